@@ -1,0 +1,23 @@
+"""mjx_pusht: the planar PushT pushing task in MuJoCo, CPU reference and MJX batch.
+
+The library API: build a `Scenario`, pick a backend, run seeds, read `Rollouts`.
+
+    from mjx_pusht import Scenario, make_backend
+    rows = make_backend("cpu", Scenario()).run(range(8))
+"""
+
+from mjx_pusht.backends import make_backend, resolve
+from mjx_pusht.metrics import gap_deviation, stayed_rigid, weld_gap
+from mjx_pusht.reset import start_pose, start_poses
+from mjx_pusht.results import Rollouts
+from mjx_pusht.scenario import Scenario
+from mjx_pusht.schedule import Schedule
+from mjx_pusht.scene import SceneSpec, build_model, scene_xml
+from mjx_pusht.tree import EXPECTED_TREES, Tree, TreeMismatch, check_tree, read_tree
+
+__all__ = [
+    "EXPECTED_TREES", "Rollouts", "Scenario", "SceneSpec", "Schedule", "Tree", "TreeMismatch",
+    "build_model", "check_tree", "gap_deviation", "make_backend", "read_tree", "resolve", "scene_xml",
+    "start_pose", "start_poses", "stayed_rigid", "weld_gap",
+]
+__version__ = "0.1.0"

@@ -1,0 +1,5 @@
+import sys
+
+from mjx_pusht.cli import main
+
+sys.exit(main())

@@ -1,0 +1,131 @@
+"""Backends behind one interface: a scenario and seeds in, per-seed `Rollouts` out.
+
+Everything downstream (tables, summaries, recordings, comparison, benchmarks)
+reads `Rollouts` and never needs to know which backend made them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.metadata
+import platform
+
+import numpy as np
+
+from mjx_pusht.results import Rollouts
+from mjx_pusht.scenario import Scenario
+
+BACKENDS = ("auto", "cpu", "mjx-jax", "mjx-warp")
+
+
+class BackendError(RuntimeError):
+    """A backend cannot run here (missing package, no device); the message says why."""
+
+
+def versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for pkg in ("mujoco", "mujoco-mjx", "jax", "jaxlib", "warp-lang", "numpy"):
+        try:
+            out[pkg] = importlib.metadata.version(pkg)
+        except importlib.metadata.PackageNotFoundError:
+            pass
+    return out
+
+
+@dataclasses.dataclass
+class CpuBackend:
+    """MuJoCo C, float64, every core: the determinism reference."""
+
+    scenario: Scenario
+    nthread: int | None = None
+    name: str = "cpu"
+    compile_seconds: float = 0.0
+    default_chunk: int = 16384
+
+    def __post_init__(self) -> None:
+        from mjx_pusht.rollout_cpu import _model, default_threads
+
+        self.nthread = self.nthread or default_threads()
+        self.model = _model(self.scenario)
+
+    @property
+    def pusher(self) -> str:
+        return self.scenario.scene.pusher
+
+    @property
+    def device(self) -> str:
+        return f"cpu ({self.nthread} threads)"
+
+    def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None) -> Rollouts:
+        from mjx_pusht.rollout_cpu import run_cpu
+
+        return run_cpu(self.scenario, seeds, trace=trace, nthread=self.nthread, model=self.model)
+
+
+class MjxBackend:
+    """MJX with impl='jax' (capsule pusher) or impl='warp' (the scene as authored)."""
+
+    def __init__(self, scenario: Scenario, impl: str, *, devices=None, **cfg):
+        from mjx_pusht.rollout_mjx import MjxConfig, MjxRunner, warp_available
+
+        if impl == "warp" and not warp_available():
+            raise BackendError("backend mjx-warp needs warp-lang, which is not installed: pip install 'mujoco-mjx[warp]'")
+        self.name = f"mjx-{impl}"
+        self.runner = MjxRunner(scenario, MjxConfig(impl=impl, **cfg), devices=devices)
+        self.model = self.runner.model
+        self.scenario = scenario
+
+    @property
+    def pusher(self) -> str:
+        return self.runner.scene.pusher
+
+    @property
+    def device(self) -> str:
+        return self.runner.device_name
+
+    @property
+    def compile_seconds(self) -> float:
+        return self.runner.compile_seconds
+
+    @property
+    def default_chunk(self) -> int:
+        on_gpu = self.runner.devices[0].platform == "gpu"
+        per = 4096 if on_gpu else 64
+        return per * len(self.runner.devices)
+
+    def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None) -> Rollouts:
+        return self.runner.run(seeds, trace=trace, batch=batch)
+
+
+def has_gpu() -> bool:
+    try:
+        import jax
+
+        return any(d.platform == "gpu" for d in jax.devices())
+    except RuntimeError:
+        return False
+
+
+def resolve(name: str) -> tuple[str, str]:
+    """The concrete backend `name` means here, and why (for `auto`)."""
+    if name not in BACKENDS:
+        raise BackendError(f"unknown backend {name!r}; choose from {', '.join(BACKENDS)}")
+    if name != "auto":
+        return name, "asked for"
+    from mjx_pusht.rollout_mjx import warp_available
+
+    if has_gpu():
+        if warp_available():
+            return "mjx-warp", "auto: a GPU is present and MJX-Warp runs the scene as authored"
+        return "cpu", "auto: a GPU is present but warp-lang is not; mjx-jax would change the pusher shape, so cpu"
+    return "cpu", "auto: no GPU here; MuJoCo C on every core is the fastest faithful path"
+
+
+def make_backend(name: str, scenario: Scenario, **kwargs):
+    """Build a backend by name (after `resolve`); MJX keyword options pass through."""
+    if name == "cpu":
+        return CpuBackend(scenario, nthread=kwargs.get("nthread"))
+    if name in ("mjx-jax", "mjx-warp"):
+        kwargs.pop("nthread", None)
+        return MjxBackend(scenario, name.split("-")[1], **kwargs)
+    raise BackendError(f"unknown backend {name!r}; choose from {', '.join(BACKENDS)}")

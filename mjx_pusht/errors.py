@@ -1,0 +1,14 @@
+"""The errors a user can cause or meet; the CLI prints each as one line."""
+
+from __future__ import annotations
+
+from mjx_pusht.backends import BackendError
+from mjx_pusht.outputs import OutputError
+from mjx_pusht.rollout_mjx import BufferOverflow
+from mjx_pusht.seeds import SeedSpecError
+from mjx_pusht.sweep import ResumeError
+from mjx_pusht.tree import TreeMismatch
+
+KNOWN_ERRORS: tuple[type[BaseException], ...] = (
+    BackendError, OutputError, BufferOverflow, SeedSpecError, ResumeError, TreeMismatch, ValueError,
+)

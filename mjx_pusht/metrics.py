@@ -1,0 +1,57 @@
+"""The invariants: the weld gap and the rigidity verdict, written once for NumPy and JAX."""
+
+from __future__ import annotations
+
+WELD_GAP = 0.06  # bar centre to stem centre in the authored T, metres
+RIGID_TOL = 1e-4  # peak |gap - 0.06| below this over the whole run: one rigid body
+
+
+def weld_gap(bar_pos, stem_pos):
+    """World distance between the bar and stem geom centres; (..., 3) arrays of either kind."""
+    d = bar_pos - stem_pos
+    return ((d * d).sum(axis=-1)) ** 0.5
+
+
+def gap_deviation(bar_pos, stem_pos):
+    """|gap - 0.06|: exactly 0 for a welded T at every step, large for a split one."""
+    return abs(weld_gap(bar_pos, stem_pos) - WELD_GAP)
+
+
+def stayed_rigid(gap_max_dev):
+    """The verdict keys off the whole-run peak deviation; NaN (a diverged run) is never rigid."""
+    return gap_max_dev < RIGID_TOL
+
+
+def _xp(a):
+    return a.__array_namespace__()
+
+
+def invariants_init(n: int, xp):
+    """The running reduction's start: nothing settled yet, zero peak, all finite."""
+    nan = xp.full((n,), float("nan"))
+    return {
+        "tee_settled": xp.stack([nan, nan, nan], axis=-1),
+        "gap_settled": nan,
+        "gap_max_dev": xp.zeros((n,)),
+        "finite": xp.ones((n,), dtype=bool),
+    }
+
+
+def invariants_update(acc, t, settle_step, tee_pose, qpos, bar_pos, stem_pos):
+    """Fold one step into the running invariants; used per step by every backend.
+
+    `bar_pos`/`stem_pos` are the geom positions MuJoCo computed in step t (the
+    kinematics of the pre-step state, as the chapter reads geom_xpos after
+    mj_step); `qpos` and `tee_pose` are the state after step t. The settled
+    values are those after step `settle_step` (the last settle step).
+    """
+    xp = _xp(qpos)
+    gap = weld_gap(bar_pos, stem_pos)
+    at_settle = t == settle_step
+    return {
+        "tee_settled": xp.where(at_settle, tee_pose, acc["tee_settled"]),
+        "gap_settled": xp.where(at_settle, gap, acc["gap_settled"]),
+        # maximum propagates NaN, so a diverged seed can never read as rigid
+        "gap_max_dev": xp.maximum(acc["gap_max_dev"], abs(gap - WELD_GAP)),
+        "finite": acc["finite"] & xp.all(xp.isfinite(qpos), axis=-1),
+    }

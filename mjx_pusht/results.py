@@ -1,0 +1,107 @@
+"""Per-seed results, the one shape every backend returns and everything downstream reads."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from mjx_pusht.metrics import stayed_rigid
+
+# per_seed.parquet's columns, in order
+COLUMNS = (
+    "seed", "start_x", "start_y", "start_yaw",
+    "tee_settled_x", "tee_settled_y", "tee_settled_yaw",
+    "tee_final_x", "tee_final_y", "tee_final_yaw",
+    "pusher_final_x", "pusher_final_y",
+    "tee_gap_settled", "tee_gap_max_dev", "tee_stayed_rigid", "finite",
+)
+
+
+@dataclasses.dataclass
+class Trace:
+    """Per-step state for a few seeds: qpos at the start (frame 0) and after every step."""
+
+    qpos: np.ndarray  # (N, total_steps + 1, nq)
+    dt: float
+
+
+@dataclasses.dataclass
+class Rollouts:
+    """One row per seed, float64 on the host whatever the backend computed in."""
+
+    seeds: np.ndarray  # (N,) int64
+    start: np.ndarray  # (N, 3) tee x, y, yaw at reset
+    settled: np.ndarray  # (N, 3) after the settle phase
+    final: np.ndarray  # (N, 3) after the nudge
+    pusher_final: np.ndarray  # (N, 2)
+    gap_settled: np.ndarray  # (N,)
+    gap_max_dev: np.ndarray  # (N,) peak |gap - 0.06| over every step, start included
+    finite: np.ndarray  # (N,) bool: the state never went NaN/inf
+    trace: Trace | None = None
+
+    @property
+    def rigid(self) -> np.ndarray:
+        return stayed_rigid(self.gap_max_dev) & self.finite
+
+    def __len__(self) -> int:
+        return len(self.seeds)
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """The per-seed table as named columns (see COLUMNS)."""
+        cols = {"seed": self.seeds.astype(np.int64)}
+        for name, arr in (("start", self.start), ("tee_settled", self.settled), ("tee_final", self.final)):
+            for k, axis in enumerate(("x", "y", "yaw")):
+                cols[f"{name}_{axis}"] = arr[:, k]
+        cols["pusher_final_x"], cols["pusher_final_y"] = self.pusher_final[:, 0], self.pusher_final[:, 1]
+        cols["tee_gap_settled"] = self.gap_settled
+        cols["tee_gap_max_dev"] = self.gap_max_dev
+        cols["tee_stayed_rigid"] = self.rigid
+        cols["finite"] = self.finite.astype(bool)
+        return cols
+
+    @classmethod
+    def from_columns(cls, cols: dict[str, np.ndarray]) -> "Rollouts":
+        def stack(prefix: str) -> np.ndarray:
+            return np.stack([np.asarray(cols[f"{prefix}_{a}"], np.float64) for a in ("x", "y", "yaw")], axis=-1)
+
+        return cls(
+            seeds=np.asarray(cols["seed"], np.int64),
+            start=stack("start"),
+            settled=stack("tee_settled"),
+            final=stack("tee_final"),
+            pusher_final=np.stack([cols["pusher_final_x"], cols["pusher_final_y"]], -1).astype(np.float64),
+            gap_settled=np.asarray(cols["tee_gap_settled"], np.float64),
+            gap_max_dev=np.asarray(cols["tee_gap_max_dev"], np.float64),
+            finite=np.asarray(cols["finite"], bool),
+        )
+
+    @classmethod
+    def concat(cls, parts: list["Rollouts"]) -> "Rollouts":
+        fields = [f.name for f in dataclasses.fields(cls) if f.name != "trace"]
+        return cls(**{f: np.concatenate([getattr(p, f) for p in parts]) for f in fields})
+
+
+def round6(v) -> float:
+    return round(float(v), 6)
+
+
+def scene_metrics(rollouts: Rollouts, row: int, tree, break_it: str) -> dict:
+    """The chapter's metrics.json for one row: exactly its keys, rounded to 6 decimals as it rounds."""
+    return {
+        "break_it": break_it,
+        "joint_types": tree.joint_types,
+        "n_bodies": tree.n_bodies,
+        "n_geoms": tree.n_geoms,
+        "n_joints": tree.n_joints,
+        "nq": tree.nq,
+        "nu": tree.nu,
+        "nv": tree.nv,
+        "pusher_final": [round6(v) for v in rollouts.pusher_final[row]],
+        "seed": int(rollouts.seeds[row]),
+        "tee_final_pose": [round6(v) for v in rollouts.final[row]],
+        "tee_gap_max_dev": round6(rollouts.gap_max_dev[row]),
+        "tee_gap_settled": round6(rollouts.gap_settled[row]),
+        "tee_settled_pose": [round6(v) for v in rollouts.settled[row]],
+        "tee_stayed_rigid": bool(rollouts.rigid[row]),
+    }

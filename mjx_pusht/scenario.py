@@ -1,0 +1,20 @@
+"""One scenario, many backends: the scene, the schedule and the seeds' start poses."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from mjx_pusht.schedule import Schedule
+from mjx_pusht.scene import SceneSpec
+
+
+@dataclasses.dataclass(frozen=True)
+class Scenario:
+    """What to simulate; every backend takes this and seeds, and returns `Rollouts`."""
+
+    scene: SceneSpec = SceneSpec()
+    schedule: Schedule = Schedule()
+
+    @property
+    def break_it(self) -> str:
+        return self.scene.break_it
