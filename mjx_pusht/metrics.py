@@ -4,6 +4,8 @@ from __future__ import annotations
 
 WELD_GAP = 0.06  # bar centre to stem centre in the authored T, metres
 RIGID_TOL = 1e-4  # peak |gap - 0.06| below this over the whole run: one rigid body
+WORKSPACE = 0.40  # the walls' inner faces are at +-0.39 m: a tee centre beyond this went through a wall
+MAX_VAL = 1e10  # MuJoCo's mjMAXVAL: a state beyond it has diverged even while still finite
 
 
 def weld_gap(bar_pos, stem_pos):
@@ -34,10 +36,17 @@ def invariants_init(n: int, xp):
         "gap_settled": nan,
         "gap_max_dev": xp.zeros((n,)),
         "finite": xp.ones((n,), dtype=bool),
+        "contained": xp.ones((n,), dtype=bool),
     }
 
 
-def invariants_update(acc, t, settle_step, tee_pose, qpos, bar_pos, stem_pos):
+def sane(x):
+    """Per row: every entry finite and within MuJoCo's mjMAXVAL (its own divergence test)."""
+    xp = _xp(x)
+    return xp.all(xp.isfinite(x) & (abs(x) < MAX_VAL), axis=-1)
+
+
+def invariants_update(acc, t, settle_step, tee_pose, qpos, qvel, bar_pos, stem_pos):
     """Fold one step into the running invariants; used per step by every backend.
 
     `bar_pos`/`stem_pos` are the geom positions MuJoCo computed in step t (the
@@ -53,5 +62,7 @@ def invariants_update(acc, t, settle_step, tee_pose, qpos, bar_pos, stem_pos):
         "gap_settled": xp.where(at_settle, gap, acc["gap_settled"]),
         # maximum propagates NaN, so a diverged seed can never read as rigid
         "gap_max_dev": xp.maximum(acc["gap_max_dev"], abs(gap - WELD_GAP)),
-        "finite": acc["finite"] & xp.all(xp.isfinite(qpos), axis=-1),
+        "finite": acc["finite"] & sane(qpos) & sane(qvel),
+        # a tee outside the walls means a contact was missed (or the state diverged)
+        "contained": acc["contained"] & xp.all(abs(tee_pose[..., :2]) < WORKSPACE, axis=-1),
     }

@@ -14,7 +14,7 @@ COLUMNS = (
     "tee_settled_x", "tee_settled_y", "tee_settled_yaw",
     "tee_final_x", "tee_final_y", "tee_final_yaw",
     "pusher_final_x", "pusher_final_y",
-    "tee_gap_settled", "tee_gap_max_dev", "tee_stayed_rigid", "finite",
+    "tee_gap_settled", "tee_gap_max_dev", "tee_stayed_rigid", "finite", "contained",
 )
 
 
@@ -37,7 +37,8 @@ class Rollouts:
     pusher_final: np.ndarray  # (N, 2)
     gap_settled: np.ndarray  # (N,)
     gap_max_dev: np.ndarray  # (N,) peak |gap - 0.06| over every step, start included
-    finite: np.ndarray  # (N,) bool: the state never went NaN/inf
+    finite: np.ndarray  # (N,) bool: qpos and qvel stayed finite and within mjMAXVAL at every step
+    contained: np.ndarray  # (N,) bool: the tee's centre stayed inside the walls at every step
     trace: Trace | None = None
 
     @property
@@ -58,6 +59,7 @@ class Rollouts:
         cols["tee_gap_max_dev"] = self.gap_max_dev
         cols["tee_stayed_rigid"] = self.rigid
         cols["finite"] = self.finite.astype(bool)
+        cols["contained"] = self.contained.astype(bool)
         return cols
 
     @classmethod
@@ -74,6 +76,7 @@ class Rollouts:
             gap_settled=np.asarray(cols["tee_gap_settled"], np.float64),
             gap_max_dev=np.asarray(cols["tee_gap_max_dev"], np.float64),
             finite=np.asarray(cols["finite"], bool),
+            contained=np.asarray(cols["contained"], bool),
         )
 
     @classmethod

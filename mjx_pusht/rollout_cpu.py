@@ -75,10 +75,11 @@ def run_cpu(
                 initial_warmstart=np.zeros((n, model.nv)),  # as a fresh MjData: no carry-over between seeds
             )
             qpos = state[:, :, 1 : 1 + model.nq]
+            qvel = state[:, :, 1 + model.nq : 1 + model.nq + model.nv]
             acc = invariants_init(n, np)
             for t in range(schedule.total_steps):
                 acc = invariants_update(
-                    acc, t, schedule.settle_steps - 1, layout.tee_pose(qpos[:, t]), qpos[:, t],
+                    acc, t, schedule.settle_steps - 1, layout.tee_pose(qpos[:, t]), qpos[:, t], qvel[:, t],
                     sensor[:, t, bar], sensor[:, t, stem],
                 )
             parts.append(
@@ -91,6 +92,7 @@ def run_cpu(
                     gap_settled=acc["gap_settled"],
                     gap_max_dev=acc["gap_max_dev"],
                     finite=acc["finite"],
+                    contained=acc["contained"],
                 )
             )
             if trace:
@@ -103,7 +105,8 @@ def run_cpu(
 
 def _empty() -> Rollouts:
     z = np.zeros((0, 3))
-    return Rollouts(np.zeros(0, np.int64), z, z, z, np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0, bool))
+    b = np.zeros(0, bool)
+    return Rollouts(np.zeros(0, np.int64), z, z, z, np.zeros((0, 2)), np.zeros(0), np.zeros(0), b, b)
 
 
 def timed(fn, *args, **kwargs):

@@ -169,7 +169,7 @@ class MjxRunner:
                 t, u = xs
                 d = mjx.step(mx, d.replace(ctrl=u))
                 s = d.sensordata
-                acc = invariants_update(acc, t, settle_step, layout.tee_pose(d.qpos), d.qpos, s[0:3], s[3:6])
+                acc = invariants_update(acc, t, settle_step, layout.tee_pose(d.qpos), d.qpos, d.qvel, s[0:3], s[3:6])
                 if warp:
                     ovf = ovf | d._impl.overflow
                 return (d, acc, ovf), (d.qpos if trace else None)
@@ -233,6 +233,7 @@ class MjxRunner:
         out = Rollouts(
             seeds=seeds, start=poses, settled=f64(acc["tee_settled"]), final=f64(final), pusher_final=f64(pusher),
             gap_settled=f64(acc["gap_settled"]), gap_max_dev=f64(acc["gap_max_dev"]), finite=np.asarray(acc["finite"])[:n],
+            contained=np.asarray(acc["contained"])[:n],
         )
         if trace:
             out.trace = Trace(

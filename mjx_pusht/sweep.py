@@ -165,6 +165,8 @@ def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s
         "n_rigid": int(rollouts.rigid.sum()),
         "n_non_finite": int((~finite).sum()),
         "non_finite_seeds": [int(s) for s in rollouts.seeds[~finite][:100]],
+        "n_escaped": int((~rollouts.contained).sum()),
+        "escaped_seeds": [int(s) for s in rollouts.seeds[~rollouts.contained][:100]],
         "gap_max_dev": _stats(rollouts.gap_max_dev[finite]),
         "tee_gap_settled": _stats(rollouts.gap_settled[finite]),
         "tee_final_y": _stats(rollouts.final[finite, 1]),

@@ -1,0 +1,193 @@
+"""Sweeps: rows equal single runs, MJX agrees with the CPU reference, sharding, resume, loud failures."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from mjx_pusht.backends import CpuBackend
+from mjx_pusht.cli import main
+from mjx_pusht.outputs import read_table
+from mjx_pusht.results import COLUMNS, Rollouts, scene_metrics
+from mjx_pusht.scenario import Scenario
+from mjx_pusht.scene import SceneSpec
+from mjx_pusht.seeds import SeedSpecError, parse_seeds
+from mjx_pusht.sweep import finish, run_sweep
+from mjx_pusht.tree import read_tree
+
+
+
+def test_seed_specs():
+    np.testing.assert_array_equal(parse_seeds("4"), [0, 1, 2, 3])
+    np.testing.assert_array_equal(parse_seeds("10:13"), [10, 11, 12])
+    np.testing.assert_array_equal(parse_seeds("5,1,9"), [5, 1, 9])
+    for bad in ("", "abc", "5:2", "3:3", "0", "1:2:3", "1,,2", "-4", "1,1"):
+        with pytest.raises(SeedSpecError):
+            parse_seeds(bad)
+
+
+@pytest.mark.parametrize("break_it", ["none", "split-tee"])
+def test_cpu_sweep_rows_equal_scene_runs(tmp_path, break_it):
+    out = tmp_path / "sweep"
+    assert main(["sweep", "--seeds", "8", "--backend", "cpu", "--break", break_it, "--out", str(out),
+                 "--no-rerun", "--no-progress", "--chunk", "3"]) == 0
+    table = read_table(out / "per_seed.parquet")
+    assert list(table) == list(COLUMNS)
+    rows = Rollouts.from_columns(table)
+    for s in range(8):
+        scene_out = tmp_path / f"scene{s}"
+        assert main(["scene", "--seed", str(s), "--break", break_it, "--no-rerun", "--out", str(scene_out)]) == 0
+        single = json.loads((scene_out / "metrics.json").read_text())
+        tree = read_tree(CpuBackend(Scenario(SceneSpec(break_it))).model)
+        assert scene_metrics(rows, s, tree, break_it) == single
+
+
+def _assert_matches_cpu(mjx: Rollouts, cpu: Rollouts):
+    np.testing.assert_array_equal(mjx.start, cpu.start)
+    np.testing.assert_allclose(mjx.settled, cpu.settled, atol=1e-5)  # no contact yet: float32 rounding only
+    np.testing.assert_allclose(mjx.gap_settled, cpu.gap_settled, atol=1e-5)
+    np.testing.assert_array_equal(mjx.rigid, cpu.rigid)
+    assert mjx.finite.all()
+
+
+@pytest.mark.parametrize("break_it", ["none", "split-tee"])
+def test_mjx_jax_agrees_with_cpu_before_contact_and_on_every_verdict(mjx_jax_runs, cpu_runs, break_it):
+    _assert_matches_cpu(mjx_jax_runs[break_it], cpu_runs[(break_it, "capsule")])
+
+
+@pytest.mark.warp
+@pytest.mark.parametrize("break_it", ["none", "split-tee"])
+def test_mjx_warp_agrees_with_cpu_before_contact_and_on_every_verdict(mjx_warp_runs, cpu_runs, break_it):
+    _assert_matches_cpu(mjx_warp_runs[break_it], cpu_runs[(break_it, "cylinder")])
+
+
+def test_split_tee_is_split_on_every_seed_and_backend(mjx_jax_runs, cpu_runs):
+    assert not mjx_jax_runs["split-tee"].rigid.any() and not cpu_runs[("split-tee", "cylinder")].rigid.any()
+    assert np.all(mjx_jax_runs["split-tee"].gap_max_dev >= 0.03)
+
+
+SHARD_SCRIPT = """
+import numpy as np, jax
+from mjx_pusht.backends import MjxBackend
+from mjx_pusht.scenario import Scenario
+assert len(jax.devices()) == 2, jax.devices()
+seeds = np.arange(8)
+one = MjxBackend(Scenario(), "jax", devices=jax.devices()[:1]).run(seeds)
+two = MjxBackend(Scenario(), "jax", devices=jax.devices()).run(seeds)
+for a, b in zip(one.columns().values(), two.columns().values()):
+    np.testing.assert_array_equal(a, b)
+print("SHARDED_OK")
+"""
+
+
+@pytest.mark.slow
+def test_sweep_sharded_over_two_cpu_devices_gives_the_same_rows():
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu"}
+    r = subprocess.run([sys.executable, "-c", SHARD_SCRIPT], capture_output=True, text=True, env=env)
+    assert "SHARDED_OK" in r.stdout, r.stderr[-2000:]
+
+
+class _StopAfter:
+    """A backend that stops the sweep (like Ctrl-C) after `n` chunks."""
+
+    def __init__(self, inner, n):
+        self.inner, self.n = inner, n
+        self.name, self.default_chunk = inner.name, inner.default_chunk
+
+    @property
+    def compile_seconds(self):
+        return self.inner.compile_seconds
+
+    def run(self, seeds, **kw):
+        if self.n == 0:
+            raise KeyboardInterrupt
+        self.n -= 1
+        return self.inner.run(seeds, **kw)
+
+
+def test_a_sweep_killed_after_a_chunk_resumes_to_the_same_table(tmp_path):
+    seeds = np.arange(10)
+    backend = CpuBackend(Scenario())
+    config = {"backend": "cpu", "break_it": "none", "steps": 120}
+    whole = run_sweep(backend, seeds, tmp_path / "whole", config=config, chunk=4, progress=False)
+    cut = tmp_path / "cut"
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(_StopAfter(backend, 1), seeds, cut, config=config, chunk=4, progress=False)
+    assert not (cut / "per_seed.parquet").exists()  # no half table, only finished chunks
+    assert len(list((cut / ".parts").glob("seeds-*.parquet"))) == 1
+    resumed = run_sweep(backend, seeds, cut, config=config, chunk=4, resume=True, progress=False)
+    finish(cut, resumed)
+    finish(tmp_path / "whole", whole)
+    a, b = read_table(tmp_path / "whole" / "per_seed.parquet"), read_table(cut / "per_seed.parquet")
+    for k in COLUMNS:
+        np.testing.assert_array_equal(a[k], b[k])
+
+
+def test_unfinished_sweep_is_not_clobbered_without_resume(tmp_path, capsys):
+    seeds = np.arange(10)
+    config = {"backend": "cpu", "break_it": "none", "steps": 120}
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(_StopAfter(CpuBackend(Scenario()), 1), seeds, tmp_path, config=config, chunk=4, progress=False)
+    assert main(["sweep", "--seeds", "10", "--backend", "cpu", "--out", str(tmp_path), "--no-rerun"]) == 1
+    assert "--resume" in capsys.readouterr().err
+    assert main(["sweep", "--seeds", "11", "--backend", "cpu", "--out", str(tmp_path), "--resume", "--no-rerun"]) == 1
+    assert "other seeds" in capsys.readouterr().err
+    assert len(list((tmp_path / ".parts").glob("seeds-*.parquet"))) == 1
+
+
+def test_non_finite_seeds_are_flagged_and_counted_not_averaged(tmp_path):
+    from mjx_pusht.sweep import summarize
+
+    backend = CpuBackend(Scenario())
+    backend.model.dof_damping[:2] = -8.0  # anti-damping: once pushed, the tee's speed grows without bound
+    rows = backend.run(np.arange(3))
+    # seeds 1 and 2 overflow to inf/NaN; seed 0 stays finite but is flung 1e8 m, through the walls
+    np.testing.assert_array_equal(rows.finite, [True, False, False])
+    np.testing.assert_array_equal(rows.contained, [False, False, False])
+    assert not rows.rigid[1:].any()
+    s = summarize(rows, backend=backend, schedule=Scenario().schedule, break_it="none", compile_s=0, run_s=1)
+    assert s["n_non_finite"] == 2 and s["non_finite_seeds"] == [1, 2] and s["gap_max_dev"]["n"] == 1
+    assert s["n_escaped"] == 3
+
+
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["--seeds", "abc"], "not an integer"),
+        (["--seeds", "9:3"], "empty range"),
+        (["--seeds", "0"], "empty sweep"),
+        (["--backend", "gpu-magic"], "unknown backend"),
+    ],
+)
+def test_bad_sweep_input_is_one_line(tmp_path, capsys, argv, needle):
+    assert main(["sweep", *argv, "--out", str(tmp_path / "o")]) != 0
+    err = capsys.readouterr().err.strip()
+    assert needle in err and "\n" not in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_mjx_warp_without_warp_lang_is_one_line(tmp_path, capsys, monkeypatch):
+    import mjx_pusht.rollout_mjx as rm
+
+    monkeypatch.setattr(rm, "warp_available", lambda: False)
+    assert main(["sweep", "--seeds", "2", "--backend", "mjx-warp", "--out", str(tmp_path / "o")]) == 1
+    assert "warp-lang" in capsys.readouterr().err
+
+
+def test_sweep_cli_writes_table_summary_and_recording(tmp_path):
+    out = tmp_path / "s"
+    r = subprocess.run([sys.executable, "-m", "mjx_pusht", "sweep", "--seeds", "6", "--backend", "cpu", "--out", str(out),
+                        "--record", "2"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    for key in ("backend", "device", "versions", "pusher_shape", "n_seeds", "steps", "break_it", "rigid_fraction",
+                "gap_max_dev", "n_non_finite", "compile_seconds", "run_seconds", "steps_per_second"):
+        assert key in s
+    assert s["n_seeds"] == 6 and s["rigid_fraction"] == 1.0 and s["pusher_shape"] == "cylinder"
+    assert (out / "sweep.rrd").stat().st_size > 0 and not (out / ".parts").exists()
+    assert "tier:" in r.stdout and "wall-clock" in r.stdout
