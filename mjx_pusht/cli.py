@@ -76,7 +76,36 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--record", type=_nonneg, default=4, help="seeds to show side by side in sweep.rrd (default 4)")
     w.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip sweep.rrd")
     w.add_argument("--no-progress", dest="progress", action="store_false")
+
+    c = sub.add_parser("compare", help="CPU vs MJX fidelity report: compare.json, compare.md, compare.png")
+    c.add_argument("--seeds", default="64", help="N, A:B or a,b,c (default 64)")
+    c.add_argument("--backend", default="mjx-jax", help="mjx-jax or mjx-warp (default mjx-jax)")
+    c.add_argument("--out", type=Path, default=Path("outputs/compare"))
+    c.add_argument("--no-root-cause", dest="root_cause", action="store_false",
+                   help="skip the one-change-at-a-time runs (x64, solver, contact census)")
     return p
+
+
+def cmd_compare(args) -> int:
+    from mjx_pusht.backends import BackendError
+    from mjx_pusht.compare import compare
+    from mjx_pusht.outputs import prepare_out_dir
+    from mjx_pusht.seeds import parse_seeds
+    from mjx_pusht.tier import Banner
+
+    seeds = parse_seeds(args.seeds)
+    if args.backend not in ("mjx-jax", "mjx-warp"):
+        raise BackendError(f"compare takes --backend mjx-jax or mjx-warp, not {args.backend!r}")
+    out = prepare_out_dir(args.out)
+    banner = Banner("compare")
+    r = compare(seeds, args.backend.split("-")[1], out, root_cause=args.root_cause)
+    w = r["none"]
+    print(f"settle_max_abs_err {w['settle_max_abs_err']:.2e} (split-tee {r['split-tee']['settle_max_abs_err']:.2e}); "
+          f"verdict_agreement {w['verdict_agreement']:.3f} (split-tee {r['split-tee']['verdict_agreement']:.3f})")
+    print(f"outcome_within_cpu_baseline: {r['outcomes']['outcome_within_cpu_baseline']}")
+    print(f"report: {out / 'compare.md'}\njson: {out / 'compare.json'}\nplot: {out / 'compare.png'}")
+    banner.done()
+    return 0
 
 
 def cmd_tree(args) -> int:
@@ -180,7 +209,7 @@ def cmd_sweep(args) -> int:
     return 0
 
 
-COMMANDS = {"scene": cmd_scene, "tree": cmd_tree, "sweep": cmd_sweep}
+COMMANDS = {"scene": cmd_scene, "tree": cmd_tree, "sweep": cmd_sweep, "compare": cmd_compare}
 
 
 def main(argv: list[str] | None = None) -> int:

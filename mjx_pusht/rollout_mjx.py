@@ -137,7 +137,8 @@ class MjxRunner:
         from mujoco import mjx
 
         self.mx = mjx.put_model(self.model, impl=cfg.impl, device=self.devices[0])
-        self.dtype = np.float64 if cfg.x64 else np.float32
+        # x64 is process-wide in JAX: once on, every later runner computes in float64 too
+        self.dtype = np.float64 if jax.config.jax_enable_x64 else np.float32
 
     @property
     def device_name(self) -> str:
