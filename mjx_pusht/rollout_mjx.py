@@ -152,6 +152,13 @@ class MjxRunner:
 
         model, layout, schedule, mx = self.model, self.layout, self.scenario.schedule, self.mx
         warp = self.cfg.impl == "warp"
+        if warp and trace and self.devices[0].platform != "cpu":
+            # Under CUDA-graph capture (MJX-Warp's GPU default) the per-step qpos
+            # stacked by scan came back stale (measured on an H100: frame 1 read
+            # as qpos0) while the carried state was right. Traces run uncaptured.
+            from mujoco.mjx.warp import types as mjxw_types
+
+            mx = mjx.put_model(model, impl="warp", device=self.devices[0], graph_mode=mjxw_types.GraphMode.JAX)
         if warp:
             per_dev = batch // len(self.devices)
             d0 = mjx.make_data(
@@ -240,6 +247,11 @@ class MjxRunner:
             out.trace = Trace(
                 np.concatenate([np.asarray(qpos0, np.float64)[:n, None], f64(qs)], axis=1), float(self.model.opt.timestep)
             )
+            # the trace and the carried state are two paths to one answer: they must agree
+            last = self.layout.tee_pose(out.trace.qpos[:, -1])
+            if not np.array_equal(last[out.finite], out.final[out.finite]):
+                raise RuntimeError(f"{self.cfg.impl}: the per-step trace disagrees with the carried final state; "
+                                   "the trace is not trustworthy on this device")
         return out
 
 

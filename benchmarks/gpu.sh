@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# Measurements on a lent GPU machine (see ../shared/gpu/README.md for carrying the wheels).
+# Usage there: bash benchmarks/gpu.sh STAGE TIER   (logs and results go under $OUT)
+set -uo pipefail
+stage=$1; tier=${2:-h100}
+export PYTHONPATH=$HOME/site:$PWD PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
+export MJX_PUSHT_JAX_CACHE=$HOME/jax_cache
+mkdir -p "$OUT/results"
+case "$stage" in
+  warp)   python3 -m benchmarks.harness --tier "$tier-warp" --backends cpu,mjx-warp --cpu-batches 4096,65536 \
+            --batches 1024,4096,16384,65536 --repeats 2 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
+  jax)    python3 -m benchmarks.harness --tier "$tier-jax" --backends mjx-jax --batches 1024,4096,16384,65536 \
+            --repeats 2 --e2e 1000000 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
+  compare-warp) python3 -m mjx_pusht compare --seeds 4096 --backend mjx-warp --no-root-cause \
+            --out "$OUT/compare-mjx-warp" 2>&1 | tee "$OUT/$stage.log" ;;
+  compare-jax) python3 -m mjx_pusht compare --seeds 4096 --backend mjx-jax --out "$OUT/compare-mjx-jax" 2>&1 | tee "$OUT/$stage.log" ;;
+esac

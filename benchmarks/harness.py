@@ -1,0 +1,170 @@
+"""Wall-clock benchmarks per hardware tier: every backend over batch sizes, in one process, in one run.
+
+Writes benchmarks/results/<tier>.json and <tier>.png. Compile time is kept apart
+from run time (first call minus the median of the timed repeats); the CPU's
+single-thread mj_step rate and all-core rollout are measured beside the MJX
+backends on the same host, so ratios never mix machines.
+
+    python -m benchmarks.harness --tier cpu
+    python -m benchmarks.harness --tier h100 --batches 4096,65536 --e2e 1000000
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import tempfile
+import time
+import traceback
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from mjx_pusht.backends import make_backend, versions
+from mjx_pusht.scenario import Scenario
+from mjx_pusht.tier import tier as tier_name
+
+RESULTS = Path(__file__).parent / "results"
+
+
+def single_thread_mj_step_rate(scenario: Scenario, seconds: float = 2.0) -> float:
+    """Steps/s of a bare mj_step loop on one core over the seed-0 schedule, repeated."""
+    from mjx_pusht.reset import QposLayout, start_poses
+    from mjx_pusht.scene import build_model
+
+    model = build_model(scenario.scene)
+    data = mujoco.MjData(model)
+    qpos0 = QposLayout.of(model).initial_qpos(model, start_poses([0]))[0]
+    ctrl = scenario.schedule.controls()
+    steps, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        mujoco.mj_resetData(model, data)
+        data.qpos[:] = qpos0
+        for u in ctrl:
+            data.ctrl[:] = u
+            mujoco.mj_step(model, data)
+        steps += len(ctrl)
+    return steps / (time.perf_counter() - t0)
+
+
+def measure(backend, batch: int, repeats: int, total_steps: int) -> dict:
+    seeds = np.arange(batch)
+    t0 = time.perf_counter()
+    backend.run(seeds, batch=batch)
+    first = time.perf_counter() - t0
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        backend.run(seeds, batch=batch)
+        times.append(time.perf_counter() - t0)
+    run = statistics.median(times)
+    return {
+        "batch": batch,
+        "first_call_seconds": round(first, 4),
+        "compile_seconds": round(max(first - run, 0.0), 4),
+        "run_seconds_median": round(run, 5),
+        "run_seconds_all": [round(t, 5) for t in times],
+        "steps_per_second": round(batch * total_steps / run, 1),
+    }
+
+
+def end_to_end(name: str, scenario: Scenario, n: int, chunk: int | None) -> dict:
+    """A whole sweep as a user runs it: start poses, compile, rollout, per_seed.parquet written."""
+    from mjx_pusht.sweep import finish, run_sweep
+
+    t0 = time.perf_counter()
+    backend = make_backend(name, scenario)
+    with tempfile.TemporaryDirectory() as d:
+        run = run_sweep(backend, np.arange(n), Path(d), config={"bench": name}, chunk=chunk, progress=False)
+        finish(Path(d), run)
+        size = (Path(d) / "per_seed.parquet").stat().st_size
+    wall = time.perf_counter() - t0
+    return {"backend": name, "n_seeds": n, "wall_seconds": round(wall, 2), "compile_seconds": round(run.compile_seconds, 2),
+            "rigid_fraction": float(run.rollouts.rigid.mean()), "parquet_bytes": size,
+            "steps_per_second_end_to_end": round(n * scenario.schedule.total_steps / wall, 1)}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--tier", default="cpu", help="name of the results file (cpu, h100, h200, ...)")
+    p.add_argument("--backends", default="cpu,mjx-jax,mjx-warp")
+    p.add_argument("--batches", default=None, help="comma list for every backend (default: by tier)")
+    p.add_argument("--cpu-batches", default=None)
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--e2e", type=int, default=0, help="also time an end-to-end sweep of this many seeds")
+    p.add_argument("--e2e-backend", default="auto")
+    p.add_argument("--e2e-chunk", type=int, default=None)
+    p.add_argument("--out", type=Path, default=RESULTS)
+    args = p.parse_args(argv)
+    scenario = Scenario()
+    total = scenario.schedule.total_steps
+    on_cpu = args.tier == "cpu"
+    default = "1024,4096" if on_cpu else "1024,4096,16384,65536"
+    mjx_batches = [int(b) for b in (args.batches or ("64,256" if on_cpu else default)).split(",")]
+    cpu_batches = [int(b) for b in (args.cpu_batches or args.batches or default).split(",")]
+    result = {"tier": args.tier, "device": tier_name(), "versions": versions(), "total_steps": total,
+              "date": time.strftime("%Y-%m-%d"), "scene": "welded, 40 settle + 120 nudge steps", "backends": {}}
+    result["cpu_single_thread_mj_step_per_second"] = round(single_thread_mj_step_rate(scenario), 1)
+    print(f"single-thread mj_step: {result['cpu_single_thread_mj_step_per_second']:,.0f} steps/s", flush=True)
+    for name in args.backends.split(","):
+        rows = []
+        try:
+            backend = make_backend(name, scenario)
+        except Exception as e:  # noqa: BLE001 - a backend that cannot run here is recorded, not fatal
+            result["backends"][name] = {"error": f"{type(e).__name__}: {e}"}
+            print(f"{name}: cannot run here: {e}", flush=True)
+            continue
+        batches = cpu_batches if name == "cpu" else mjx_batches
+        for batch in batches:
+            try:
+                row = measure(backend, batch, args.repeats, total)
+            except Exception as e:  # noqa: BLE001 - out of memory at a size is a result too
+                row = {"batch": batch, "error": f"{type(e).__name__}: {str(e).splitlines()[0][:300]}"}
+                traceback.print_exc(limit=1)
+            rows.append(row)
+            print(f"{name} batch {batch}: {row.get('steps_per_second', row.get('error'))}", flush=True)
+        result["backends"][name] = {"device": backend.device, "pusher": backend.pusher, "rows": rows}
+        if name == "cpu":
+            result["backends"][name]["threads"] = backend.nthread
+    if args.e2e:
+        result["end_to_end"] = end_to_end(resolve_auto(args.e2e_backend), scenario, args.e2e, args.e2e_chunk)
+        print(f"end to end: {result['end_to_end']}", flush=True)
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / f"{args.tier}.json"
+    path.write_text(json.dumps(result, indent=2) + "\n")
+    plot(result, args.out / f"{args.tier}.png")
+    print(f"wrote {path}")
+    return 0
+
+
+def resolve_auto(name: str) -> str:
+    from mjx_pusht.backends import resolve
+
+    return resolve(name)[0]
+
+
+def plot(result: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for name, b in result["backends"].items():
+        rows = [r for r in b.get("rows", []) if "steps_per_second" in r]
+        if rows:
+            ax.plot([r["batch"] for r in rows], [r["steps_per_second"] for r in rows], "o-", label=f"{name} ({b['device']})")
+    ax.set(xscale="log", yscale="log", xlabel="batch (seeds)", ylabel="steps / s",
+           title=f"PushT rollout throughput, tier {result['tier']} ({result['device']})")
+    ax.legend(fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
