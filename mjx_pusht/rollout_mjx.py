@@ -152,13 +152,6 @@ class MjxRunner:
 
         model, layout, schedule, mx = self.model, self.layout, self.scenario.schedule, self.mx
         warp = self.cfg.impl == "warp"
-        if warp and trace and self.devices[0].platform != "cpu":
-            # Under CUDA-graph capture (MJX-Warp's GPU default) the per-step qpos
-            # stacked by scan came back stale (measured on an H100: frame 1 read
-            # as qpos0) while the carried state was right. Traces run uncaptured.
-            from mujoco.mjx.warp import types as mjxw_types
-
-            mx = mjx.put_model(model, impl="warp", device=self.devices[0], graph_mode=mjxw_types.GraphMode.JAX)
         if warp:
             per_dev = batch // len(self.devices)
             d0 = mjx.make_data(
@@ -173,17 +166,23 @@ class MjxRunner:
 
         def one_seed(qpos0, acc0):
             def body(carry, xs):
-                d, acc, ovf = carry
+                d, acc, ovf, qs = carry
                 t, u = xs
                 d = mjx.step(mx, d.replace(ctrl=u))
                 s = d.sensordata
                 acc = invariants_update(acc, t, settle_step, layout.tee_pose(d.qpos), d.qpos, d.qvel, s[0:3], s[3:6])
                 if warp:
                     ovf = ovf | d._impl.overflow
-                return (d, acc, ovf), (d.qpos if trace else None)
+                if trace:
+                    # Written into the carry, not stacked as scan output: under MJX-Warp's
+                    # CUDA-graph capture on an H100 the stacked per-step qpos came back
+                    # stale (frame 1 read as qpos0) while the carried state was right.
+                    qs = qs.at[t].set(d.qpos)
+                return (d, acc, ovf, qs), None
 
             d = d0.replace(qpos=qpos0)
-            (d, acc, ovf), qs = jax.lax.scan(body, (d, acc0, jnp.zeros((), jnp.int32)), (steps, ctrl))
+            qs0 = jnp.zeros((schedule.total_steps if trace else 0, model.nq), qpos0.dtype)
+            (d, acc, ovf, qs), _ = jax.lax.scan(body, (d, acc0, jnp.zeros((), jnp.int32), qs0), (steps, ctrl))
             return acc, layout.tee_pose(d.qpos), layout.pusher_xy(d.qpos), ovf, qs
 
         fn = jax.jit(jax.vmap(one_seed))
