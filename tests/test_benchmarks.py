@@ -1,0 +1,30 @@
+"""The benchmark harness runs and writes valid results (a functional test, not a timing)."""
+
+from __future__ import annotations
+
+import json
+
+from benchmarks import harness, table
+
+
+def test_harness_runs_at_tiny_sizes_and_writes_json_and_plot(tmp_path):
+    assert harness.main(["--tier", "tiny", "--backends", "cpu", "--batches", "4,8", "--repeats", "1",
+                         "--e2e", "16", "--e2e-backend", "cpu", "--out", str(tmp_path)]) == 0
+    r = json.loads((tmp_path / "tiny.json").read_text())
+    rows = r["backends"]["cpu"]["rows"]
+    assert [row["batch"] for row in rows] == [4, 8]
+    assert all(row["steps_per_second"] > 0 and row["run_seconds_median"] > 0 for row in rows)
+    assert r["cpu_single_thread_mj_step_per_second"] > 0 and r["versions"]["mujoco"] == "3.17.0"
+    assert r["end_to_end"]["n_seeds"] == 16 and r["end_to_end"]["rigid_fraction"] == 1.0
+    assert (tmp_path / "tiny.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_harness_records_a_backend_that_cannot_run_instead_of_crashing(tmp_path):
+    assert harness.main(["--tier", "t", "--backends", "no-such-backend", "--out", str(tmp_path)]) == 0
+    assert "error" in json.loads((tmp_path / "t.json").read_text())["backends"]["no-such-backend"]
+
+
+def test_readme_table_is_rendered_from_the_committed_results():
+    readme = (table.ROOT / "README.md").read_text()
+    block = readme[readme.index(table.BEGIN) + len(table.BEGIN): readme.index(table.END)].strip()
+    assert block == table.render().strip()
