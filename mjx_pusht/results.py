@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 
 from mjx_pusht.metrics import stayed_rigid
+from mjx_pusht.score import task_score
 
 # per_seed.parquet's columns, in order
 COLUMNS = (
@@ -15,6 +16,7 @@ COLUMNS = (
     "tee_final_x", "tee_final_y", "tee_final_yaw",
     "pusher_final_x", "pusher_final_y",
     "tee_gap_settled", "tee_gap_max_dev", "tee_stayed_rigid", "finite", "contained",
+    "task_pos_err", "task_yaw_err", "task_coverage", "task_success",
 )
 
 
@@ -60,6 +62,9 @@ class Rollouts:
         cols["tee_stayed_rigid"] = self.rigid
         cols["finite"] = self.finite.astype(bool)
         cols["contained"] = self.contained.astype(bool)
+        score = task_score(self.final)
+        for k, v in score.items():
+            cols[f"task_{k}"] = v
         return cols
 
     @classmethod

@@ -145,6 +145,22 @@ def _stats(x: np.ndarray) -> dict:
     }
 
 
+def _task_summary(rollouts: Rollouts) -> dict:
+    """The PushT score over finite seeds: success rate at coverage >= 0.95, and the error spreads."""
+    from mjx_pusht.score import SUCCESS_COVERAGE, task_score
+
+    s = task_score(rollouts.final[rollouts.finite]) if rollouts.finite.any() else None
+    if s is None:
+        return {"n": 0}
+    return {
+        "success_coverage": SUCCESS_COVERAGE,
+        "success_rate": float(s["success"].mean()),
+        "coverage": _stats(s["coverage"]),
+        "pos_err": _stats(s["pos_err"]),
+        "abs_yaw_err": _stats(np.abs(s["yaw_err"])),
+    }
+
+
 def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s: float, run_s: float) -> dict:
     """summary.json: what ran where, the verdicts, and the speed. Non-finite seeds are counted, never averaged in."""
     from mjx_pusht.backends import versions
@@ -170,6 +186,7 @@ def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s
         "gap_max_dev": _stats(rollouts.gap_max_dev[finite]),
         "tee_gap_settled": _stats(rollouts.gap_settled[finite]),
         "tee_final_y": _stats(rollouts.final[finite, 1]),
+        "task": _task_summary(rollouts),
         "compile_seconds": round(compile_s, 3),
         "run_seconds": round(run_s, 3),
         "steps_per_second": round(n * schedule.total_steps / run_s, 1) if run_s > 0 else None,

@@ -39,3 +39,33 @@ def test_compare_on_a_few_seeds_agrees_where_it_must(tmp_path):
     assert isinstance(r["outcomes"]["outcome_within_cpu_baseline"], bool)
     assert "# CPU vs mjx-jax" in (tmp_path / "compare.md").read_text()
     assert (tmp_path / "compare.png").read_bytes()[:4] == b"\x89PNG"
+
+
+# --- the task score -------------------------------------------------------------
+
+from mjx_pusht.score import T_AREA, coverage, task_score, wrap_angle  # noqa: E402
+
+
+def test_the_target_covers_itself_completely():
+    assert coverage(np.array([[0.0, 0.0, 0.0]]))[0] == pytest.approx(1.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("dx", [0.002, 0.01, 0.014])
+def test_coverage_of_a_shifted_tee_matches_the_analytic_overlap(dx):
+    # Shifted along x by dx < 0.015: the bars overlap over (0.12 - dx) x 0.03, the stems over
+    # (0.03 - dx) x 0.09, and a bar and a stem only share an edge (zero area).
+    expect = ((0.12 - dx) * 0.03 + (0.03 - dx) * 0.09) / T_AREA
+    assert coverage(np.array([[dx, 0.0, 0.0]]))[0] == pytest.approx(expect, rel=1e-9)
+
+
+def test_coverage_of_a_tee_turned_half_round_is_the_bar_alone():
+    # rotated by pi about the bar centre, only the bars coincide: 0.0036 of 0.0063 m^2
+    assert coverage(np.array([[0.0, 0.0, np.pi]]))[0] == pytest.approx(0.0036 / 0.0063, rel=1e-9)
+
+
+def test_coverage_is_zero_far_away_and_yaw_error_wraps():
+    assert coverage(np.array([[0.3, 0.3, 0.0]]))[0] == 0.0
+    assert wrap_angle(np.array([3 * np.pi / 2, -np.pi, np.pi]))[0] == pytest.approx(-np.pi / 2)
+    assert list(wrap_angle(np.array([-np.pi, np.pi]))) == [np.pi, np.pi]
+    s = task_score(np.array([[0.03, 0.04, 2 * np.pi + 0.1]]))
+    assert s["pos_err"][0] == pytest.approx(0.05) and s["yaw_err"][0] == pytest.approx(0.1)

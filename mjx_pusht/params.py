@@ -1,0 +1,92 @@
+"""Physical parameters by name, applied to a compiled model, and grids of them for sweeps.
+
+Each parameter edits the CPU MjModel and then re-derives MuJoCo's constants
+(mj_setConst), so a parameterised model is exactly what compiling the edited
+scene would give; MJX backends stack the fields that differ across the grid and
+batch over them, so a grid is one compiled program, not one per value.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+
+import mujoco
+import numpy as np
+
+
+def _tee_dofs(m: mujoco.MjModel) -> list[int]:
+    return [int(m.joint(n).dofadr[0]) for n in ("tee_x", "tee_y")]
+
+
+def _kv(m: mujoco.MjModel, v: float) -> None:
+    # a velocity servo is gain kv on ctrl and bias -kv on joint velocity
+    m.actuator_gainprm[:, 0] = v
+    m.actuator_biasprm[:, 2] = -v
+
+
+def _tee_damping(m: mujoco.MjModel, v: float) -> None:
+    m.dof_damping[_tee_dofs(m)] = v
+
+
+def _tee_frictionloss(m: mujoco.MjModel, v: float) -> None:
+    m.dof_frictionloss[_tee_dofs(m)] = v
+
+
+def _tee_mass(m: mujoco.MjModel, v: float) -> None:
+    # scale the whole tee (bar and stem bodies alike) so its total mass is v, inertia with it
+    bodies = [i for i in range(m.nbody) if m.body(i).name in ("tee", "tee_stem_body")]
+    total = float(m.body_mass[bodies].sum())
+    for b in bodies:
+        m.body_mass[b] *= v / total
+        m.body_inertia[b] *= v / total
+
+
+PARAMS: dict[str, tuple[Callable[[mujoco.MjModel, float], None], str]] = {
+    "kv": (_kv, "pusher velocity-servo gain (chapter: 20)"),
+    "tee_damping": (_tee_damping, "tee x/y joint damping (chapter: 4)"),
+    "tee_frictionloss": (_tee_frictionloss, "tee x/y joint frictionloss (chapter: 1.2)"),
+    "tee_mass": (_tee_mass, "tee total mass in kg (chapter: 0.105)"),
+}
+
+
+class ParamError(ValueError):
+    pass
+
+
+def parse_param(text: str) -> tuple[str, list[float]]:
+    """`NAME=a,b,c` (listed values) or `NAME=lo:hi:n` (n evenly spaced values, ends included)."""
+    name, sep, values = text.partition("=")
+    name = name.strip()
+    if not sep or name not in PARAMS:
+        raise ParamError(f"--param {text!r}: expected NAME=VALUES with NAME one of {', '.join(PARAMS)}")
+    try:
+        if ":" in values:
+            lo, hi, n = values.split(":")
+            if int(n) < 1:
+                raise ValueError
+            out = list(np.linspace(float(lo), float(hi), int(n)))
+        else:
+            out = [float(v) for v in values.split(",")]
+    except ValueError:
+        raise ParamError(f"--param {text!r}: values are a,b,c or lo:hi:n") from None
+    if not out or not all(np.isfinite(out)) or min(out) < 0 or (name == "tee_mass" and min(out) <= 0):
+        raise ParamError(f"--param {text!r}: values must be finite and non-negative (mass positive)")
+    return name, out
+
+
+def grid(params: dict[str, list[float]]) -> list[dict[str, float]]:
+    """Every combination of the listed values (one empty combination when no parameter is given)."""
+    names = list(params)
+    return [dict(zip(names, combo)) for combo in itertools.product(*(params[n] for n in names))]
+
+
+def apply(model: mujoco.MjModel, values: dict[str, float]) -> mujoco.MjModel:
+    """A copy of `model` with the parameters set and MuJoCo's derived constants recomputed."""
+    import copy
+
+    m = copy.copy(model)
+    for name, v in values.items():
+        PARAMS[name][0](m, float(v))
+    mujoco.mj_setConst(m, mujoco.MjData(m))
+    return m
