@@ -56,10 +56,10 @@ class CpuBackend:
     def device(self) -> str:
         return f"cpu ({self.nthread} threads)"
 
-    def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None) -> Rollouts:
+    def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None) -> Rollouts:
         from mjx_pusht.rollout_cpu import run_cpu
 
-        return run_cpu(self.scenario, seeds, trace=trace, nthread=self.nthread, model=self.model)
+        return run_cpu(self.scenario, seeds, trace=trace, nthread=self.nthread, model=self.model, combos=combos)
 
 
 class MjxBackend:
@@ -93,8 +93,8 @@ class MjxBackend:
         per = 4096 if on_gpu else 64
         return per * len(self.runner.devices)
 
-    def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None) -> Rollouts:
-        return self.runner.run(seeds, trace=trace, batch=batch)
+    def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None) -> Rollouts:
+        return self.runner.run(seeds, trace=trace, batch=batch, combos=combos)
 
 
 def has_gpu() -> bool:

@@ -76,6 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--record", type=_nonneg, default=4, help="seeds to show side by side in sweep.rrd (default 4)")
     w.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip sweep.rrd")
     w.add_argument("--no-progress", dest="progress", action="store_false")
+    w.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
+                   help="sweep a physical parameter as a grid: kv, tee_damping, tee_frictionloss, tee_mass; "
+                        "VALUES is a,b,c or lo:hi:n (repeatable)")
 
     c = sub.add_parser("compare", help="CPU vs MJX fidelity report: compare.json, compare.md, compare.png")
     c.add_argument("--seeds", default="64", help="N, A:B or a,b,c (default 64)")
@@ -162,23 +165,32 @@ def cmd_sweep(args) -> int:
     from mjx_pusht.tier import Banner
     from mjx_pusht.tree import read_tree
 
+    from mjx_pusht.params import parse_param
+    from mjx_pusht.sweep import rows_for
+
     seeds = parse_seeds(args.seeds)
+    params = tuple((n, tuple(v)) for n, v in (parse_param(t) for t in args.param))
+    if len({n for n, _ in params}) != len(params):
+        raise UsageError("each --param NAME may be given once")
     name, why = resolve(args.backend)
     schedule = Schedule(nudge_steps=args.steps)
-    config = {"backend": name, "break_it": args.break_it, "steps": args.steps}
+    config = {"backend": name, "break_it": args.break_it, "steps": args.steps, "params": [[n, list(v)] for n, v in params]}
+    scenario = Scenario(SceneSpec(args.break_it), schedule, params)
+    row_seeds, combos = rows_for(seeds, len(scenario.grid()))
     out = prepare_out_dir(args.out)
-    check_resumable(out, seeds, config, args.resume)
+    check_resumable(out, row_seeds, config, args.resume)
     banner = Banner("sweep")
     print(f"backend: {name} ({why})")
-    scenario = Scenario(SceneSpec(args.break_it), schedule)
     backend = make_backend(name, scenario)
     print(read_tree(backend.model).describe())
     print(f"pusher shape simulated: {backend.pusher}" + (" (substituted: MJX's JAX backend has no cylinder-box collision)"
                                                           if backend.pusher != scenario.scene.pusher else ""))
     print(f"device: {backend.device}; {len(seeds)} seeds x {schedule.total_steps} steps "
-          f"({schedule.settle_steps} settle + {schedule.nudge_steps} nudge)")
+          f"({schedule.settle_steps} settle + {schedule.nudge_steps} nudge)"
+          + (f" x {len(scenario.grid())} parameter combinations ({', '.join(n for n, _ in params)})" if params else ""))
     try:
-        run = run_sweep(backend, seeds, out, config=config, chunk=args.chunk, resume=args.resume, progress=args.progress)
+        run = run_sweep(backend, row_seeds, out, config=config, chunk=args.chunk, resume=args.resume,
+                        progress=args.progress, combos=combos)
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished chunks are kept in {out}; rerun with --resume to finish", file=sys.stderr)
         return 130
@@ -199,11 +211,11 @@ def cmd_sweep(args) -> int:
           f"(+{summary['compile_seconds']:.2f} s compile)")
     print(f"table: {out / 'per_seed.parquet'}\nsummary: {out / 'summary.json'}")
     if args.rerun and args.record > 0:
-        from mjx_pusht.record import record_sweep, recorded_seeds
+        from mjx_pusht.record import record_sweep, recorded_rows, row_labels
 
-        shown = recorded_seeds(r, args.record)
-        traced = backend.run(shown, trace=True)
-        record_sweep(out / "sweep.rrd", backend.model, traced, r)
+        shown = recorded_rows(r, args.record)
+        traced = backend.run(r.seeds[shown], trace=True, combos=combos[shown])
+        record_sweep(out / "sweep.rrd", backend.model, traced, r, row_labels(r, shown))
         print(f"recording: {out / 'sweep.rrd'} ({len(shown)} seeds side by side) - open it with: rerun {out / 'sweep.rrd'}")
     banner.done()
     return 0

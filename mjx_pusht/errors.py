@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from mjx_pusht.backends import BackendError
 from mjx_pusht.outputs import OutputError
+from mjx_pusht.params import ParamError
 from mjx_pusht.rollout_mjx import BufferOverflow
 from mjx_pusht.seeds import SeedSpecError
 from mjx_pusht.sweep import ResumeError
 from mjx_pusht.tree import TreeMismatch
 
 KNOWN_ERRORS: tuple[type[BaseException], ...] = (
-    BackendError, OutputError, BufferOverflow, SeedSpecError, ResumeError, TreeMismatch, ValueError,
+    BackendError, OutputError, ParamError, BufferOverflow, SeedSpecError, ResumeError, TreeMismatch, ValueError,
 )

@@ -111,7 +111,8 @@ def _histogram(values: np.ndarray, bins: int = 40) -> np.ndarray:
     return counts
 
 
-def record_sweep(path: Path, model: mujoco.MjModel, traced: Rollouts, everyone: Rollouts) -> Path:
+def record_sweep(path: Path, model: mujoco.MjModel, traced: Rollouts, everyone: Rollouts,
+                 labels: list[str] | None = None) -> Path:
     """K seeds side by side (world/seed_S/...), and outcome distributions over every seed (outcomes/...)."""
     import rerun as rr
 
@@ -119,11 +120,12 @@ def record_sweep(path: Path, model: mujoco.MjModel, traced: Rollouts, everyone: 
     rec = rr.RecordingStream("mjx_pusht_sweep")
     with rec:
         rec.save(str(path))
-        for k, seed in enumerate(traced.seeds):
-            root = f"world/seed_{int(seed)}"
+        labels = labels or [f"seed_{int(s)}" for s in traced.seeds]
+        for k, label in enumerate(labels):
+            root = f"world/{label}"
             rr.log(root, rr.Transform3D(translation=[k * SEED_SPACING, 0, 0]), static=True)
             _log_static_scene(rr, root, model)
-            _log_frames(rr, root, model, traced.trace.qpos[k], traced.trace.dt, f"plots/weld_gap/seed_{int(seed)}")
+            _log_frames(rr, root, model, traced.trace.qpos[k], traced.trace.dt, f"plots/weld_gap/{label}")
         rigid = everyone.rigid
         colors = np.where(rigid[:, None], [[60, 160, 90]], [[220, 60, 60]])
         rr.log("outcomes/final_xy", rr.Points2D(everyone.final[:, :2], colors=colors, radii=0.002), static=True)
@@ -136,8 +138,20 @@ def record_sweep(path: Path, model: mujoco.MjModel, traced: Rollouts, everyone: 
     return path
 
 
-def recorded_seeds(rollouts: Rollouts, k: int) -> np.ndarray:
-    """The first k seeds, plus every split or non-finite one (capped at 4*k so a recording stays small)."""
-    first = list(rollouts.seeds[:k])
-    odd = [s for s, ok in zip(rollouts.seeds, rollouts.rigid) if not ok and s not in first]
+def recorded_rows(rollouts: Rollouts, k: int) -> np.ndarray:
+    """The first k rows, plus split, non-finite or escaped ones (capped at 4*k so a recording stays small)."""
+    first = list(range(min(k, len(rollouts))))
+    bad = ~rollouts.rigid | ~rollouts.contained
+    odd = [i for i in np.flatnonzero(bad) if i >= k]
     return np.array(first + odd[: 4 * max(k, 1)], dtype=np.int64)
+
+
+def row_labels(rollouts: Rollouts, rows: np.ndarray) -> list[str]:
+    """Entity names: seed_S, with the swept parameter values appended when there are any."""
+    out = []
+    for i in rows:
+        label = f"seed_{int(rollouts.seeds[i])}"
+        for name, v in (rollouts.params or {}).items():
+            label += f"_{name}_{v[i]:g}".replace(".", "p")
+        out.append(label)
+    return out

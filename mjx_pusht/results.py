@@ -42,6 +42,7 @@ class Rollouts:
     finite: np.ndarray  # (N,) bool: qpos and qvel stayed finite and within mjMAXVAL at every step
     contained: np.ndarray  # (N,) bool: the tee's centre stayed inside the walls at every step
     trace: Trace | None = None
+    params: dict[str, np.ndarray] | None = None  # per row: the swept parameter values it ran with
 
     @property
     def rigid(self) -> np.ndarray:
@@ -62,6 +63,8 @@ class Rollouts:
         cols["tee_stayed_rigid"] = self.rigid
         cols["finite"] = self.finite.astype(bool)
         cols["contained"] = self.contained.astype(bool)
+        for name, v in (self.params or {}).items():
+            cols[f"param_{name}"] = np.asarray(v, np.float64)
         score = task_score(self.final)
         for k, v in score.items():
             cols[f"task_{k}"] = v
@@ -82,12 +85,17 @@ class Rollouts:
             gap_max_dev=np.asarray(cols["tee_gap_max_dev"], np.float64),
             finite=np.asarray(cols["finite"], bool),
             contained=np.asarray(cols["contained"], bool),
+            params={k.removeprefix("param_"): np.asarray(v, np.float64) for k, v in cols.items()
+                    if k.startswith("param_")} or None,
         )
 
     @classmethod
     def concat(cls, parts: list["Rollouts"]) -> "Rollouts":
-        fields = [f.name for f in dataclasses.fields(cls) if f.name != "trace"]
-        return cls(**{f: np.concatenate([getattr(p, f) for p in parts]) for f in fields})
+        fields = [f.name for f in dataclasses.fields(cls) if f.name not in ("trace", "params")]
+        out = cls(**{f: np.concatenate([getattr(p, f) for p in parts]) for f in fields})
+        if parts and parts[0].params:
+            out.params = {k: np.concatenate([p.params[k] for p in parts]) for k in parts[0].params}
+        return out
 
 
 def round6(v) -> float:

@@ -52,9 +52,20 @@ def run_cpu(
     trace: bool = False,
     nthread: int | None = None,
     model: mujoco.MjModel | None = None,
+    combos: np.ndarray | None = None,
 ) -> Rollouts:
-    """Roll out every seed on the CPU and reduce each to its per-seed row."""
+    """Roll out every seed on the CPU and reduce each to its per-seed row.
+
+    `combos[i]` picks row i's parameter combination from `scenario.grid()`; each
+    row runs on its own parameterised MjModel (mujoco.rollout takes one per row).
+    """
     model = model if model is not None else _model(scenario)
+    grid = scenario.grid()
+    combos = np.zeros(len(seeds), np.int64) if combos is None else np.asarray(combos, np.int64)
+    if scenario.params:
+        from mjx_pusht.params import apply
+
+        models = [apply(model, g) for g in grid]
     seeds = np.asarray(seeds, dtype=np.int64)
     nthread = nthread or default_threads()
     layout = QposLayout.of(model)
@@ -69,8 +80,9 @@ def run_cpu(
         for lo in range(0, len(seeds), _CHUNK):
             qpos0 = layout.initial_qpos(model, poses[lo : lo + _CHUNK])
             n = len(qpos0)
+            row_models = [models[c] for c in combos[lo : lo + n]] if scenario.params else model
             state, sensor = pool.rollout(
-                model, datas, initial_states(model, qpos0), ctrl,
+                row_models, datas, initial_states(model, qpos0), ctrl,
                 nstep=schedule.total_steps,
                 initial_warmstart=np.zeros((n, model.nv)),  # as a fresh MjData: no carry-over between seeds
             )
@@ -98,6 +110,8 @@ def run_cpu(
             if trace:
                 traces.append(np.concatenate([qpos0[:, None], qpos], axis=1))
     out = Rollouts.concat(parts) if parts else _empty()
+    if scenario.params:
+        out.params = {name: np.array([grid[c][name] for c in combos]) for name, _ in scenario.params}
     if trace:
         out.trace = Trace(np.concatenate(traces), float(model.opt.timestep))
     return out

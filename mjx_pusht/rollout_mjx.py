@@ -137,8 +137,45 @@ class MjxRunner:
         from mujoco import mjx
 
         self.mx = mjx.put_model(self.model, impl=cfg.impl, device=self.devices[0])
+        self.grid = scenario.grid()
+        self._stacked = self._stack_grid() if len(self.grid) > 1 else None
+        if len(self.grid) == 1 and scenario.params:
+            from mjx_pusht.params import apply
+
+            self.mx = mjx.put_model(apply(self.model, self.grid[0]), impl=cfg.impl, device=self.devices[0])
         # x64 is process-wide in JAX: once on, every later runner computes in float64 too
         self.dtype = np.float64 if jax.config.jax_enable_x64 else np.float32
+
+    def _stack_grid(self):
+        """The grid's models as one Model whose differing leaves carry a leading combo axis.
+
+        Each combination is the CPU model edited and re-derived (params.apply), put on
+        the device; only the leaves that differ are stacked, so the rollout gathers a
+        row's model by index inside one compiled program.
+        """
+        import jax
+        import jax.numpy as jnp
+        from mujoco import mjx
+
+        from mjx_pusht.params import apply
+
+        mxs = [mjx.put_model(apply(self.model, g), impl=self.cfg.impl, device=self.devices[0]) for g in self.grid]
+        flat = [jax.tree.flatten(m) for m in mxs]
+        treedef = flat[0][1]
+        leaves, batched = [], []
+        for column in zip(*(f[0] for f in flat)):
+            same = all(np.array_equal(np.asarray(column[0]), np.asarray(c)) for c in column[1:])
+            leaves.append(column[0] if same else jnp.stack([jnp.asarray(c) for c in column]))
+            batched.append(not same)
+        return treedef, leaves, batched
+
+    def _row_model(self, combo):
+        import jax
+
+        if self._stacked is None:
+            return self.mx
+        treedef, leaves, batched = self._stacked
+        return jax.tree.unflatten(treedef, [l[combo] if b else l for l, b in zip(leaves, batched)])
 
     @property
     def device_name(self) -> str:
@@ -150,7 +187,7 @@ class MjxRunner:
         import jax.numpy as jnp
         from mujoco import mjx
 
-        model, layout, schedule, mx = self.model, self.layout, self.scenario.schedule, self.mx
+        model, layout, schedule = self.model, self.layout, self.scenario.schedule
         warp = self.cfg.impl == "warp"
         if warp:
             per_dev = batch // len(self.devices)
@@ -164,7 +201,9 @@ class MjxRunner:
         steps = jnp.arange(schedule.total_steps)
         settle_step = schedule.settle_steps - 1
 
-        def one_seed(qpos0, acc0):
+        def one_seed(qpos0, acc0, combo):
+            mx = self._row_model(combo)
+
             def body(carry, xs):
                 d, acc, ovf, qs = carry
                 t, u = xs
@@ -193,7 +232,10 @@ class MjxRunner:
         sharding = self._sharding(batch)
         if sharding is not None:
             qpos, acc = jax.device_put((qpos, acc), sharding)
-        compiled = fn.lower(qpos, acc).compile()
+        combo = jnp.zeros((batch,), jnp.int32)
+        if sharding is not None:
+            combo = jax.device_put(combo, sharding)
+        compiled = fn.lower(qpos, acc, combo).compile()
         self.compile_seconds += time.perf_counter() - t0
         return compiled, sharding
 
@@ -208,7 +250,7 @@ class MjxRunner:
         mesh = Mesh(np.array(self.devices), ("seeds",))
         return NamedSharding(mesh, PartitionSpec("seeds"))
 
-    def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None) -> Rollouts:
+    def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None) -> Rollouts:
         """Roll out `seeds` (padded up to `batch` so one compiled shape serves every chunk)."""
         import jax
         import jax.numpy as jnp
@@ -226,9 +268,11 @@ class MjxRunner:
         qpos0 = self.layout.initial_qpos(self.model, np.concatenate([poses, np.repeat(poses[-1:], batch - n, 0)]))
         acc = jax.tree.map(lambda a: a.astype(self.dtype) if a.dtype != bool else a, invariants_init(batch, jnp))
         qpos0 = jnp.asarray(qpos0, self.dtype)
+        combos = np.zeros(n, np.int64) if combos is None else np.asarray(combos, np.int64)
+        combo = jnp.asarray(np.concatenate([combos, np.repeat(combos[-1:], batch - n)]), jnp.int32)
         if sharding is not None:
-            qpos0, acc = jax.device_put((qpos0, acc), sharding)
-        acc, final, pusher, ovf, qs = jax.device_get(fn(qpos0, acc))
+            qpos0, acc, combo = jax.device_put((qpos0, acc, combo), sharding)
+        acc, final, pusher, ovf, qs = jax.device_get(fn(qpos0, acc, combo))
         ovf = np.asarray(ovf)[:n]
         dropped = (ovf & _DROP_BITS) != 0
         if dropped.any():
@@ -242,6 +286,8 @@ class MjxRunner:
             gap_settled=f64(acc["gap_settled"]), gap_max_dev=f64(acc["gap_max_dev"]), finite=np.asarray(acc["finite"])[:n],
             contained=np.asarray(acc["contained"])[:n],
         )
+        if self.scenario.params:
+            out.params = {name: np.array([self.grid[c][name] for c in combos]) for name, _ in self.scenario.params}
         if trace:
             out.trace = Trace(
                 np.concatenate([np.asarray(qpos0, np.float64)[:n, None], f64(qs)], axis=1), float(self.model.opt.timestep)

@@ -14,6 +14,13 @@ class Scenario:
 
     scene: SceneSpec = SceneSpec()
     schedule: Schedule = Schedule()
+    params: tuple[tuple[str, tuple[float, ...]], ...] = ()  # (name, values) pairs swept as a grid
+
+    def grid(self) -> list[dict[str, float]]:
+        """Every parameter combination; a single empty one when nothing is swept."""
+        from mjx_pusht.params import grid
+
+        return grid({name: list(values) for name, values in self.params})
 
     @property
     def break_it(self) -> str:

@@ -35,6 +35,11 @@ class SweepRun:
     run_seconds: float
 
 
+def rows_for(seeds: np.ndarray, n_combos: int) -> tuple[np.ndarray, np.ndarray]:
+    """The sweep's rows: every seed under every parameter combination, combination-major."""
+    return np.tile(seeds, n_combos), np.repeat(np.arange(n_combos), len(seeds))
+
+
 def _fingerprint(seeds: np.ndarray, config: dict) -> dict:
     return {"config": config, "n_seeds": int(len(seeds)), "seeds_sha256": hashlib.sha256(seeds.tobytes()).hexdigest()}
 
@@ -79,10 +84,12 @@ def run_sweep(
     chunk: int | None = None,
     resume: bool = False,
     progress: bool = True,
+    combos: np.ndarray | None = None,
 ) -> SweepRun:
-    """Run every seed in chunks, write each chunk as it lands, then the table and summary."""
+    """Run every row (seed, or seed x parameter combination) in chunks, writing each chunk as it lands."""
     from tqdm import tqdm
 
+    combos = np.zeros(len(seeds), np.int64) if combos is None else np.asarray(combos)
     parts = out / PARTS
     check_resumable(out, seeds, config, resume)
     if not resume and parts.exists():
@@ -105,7 +112,7 @@ def run_sweep(
         while hi < len(seeds) and hi - lo < chunk and not done[hi]:
             hi += 1
         try:
-            rows = backend.run(seeds[lo:hi], batch=chunk)
+            rows = backend.run(seeds[lo:hi], batch=chunk, combos=combos[lo:hi])
         except Exception as e:  # noqa: BLE001 - only memory errors are retried
             if not _is_out_of_memory(e) or chunk <= 1:
                 raise
@@ -121,7 +128,7 @@ def run_sweep(
     compile_s = backend.compile_seconds - compile0
     tables = [read_table(parts / f"seeds-{lo:012d}-{hi:012d}.parquet") for lo, hi in _done_ranges(parts)]
     rollouts = Rollouts.concat([Rollouts.from_columns(t) for t in tables])
-    if not np.array_equal(rollouts.seeds, seeds):
+    if not np.array_equal(rollouts.seeds, seeds) or len(rollouts) != len(seeds):
         raise RuntimeError(f"chunk files in {parts} do not cover the sweep's seeds; remove the folder and rerun")
     return SweepRun(rollouts, {}, compile_s, max(wall - compile_s, 1e-9))
 
