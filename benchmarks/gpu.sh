@@ -9,6 +9,8 @@ mkdir -p "$OUT/results"
 case "$stage" in
   warp)   python3 -m benchmarks.harness --tier "$tier-warp" --backends cpu,mjx-warp --cpu-batches 4096,65536 \
             --batches 1024,4096,16384,65536 --repeats 2 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
+  warp-tight) python3 -m benchmarks.harness --tier "$tier-warp-tight" --backends cpu,mjx-warp --cpu-batches 65536 \
+            --batches 4096,65536,131072,262144 --repeats 2 --e2e 1000000 --e2e-chunk 262144 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
   jax)    python3 -m benchmarks.harness --tier "$tier-jax" --backends mjx-jax --batches 1024,4096,16384,65536 \
             --repeats 2 --e2e 1000000 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
   compare-warp) python3 -m mjx_pusht compare --seeds 4096 --backend mjx-warp --no-root-cause \

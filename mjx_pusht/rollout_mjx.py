@@ -78,10 +78,19 @@ def contacts_per_world(model: mujoco.MjModel) -> int:
     return len(collision_pairs(model)) * _MAX_CONTACTS_PER_PAIR
 
 
-def constraints_per_world(model: mujoco.MjModel) -> int:
+def constraints_per_world(model: mujoco.MjModel, contacts: int | None = None) -> int:
     """Rows: pyramidal friction gives 2*(condim-1) rows a contact, plus one per frictionloss DOF."""
     condim = int(model.geom_condim.max())
-    return contacts_per_world(model) * max(1, 2 * (condim - 1)) + int(model.nv)
+    contacts = contacts_per_world(model) if contacts is None else contacts
+    return contacts * max(1, 2 * (condim - 1)) + int(model.nv)
+
+
+# Where MJX-Warp's buffers start: the CPU never sees more than 8 contacts (27 rows) in one
+# world of this scene, and naconmax is shared by all worlds of a batch. A chunk that
+# overflows is rerun with doubled buffers, up to the geometric bounds above, so a
+# tight start costs nothing in correctness.
+START_CONTACTS_PER_WORLD = 16
+START_ROWS_PER_WORLD = 48
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,6 +102,9 @@ class MjxConfig:
     iterations: int | None = None
     ls_iterations: int | None = None
     tolerance: float | None = None
+    # MJX-Warp buffers per world; None: start at the typical need and grow on overflow
+    contacts_per_world: int | None = None
+    constraints_per_world: int | None = None
 
 
 def simulated_scene(scenario: Scenario, impl: str) -> SceneSpec:
@@ -137,6 +149,10 @@ class MjxRunner:
         from mujoco import mjx
 
         self.mx = mjx.put_model(self.model, impl=cfg.impl, device=self.devices[0])
+        self.buffers = (
+            cfg.contacts_per_world or START_CONTACTS_PER_WORLD,
+            cfg.constraints_per_world or START_ROWS_PER_WORLD,
+        )
         self.grid = scenario.grid()
         self._stacked = self._stack_grid() if len(self.grid) > 1 else None
         if len(self.grid) == 1 and scenario.params:
@@ -145,6 +161,14 @@ class MjxRunner:
             self.mx = mjx.put_model(apply(self.model, self.grid[0]), impl=cfg.impl, device=self.devices[0])
         # x64 is process-wide in JAX: once on, every later runner computes in float64 too
         self.dtype = np.float64 if jax.config.jax_enable_x64 else np.float32
+
+    def _grow(self) -> bool:
+        """Double the per-world buffers up to the scene's geometric bounds; False when already there."""
+        top = (contacts_per_world(self.model), constraints_per_world(self.model))
+        if self.cfg.impl != "warp" or self.buffers >= top or self.cfg.contacts_per_world:
+            return False
+        self.buffers = (min(2 * self.buffers[0], top[0]), min(2 * self.buffers[1], top[1]))
+        return True
 
     def _stack_grid(self):
         """The grid's models as one Model whose differing leaves carry a leading combo axis.
@@ -193,7 +217,7 @@ class MjxRunner:
             per_dev = batch // len(self.devices)
             d0 = mjx.make_data(
                 model, impl="warp", device=self.devices[0],
-                naconmax=per_dev * contacts_per_world(model), njmax=constraints_per_world(model),
+                naconmax=per_dev * self.buffers[0], njmax=self.buffers[1],
             )
         else:
             d0 = mjx.make_data(model, impl="jax", device=self.devices[0])
@@ -260,7 +284,7 @@ class MjxRunner:
         batch = batch or n
         if n > batch:
             raise ValueError(f"{n} seeds do not fit a batch of {batch}")
-        key = (batch, trace)
+        key = (batch, trace, self.buffers)
         if key not in self._fns:
             self._fns[key] = self._build(batch, trace)
         fn, sharding = self._fns[key]
@@ -275,10 +299,13 @@ class MjxRunner:
         acc, final, pusher, ovf, qs = jax.device_get(fn(qpos0, acc, combo))
         ovf = np.asarray(ovf)[:n]
         dropped = (ovf & _DROP_BITS) != 0
+        if dropped.any() and self._grow():
+            return self.run(seeds, trace=trace, batch=batch, combos=combos)
         if dropped.any():
             raise BufferOverflow(
                 f"MJX-Warp buffers overflowed in {int(dropped.sum())} of {n} seeds (bits {int(np.bitwise_or.reduce(ovf)):#x}): "
-                "contacts or constraint rows were dropped, so these results are not physics; use a smaller --chunk"
+                "contacts or constraint rows were dropped, so these results are not physics; "
+                f"the buffers were fixed at {self.buffers} (contacts, rows) per world: raise them"
             )
         f64 = lambda a: np.asarray(a, np.float64)[:n]  # noqa: E731
         out = Rollouts(

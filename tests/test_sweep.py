@@ -198,3 +198,30 @@ def test_sweep_cli_writes_table_summary_and_recording(tmp_path):
     assert s["n_seeds"] == 6 and s["rigid_fraction"] == 1.0 and s["pusher_shape"] == "cylinder"
     assert (out / "sweep.rrd").stat().st_size > 0 and not (out / ".parts").exists()
     assert "tier:" in r.stdout and "wall-clock" in r.stdout
+
+
+@pytest.mark.warp
+def test_warp_buffers_too_small_to_hold_the_contacts_are_an_error_not_a_result():
+    from mjx_pusht.backends import MjxBackend
+    from mjx_pusht.rollout_mjx import BufferOverflow, warp_available
+
+    if not warp_available():
+        pytest.skip("warp-lang is not installed")
+    backend = MjxBackend(Scenario(), "warp", contacts_per_world=1, constraints_per_world=4)
+    with pytest.raises(BufferOverflow, match="dropped"):
+        backend.run(np.arange(8))
+
+
+@pytest.mark.warp
+def test_warp_buffers_that_overflow_grow_and_the_chunk_is_rerun(monkeypatch, cpu_runs):
+    import mjx_pusht.rollout_mjx as rm
+    from mjx_pusht.backends import MjxBackend
+
+    if not rm.warp_available():
+        pytest.skip("warp-lang is not installed")
+    monkeypatch.setattr(rm, "START_CONTACTS_PER_WORLD", 1)
+    monkeypatch.setattr(rm, "START_ROWS_PER_WORLD", 4)
+    backend = MjxBackend(Scenario(), "warp")
+    rows = backend.run(np.arange(8))
+    assert backend.runner.buffers > (1, 4)
+    _assert_matches_cpu(rows, cpu_runs[("none", "cylinder")])
