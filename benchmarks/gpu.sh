@@ -11,6 +11,8 @@ case "$stage" in
             --batches 1024,4096,16384,65536 --repeats 2 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
   warp-tight) python3 -m benchmarks.harness --tier "$tier-warp-tight" --backends cpu,mjx-warp --cpu-batches 65536 \
             --batches 4096,65536,131072,262144 --repeats 2 --e2e 1000000 --e2e-chunk 262144 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
+  e2e)    python3 -m benchmarks.harness --tier "$tier-e2e" --backends mjx-warp --batches 65536 --repeats 1 \
+            --e2e 1000000 --e2e-chunk 65536 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
   jax)    python3 -m benchmarks.harness --tier "$tier-jax" --backends mjx-jax --batches 1024,4096,16384,65536 \
             --repeats 2 --e2e 1000000 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
   compare-warp) python3 -m mjx_pusht compare --seeds 4096 --backend mjx-warp --no-root-cause \

@@ -83,6 +83,7 @@ def end_to_end(name: str, scenario: Scenario, n: int, chunk: int | None) -> dict
         size = (Path(d) / "per_seed.parquet").stat().st_size
     wall = time.perf_counter() - t0
     return {"backend": name, "n_seeds": n, "wall_seconds": round(wall, 2), "compile_seconds": round(run.compile_seconds, 2),
+            "warp_buffers": getattr(backend, "buffer_info", None),
             "rigid_fraction": float(run.rollouts.rigid.mean()), "parquet_bytes": size,
             "steps_per_second_end_to_end": round(n * scenario.schedule.total_steps / wall, 1)}
 
@@ -126,7 +127,8 @@ def main(argv=None) -> int:
                 traceback.print_exc(limit=1)
             rows.append(row)
             print(f"{name} batch {batch}: {row.get('steps_per_second', row.get('error'))}", flush=True)
-        result["backends"][name] = {"device": backend.device, "pusher": backend.pusher, "rows": rows}
+        result["backends"][name] = {"device": backend.device, "pusher": backend.pusher, "rows": rows,
+                                    "warp_buffers": getattr(backend, "buffer_info", None)}
         if name == "cpu":
             result["backends"][name]["threads"] = backend.nthread
     if args.e2e:
@@ -159,7 +161,8 @@ def plot(result: dict, path: Path) -> None:
             ax.plot([r["batch"] for r in rows], [r["steps_per_second"] for r in rows], "o-", label=f"{name} ({b['device']})")
     ax.set(xscale="log", yscale="log", xlabel="batch (seeds)", ylabel="steps / s",
            title=f"PushT rollout throughput, tier {result['tier']} ({result['device']})")
-    ax.legend(fontsize=8)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

@@ -88,6 +88,14 @@ class MjxBackend:
         return self.runner.compile_seconds
 
     @property
+    def buffer_info(self) -> dict | None:
+        """MJX-Warp's per-world buffers as they ended, and how often they had to grow."""
+        if self.runner.cfg.impl != "warp":
+            return None
+        c, r = self.runner.buffers
+        return {"contacts_per_world": c, "rows_per_world": r, "growths": self.runner.growths}
+
+    @property
     def default_chunk(self) -> int:
         on_gpu = self.runner.devices[0].platform == "gpu"
         per = 4096 if on_gpu else 64

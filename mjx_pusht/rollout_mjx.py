@@ -153,6 +153,7 @@ class MjxRunner:
             cfg.contacts_per_world or START_CONTACTS_PER_WORLD,
             cfg.constraints_per_world or START_ROWS_PER_WORLD,
         )
+        self.growths = 0
         self.grid = scenario.grid()
         self._stacked = self._stack_grid() if len(self.grid) > 1 else None
         if len(self.grid) == 1 and scenario.params:
@@ -168,6 +169,11 @@ class MjxRunner:
         if self.cfg.impl != "warp" or self.buffers >= top or self.cfg.contacts_per_world:
             return False
         self.buffers = (min(2 * self.buffers[0], top[0]), min(2 * self.buffers[1], top[1]))
+        self.growths += 1
+        import sys
+
+        print(f"mjx-warp: a buffer overflowed; rerunning the chunk with {self.buffers[0]} contacts and "
+              f"{self.buffers[1]} rows per world", file=sys.stderr)
         return True
 
     def _stack_grid(self):
