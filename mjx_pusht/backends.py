@@ -56,10 +56,12 @@ class CpuBackend:
     def device(self) -> str:
         return f"cpu ({self.nthread} threads)"
 
-    def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None) -> Rollouts:
+    def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None,
+            poses=None) -> Rollouts:
         from mjx_pusht.rollout_cpu import run_cpu
 
-        return run_cpu(self.scenario, seeds, trace=trace, nthread=self.nthread, model=self.model, combos=combos)
+        return run_cpu(self.scenario, seeds, trace=trace, nthread=self.nthread, model=self.model, combos=combos,
+                       poses=poses)
 
 
 class MjxBackend:
@@ -101,8 +103,9 @@ class MjxBackend:
         per = 4096 if on_gpu else 64
         return per * len(self.runner.devices)
 
-    def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None) -> Rollouts:
-        return self.runner.run(seeds, trace=trace, batch=batch, combos=combos)
+    def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None,
+            poses=None) -> Rollouts:
+        return self.runner.run(seeds, trace=trace, batch=batch, combos=combos, poses=poses)
 
 
 def has_gpu() -> bool:

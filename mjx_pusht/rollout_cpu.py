@@ -53,6 +53,7 @@ def run_cpu(
     nthread: int | None = None,
     model: mujoco.MjModel | None = None,
     combos: np.ndarray | None = None,
+    poses: np.ndarray | None = None,
 ) -> Rollouts:
     """Roll out every seed on the CPU and reduce each to its per-seed row.
 
@@ -73,7 +74,7 @@ def run_cpu(
     ctrl = schedule.controls()[None]  # (1, T, nu), broadcast over the batch
     bar = slice(0, 3)  # sensor order as authored: bar_pos then stem_pos
     stem = slice(3, 6)
-    poses = start_poses(seeds)
+    poses = start_poses(seeds) if poses is None else poses  # a sweep draws them once, for every chunk
     parts, traces = [], []
     datas = [mujoco.MjData(model) for _ in range(nthread)]
     with mj_rollout.Rollout(nthread=nthread) as pool:

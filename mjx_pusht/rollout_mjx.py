@@ -280,7 +280,8 @@ class MjxRunner:
         mesh = Mesh(np.array(self.devices), ("seeds",))
         return NamedSharding(mesh, PartitionSpec("seeds"))
 
-    def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None) -> Rollouts:
+    def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None,
+            poses: np.ndarray | None = None) -> Rollouts:
         """Roll out `seeds` (padded up to `batch` so one compiled shape serves every chunk)."""
         import jax
         import jax.numpy as jnp
@@ -294,7 +295,7 @@ class MjxRunner:
         if key not in self._fns:
             self._fns[key] = self._build(batch, trace)
         fn, sharding = self._fns[key]
-        poses = start_poses(seeds)
+        poses = start_poses(seeds) if poses is None else poses
         qpos0 = self.layout.initial_qpos(self.model, np.concatenate([poses, np.repeat(poses[-1:], batch - n, 0)]))
         acc = jax.tree.map(lambda a: a.astype(self.dtype) if a.dtype != bool else a, invariants_init(batch, jnp))
         qpos0 = jnp.asarray(qpos0, self.dtype)
@@ -306,7 +307,7 @@ class MjxRunner:
         ovf = np.asarray(ovf)[:n]
         dropped = (ovf & _DROP_BITS) != 0
         if dropped.any() and self._grow():
-            return self.run(seeds, trace=trace, batch=batch, combos=combos)
+            return self.run(seeds, trace=trace, batch=batch, combos=combos, poses=poses)
         if dropped.any():
             raise BufferOverflow(
                 f"MJX-Warp buffers overflowed in {int(dropped.sum())} of {n} seeds (bits {int(np.bitwise_or.reduce(ovf)):#x}): "

@@ -78,12 +78,23 @@ def _rect_overlap(pa: np.ndarray, ra, pb: np.ndarray, rb) -> np.ndarray:
     return _area(poly, count)
 
 
+# Every point of a T lies within this distance of its body origin (the stem's far corners),
+# so two Ts whose origins are more than twice this apart cannot overlap at all.
+T_REACH = max(np.hypot(abs(cx) + hx, abs(cy) + hy) for cx, cy, hx, hy in T_RECTS)
+
+
 def coverage(pose: np.ndarray, target=TARGET_POSE) -> np.ndarray:
     """Fraction of the target T's area covered by the block T at each (x, y, yaw) pose, in [0, 1]."""
     pose = np.atleast_2d(np.asarray(pose, float))
     tgt = np.broadcast_to(np.asarray(target, float), pose.shape)
-    inter = sum(_rect_overlap(pose, ra, tgt, rb) for ra in T_RECTS for rb in T_RECTS)
-    return np.clip(inter / T_AREA, 0.0, 1.0)
+    out = np.zeros(len(pose))
+    # exact shortcut: only poses within reach of the target can overlap it
+    near = np.flatnonzero(np.hypot(pose[:, 0] - tgt[:, 0], pose[:, 1] - tgt[:, 1]) < 2 * T_REACH)
+    if near.size:
+        p, t = pose[near], tgt[near]
+        inter = sum(_rect_overlap(p, ra, t, rb) for ra in T_RECTS for rb in T_RECTS)
+        out[near] = np.clip(inter / T_AREA, 0.0, 1.0)
+    return out
 
 
 def task_score(final: np.ndarray, target=TARGET_POSE) -> dict[str, np.ndarray]:

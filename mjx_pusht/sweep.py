@@ -101,6 +101,10 @@ def run_sweep(
     for lo, hi in _done_ranges(parts):
         done[lo:hi] = True
     todo = np.flatnonzero(~done)
+    from mjx_pusht.reset import start_poses
+
+    poses = np.zeros((len(seeds), 3))
+    poses[todo] = start_poses(seeds[todo])  # once for the whole sweep (a process pool when large)
     t0 = time.perf_counter()
     compile0 = backend.compile_seconds
     bar = tqdm(total=len(seeds), initial=int(done.sum()), unit="seed", disable=not progress, file=sys.stderr,
@@ -112,7 +116,7 @@ def run_sweep(
         while hi < len(seeds) and hi - lo < chunk and not done[hi]:
             hi += 1
         try:
-            rows = backend.run(seeds[lo:hi], batch=chunk, combos=combos[lo:hi])
+            rows = backend.run(seeds[lo:hi], batch=chunk, combos=combos[lo:hi], poses=poses[lo:hi])
         except Exception as e:  # noqa: BLE001 - only memory errors are retried
             if not _is_out_of_memory(e) or chunk <= 1:
                 raise

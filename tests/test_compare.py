@@ -69,3 +69,14 @@ def test_coverage_is_zero_far_away_and_yaw_error_wraps():
     assert list(wrap_angle(np.array([-np.pi, np.pi]))) == [np.pi, np.pi]
     s = task_score(np.array([[0.03, 0.04, 2 * np.pi + 0.1]]))
     assert s["pos_err"][0] == pytest.approx(0.05) and s["yaw_err"][0] == pytest.approx(0.1)
+
+
+def test_the_far_away_shortcut_changes_no_coverage():
+    from mjx_pusht.score import T_RECTS, _rect_overlap
+
+    rng = np.random.default_rng(3)
+    poses = np.column_stack([rng.uniform(-0.25, 0.25, 4000), rng.uniform(-0.25, 0.25, 4000), rng.uniform(-np.pi, np.pi, 4000)])
+    tgt = np.zeros_like(poses)
+    brute = sum(_rect_overlap(poses, ra, tgt, rb) for ra in T_RECTS for rb in T_RECTS) / T_AREA
+    np.testing.assert_allclose(coverage(poses), np.clip(brute, 0, 1), atol=1e-12)
+    assert (brute > 0).sum() > 100  # the sample does reach overlapping poses
