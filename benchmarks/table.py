@@ -13,7 +13,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 BEGIN, END = "<!-- bench-table:begin -->", "<!-- bench-table:end -->"
-TIERS = [("cpu", ["cpu"]), ("h100", ["h100-warp", "h100-warp-tight", "h100-jax"]), ("h200", ["h200"]), ("h200-x2", ["h200-x2"])]
+TIERS = [("cpu", ["cpu"]), ("h100", ["h100-warp", "h100-warp-tight", "h100-e2e", "h100-jax"]), ("h200", ["h200"]), ("h200-x2", ["h200-x2"])]
 
 
 def _rows(files: list[str]):
