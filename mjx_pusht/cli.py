@@ -77,7 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--no-progress", dest="progress", action="store_false")
     w.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
                    help="sweep a physical parameter as a grid: kv, tee_damping, tee_frictionloss, tee_mass; "
-                        "VALUES is a,b,c or lo:hi:n (repeatable)")
+                        "VALUES is a,b,c, lo:hi:n (evenly spaced) or ~lo:hi:n (n random draws) (repeatable)")
 
     c = sub.add_parser("compare", help="CPU vs MJX fidelity report: compare.json, compare.md, compare.png")
     c.add_argument("--seeds", default="64", help="N, A:B or a,b,c (default 64)")

@@ -54,14 +54,24 @@ class ParamError(ValueError):
     pass
 
 
+DRAW_SEED = 0  # random draws from a range come from this fixed generator, so a sweep is repeatable
+
+
 def parse_param(text: str) -> tuple[str, list[float]]:
-    """`NAME=a,b,c` (listed values) or `NAME=lo:hi:n` (n evenly spaced values, ends included)."""
+    """`NAME=a,b,c` (listed), `NAME=lo:hi:n` (n evenly spaced, ends included) or `NAME=~lo:hi:n`
+    (n uniform random draws from [lo, hi), from a generator seeded with DRAW_SEED and the name)."""
     name, sep, values = text.partition("=")
     name = name.strip()
     if not sep or name not in PARAMS:
         raise ParamError(f"--param {text!r}: expected NAME=VALUES with NAME one of {', '.join(PARAMS)}")
     try:
-        if ":" in values:
+        if values.startswith("~"):
+            lo, hi, n = values[1:].split(":")
+            if int(n) < 1 or not float(lo) < float(hi):
+                raise ValueError
+            rng = np.random.default_rng([DRAW_SEED, *name.encode()])
+            out = [float(v) for v in rng.uniform(float(lo), float(hi), int(n))]
+        elif ":" in values:
             lo, hi, n = values.split(":")
             if int(n) < 1:
                 raise ValueError
@@ -69,7 +79,7 @@ def parse_param(text: str) -> tuple[str, list[float]]:
         else:
             out = [float(v) for v in values.split(",")]
     except ValueError:
-        raise ParamError(f"--param {text!r}: values are a,b,c or lo:hi:n") from None
+        raise ParamError(f"--param {text!r}: values are a,b,c, lo:hi:n or ~lo:hi:n") from None
     if not out or not all(np.isfinite(out)) or min(out) < 0 or (name == "tee_mass" and min(out) <= 0):
         raise ParamError(f"--param {text!r}: values must be finite and non-negative (mass positive)")
     return name, out

@@ -21,7 +21,9 @@ from mjx_pusht.sweep import rows_for
 def test_param_specs():
     assert parse_param("kv=5,20,80") == ("kv", [5.0, 20.0, 80.0])
     assert parse_param("tee_mass=0.1:0.3:3") == ("tee_mass", pytest.approx([0.1, 0.2, 0.3]))
-    for bad in ("kv", "gain=5", "kv=", "kv=a,b", "kv=-1", "tee_mass=0", "kv=1:2:0", "kv=nan"):
+    name, draws = parse_param("kv=~1:100:5")
+    assert len(draws) == 5 and all(1 <= d < 100 for d in draws) and parse_param("kv=~1:100:5")[1] == draws
+    for bad in ("kv", "gain=5", "kv=", "kv=a,b", "kv=-1", "tee_mass=0", "kv=1:2:0", "kv=nan", "kv=~5:1:3"):
         with pytest.raises(ParamError):
             parse_param(bad)
 

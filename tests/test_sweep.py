@@ -225,3 +225,28 @@ def test_warp_buffers_that_overflow_grow_and_the_chunk_is_rerun(monkeypatch, cpu
     rows = backend.run(np.arange(8))
     assert backend.runner.buffers > (1, 4)
     _assert_matches_cpu(rows, cpu_runs[("none", "cylinder")])
+
+
+class _MemoryBound:
+    """A backend whose device "fits" at most `limit` rows: larger batches fail like XLA out of memory."""
+
+    def __init__(self, inner, limit):
+        self.inner, self.limit = inner, limit
+        self.name, self.default_chunk, self.compile_seconds = inner.name, 64, 0.0
+        self.batches = []
+
+    def run(self, seeds, batch=None, **kw):
+        self.batches.append(batch)
+        if batch > self.limit:
+            raise RuntimeError("RESOURCE_EXHAUSTED: Out of memory while trying to allocate 16.27GiB")
+        return self.inner.run(seeds, batch=batch, **kw)
+
+
+def test_a_chunk_too_big_for_memory_is_halved_automatically(tmp_path):
+    seeds = np.arange(20)
+    config = {"backend": "cpu", "break_it": "none", "steps": 120}
+    bound = _MemoryBound(CpuBackend(Scenario()), limit=8)
+    run = run_sweep(bound, seeds, tmp_path / "a", config=config, chunk=32, progress=False)
+    assert bound.batches[:3] == [32, 16, 8] and max(bound.batches[3:]) == 8
+    ref = run_sweep(CpuBackend(Scenario()), seeds, tmp_path / "b", config=config, chunk=32, progress=False)
+    np.testing.assert_array_equal(run.rollouts.final, ref.rollouts.final)
