@@ -288,7 +288,8 @@ def _plots(out: Path, mjx_r: Rollouts, cpu_r: Rollouts, div: np.ndarray, impl: s
     ax[1].hist(mjx_r.final[:, 2], bins=bins, alpha=0.6, label=f"mjx-{impl}")
     ax[1].set(xlabel="final yaw (rad)", ylabel="seeds", title="outcome modes", yscale="log")
     ax[1].legend()
-    ax[2].hist(div, bins=np.arange(0, mjx_r.trace.qpos.shape[1] + 2, 4))
+    frames = mjx_r.trace.qpos.shape[1]  # a seed that never parts reads `frames`, drawn in the last bin
+    ax[2].hist(np.minimum(div, frames), bins=np.arange(0, frames + 4, 4))
     ax[2].set(xlabel=f"first step with tee position error > {DIVERGED_M} m", ylabel="seeds",
               title="time to divergence (last bin: never)")
     fig.tight_layout()
