@@ -10,14 +10,13 @@ itself under an equally small change.
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
-from mjx_pusht.backends import CpuBackend, MjxBackend, versions
+from mjx_pusht.backends import MjxBackend, versions
 from mjx_pusht.results import Rollouts
 from mjx_pusht.rollout_cpu import run_cpu
 from mjx_pusht.scenario import Scenario
@@ -117,19 +116,15 @@ class Experiment:
 
 def _cpu_variant(scene: SceneSpec, seeds, *, jitter32: bool = False, **opt) -> Rollouts:
     """The CPU reference under a small change: start poses rounded to float32, or solver options."""
+    from mjx_pusht.reset import start_poses
+
     model = build_model(scene)
     for k, v in opt.items():
         setattr(model.opt, k, v)
-    if not jitter32:
-        return run_cpu(Scenario(scene), seeds, trace=True, model=model)
-    import mjx_pusht.rollout_cpu as rc
-
-    real = rc.start_poses
-    rc.start_poses = lambda s: real(s).astype(np.float32).astype(np.float64)
-    try:
-        return run_cpu(Scenario(scene), seeds, trace=True, model=model)
-    finally:
-        rc.start_poses = real
+    poses = start_poses(seeds)
+    if jitter32:
+        poses = poses.astype(np.float32).astype(np.float64)
+    return run_cpu(Scenario(scene), seeds, trace=True, model=model, poses=poses)
 
 
 def compare(seeds: np.ndarray, impl: str, out: Path, *, root_cause: bool = True, progress=print) -> dict:
@@ -166,12 +161,14 @@ def compare(seeds: np.ndarray, impl: str, out: Path, *, root_cause: bool = True,
             entry["pre_contact_pusher_max_abs_err"] = float(
                 np.abs(mjx_r.trace.qpos[..., -2:] - cpu_r.trace.qpos[..., -2:])[pre].max()) if pre.any() else 0.0
         per_break[break_it] = (entry, mjx_r, cpu_r, model)
+        if break_it == "none":
+            first_contacts = contact
         report[break_it] = entry
 
     entry, mjx_r, cpu_r, model = per_break["none"]
     scene = SceneSpec("none", per_break["none"][0]["structure"]["pusher_shape"])
     div = divergence_steps(_tee_traj(model, mjx_r), _tee_traj(model, cpu_r))
-    contact = first_contact_steps(model, cpu_r.trace.qpos)
+    contact = first_contacts
     report["divergence"] = {
         "threshold_m": DIVERGED_M,
         "step": _dist(div[div < mjx_r.trace.qpos.shape[1]]),
@@ -369,7 +366,3 @@ def _fmt(d: dict) -> str:
     if not d.get("n"):
         return "none"
     return f"median {d['median']:.3g} (p05 {d['p05']:.3g}, p95 {d['p95']:.3g}, n={d['n']})"
-
-
-def write_json(path: Path, obj) -> None:
-    path.write_text(json.dumps(obj, indent=2))

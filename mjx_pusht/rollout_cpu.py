@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import functools
 import os
-import time
 
 import mujoco
 import numpy as np
@@ -122,9 +121,3 @@ def _empty() -> Rollouts:
     z = np.zeros((0, 3))
     b = np.zeros(0, bool)
     return Rollouts(np.zeros(0, np.int64), z, z, z, np.zeros((0, 2)), np.zeros(0), np.zeros(0), b, b)
-
-
-def timed(fn, *args, **kwargs):
-    t0 = time.perf_counter()
-    out = fn(*args, **kwargs)
-    return out, time.perf_counter() - t0

@@ -272,7 +272,6 @@ class MjxRunner:
     def _sharding(self, batch: int):
         if len(self.devices) == 1:
             return None
-        import jax
         from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
         if batch % len(self.devices):
