@@ -18,4 +18,13 @@ case "$stage" in
   compare-warp) python3 -m mjx_pusht compare --seeds 4096 --backend mjx-warp --no-root-cause \
             --out "$OUT/compare-mjx-warp" 2>&1 | tee "$OUT/$stage.log" ;;
   compare-jax) python3 -m mjx_pusht compare --seeds 4096 --backend mjx-jax --out "$OUT/compare-mjx-jax" 2>&1 | tee "$OUT/$stage.log" ;;
+  profile) python3 -m benchmarks.profile_warp --batch 65536 --rate-batches 65536 \
+            --out "$OUT/results/$tier-profile.json" 2>&1 | tee "$OUT/$stage.log" ;;
+  profile-large) python3 -m benchmarks.profile_warp --batch 4096 --rate-batches 262144 --settings "${SETTINGS:-default,tol=1e-6}" \
+            --out "$OUT/results/$tier-profile-large.json" 2>&1 | tee "$OUT/$stage.log" ;;
+  compare-warp-tol) python3 -m mjx_pusht compare --seeds 4096 --backend mjx-warp --no-root-cause --tolerance "${TOL:-1e-6}" \
+            --out "$OUT/compare-mjx-warp-tol${TOL:-1e-6}" 2>&1 | tee "$OUT/$stage.log" ;;
+  sharded) python3 -m benchmarks.harness --tier "$tier" --backends cpu,mjx-warp --cpu-batches 65536 \
+            --batches 65536,131072,262144 --repeats 2 --device-counts 1,2 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
+  *) echo "unknown stage $stage" >&2; exit 2 ;;
 esac

@@ -102,6 +102,8 @@ def main(argv=None) -> int:
     p.add_argument("--e2e", type=int, default=0, help="also time an end-to-end sweep of this many seeds")
     p.add_argument("--e2e-backend", default="auto")
     p.add_argument("--e2e-chunk", type=int, default=None)
+    p.add_argument("--device-counts", default="1",
+                   help="comma list: run each MJX backend sharded over the first K devices too (e.g. 1,2)")
     p.add_argument("--out", type=Path, default=RESULTS)
     args = p.parse_args(argv)
     scenario = Scenario()
@@ -114,27 +116,13 @@ def main(argv=None) -> int:
               "date": time.strftime("%Y-%m-%d"), "scene": "welded, 40 settle + 120 nudge steps", "backends": {}}
     result["cpu_single_thread_mj_step_per_second"] = round(single_thread_mj_step_rate(scenario), 1)
     print(f"single-thread mj_step: {result['cpu_single_thread_mj_step_per_second']:,.0f} steps/s", flush=True)
+    counts = [int(k) for k in args.device_counts.split(",")]
     for name in args.backends.split(","):
-        rows = []
-        try:
-            backend = make_backend(name, scenario)
-        except Exception as e:  # noqa: BLE001 - a backend that cannot run here is recorded, not fatal
-            result["backends"][name] = {"error": f"{type(e).__name__}: {e}"}
-            print(f"{name}: cannot run here: {e}", flush=True)
-            continue
-        batches = cpu_batches if name == "cpu" else mjx_batches
-        for batch in batches:
-            try:
-                row = measure(backend, batch, args.repeats, total)
-            except Exception as e:  # noqa: BLE001 - out of memory at a size is a result too
-                row = {"batch": batch, "error": f"{type(e).__name__}: {str(e).splitlines()[0][:300]}"}
-                traceback.print_exc(limit=1)
-            rows.append(row)
-            print(f"{name} batch {batch}: {row.get('steps_per_second', row.get('error'))}", flush=True)
-        result["backends"][name] = {"device": backend.device, "pusher": backend.pusher, "rows": rows,
-                                    "warp_buffers": getattr(backend, "buffer_info", None)}
-        if name == "cpu":
-            result["backends"][name]["threads"] = backend.nthread
+        for k in ([1] if name == "cpu" else counts):
+            key = name if k == 1 else f"{name}-x{k}"
+            result["backends"][key] = measure_backend(name, scenario, cpu_batches if name == "cpu" else mjx_batches,
+                                                      args.repeats, total, devices=k)
+    add_scaling(result)
     if args.e2e:
         result["end_to_end"] = end_to_end(resolve_auto(args.e2e_backend), scenario, args.e2e, args.e2e_chunk)
         print(f"end to end: {result['end_to_end']}", flush=True)
@@ -144,6 +132,50 @@ def main(argv=None) -> int:
     plot(result, args.out / f"{args.tier}.png")
     print(f"wrote {path}")
     return 0
+
+
+def measure_backend(name: str, scenario: Scenario, batches: list[int], repeats: int, total: int,
+                    devices: int = 1) -> dict:
+    """One backend over batch sizes; errors (cannot run here, out of memory) are recorded as results."""
+    kwargs = {}
+    if devices > 1:
+        import jax
+
+        if len(jax.devices()) < devices:
+            return {"error": f"{devices} devices asked for, {len(jax.devices())} present"}
+        kwargs["devices"] = jax.devices()[:devices]
+    label = name if devices == 1 else f"{name} x{devices}"
+    try:
+        backend = make_backend(name, scenario, **kwargs)
+    except Exception as e:  # noqa: BLE001 - a backend that cannot run here is recorded, not fatal
+        print(f"{label}: cannot run here: {e}", flush=True)
+        return {"error": f"{type(e).__name__}: {e}"}
+    rows = []
+    for batch in batches:
+        try:
+            row = measure(backend, batch, repeats, total)
+        except Exception as e:  # noqa: BLE001 - out of memory at a size is a result too
+            row = {"batch": batch, "error": f"{type(e).__name__}: {str(e).splitlines()[0][:300]}"}
+            traceback.print_exc(limit=1)
+        rows.append(row)
+        print(f"{label} batch {batch}: {row.get('steps_per_second', row.get('error'))}", flush=True)
+    out = {"device": backend.device, "pusher": backend.pusher, "devices": devices, "rows": rows,
+           "warp_buffers": getattr(backend, "buffer_info", None)}
+    if name == "cpu":
+        out["threads"] = backend.nthread
+    return out
+
+
+def add_scaling(result: dict) -> None:
+    """Scaling efficiency of each sharded entry: its steps/s over K x the one-device rate, per batch."""
+    for key, b in result["backends"].items():
+        k = b.get("devices", 1)
+        base = result["backends"].get(key.rsplit("-x", 1)[0]) if k > 1 else None
+        if not base or "rows" not in base or "rows" not in b:
+            continue
+        one = {r["batch"]: r["steps_per_second"] for r in base["rows"] if "steps_per_second" in r}
+        b["scaling_efficiency"] = {str(r["batch"]): round(r["steps_per_second"] / (k * one[r["batch"]]), 3)
+                                   for r in b["rows"] if "steps_per_second" in r and r["batch"] in one}
 
 
 def resolve_auto(name: str) -> str:

@@ -39,6 +39,17 @@ _positive = _int_at_least(1)
 _nonneg = _int_at_least(0)
 
 
+def _positive_float(text: str) -> float:
+    """An argparse type: a finite float > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not np.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return v
+
+
 def _seed(text: str) -> int:
     v = _nonneg(text)
     if v > 2**63 - 1:
@@ -84,6 +95,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--out", type=Path, default=Path("outputs/compare"))
     c.add_argument("--no-root-cause", dest="root_cause", action="store_false",
                    help="skip the one-change-at-a-time runs (x64, solver, contact census)")
+    c.add_argument("--tolerance", type=_positive_float, default=None,
+                   help="MJX solver tolerance instead of the scene's 1e-8 (the CPU reference keeps its own)")
+    c.add_argument("--iterations", type=_positive, default=None, help="MJX solver iterations instead of the scene's")
     return p
 
 
@@ -99,7 +113,8 @@ def cmd_compare(args) -> int:
         raise BackendError(f"compare takes --backend mjx-jax or mjx-warp, not {args.backend!r}")
     out = prepare_out_dir(args.out)
     banner = Banner("compare")
-    r = compare(seeds, args.backend.split("-")[1], out, root_cause=args.root_cause)
+    opts = {k: v for k, v in (("tolerance", args.tolerance), ("iterations", args.iterations)) if v is not None}
+    r = compare(seeds, args.backend.split("-")[1], out, root_cause=args.root_cause, mjx_options=opts)
     w = r["none"]
     print(f"settle_max_abs_err {w['settle_max_abs_err']:.2e} (split-tee {r['split-tee']['settle_max_abs_err']:.2e}); "
           f"verdict_agreement {w['verdict_agreement']:.3f} (split-tee {r['split-tee']['verdict_agreement']:.3f})")

@@ -127,15 +127,22 @@ def _cpu_variant(scene: SceneSpec, seeds, *, jitter32: bool = False, **opt) -> R
     return run_cpu(Scenario(scene), seeds, trace=True, model=model, poses=poses)
 
 
-def compare(seeds: np.ndarray, impl: str, out: Path, *, root_cause: bool = True, progress=print) -> dict:
-    """Run the CPU reference and MJX (`impl`) on `seeds`, write compare.json, compare.md and plots."""
+def compare(seeds: np.ndarray, impl: str, out: Path, *, root_cause: bool = True, progress=print,
+            mjx_options: dict | None = None) -> dict:
+    """Run the CPU reference and MJX (`impl`) on `seeds`, write compare.json, compare.md and plots.
+
+    `mjx_options` (tolerance, iterations, ...) change MJX's solver only, so the report
+    measures what such a setting costs in fidelity against the unchanged CPU reference.
+    """
+    mjx_options = dict(mjx_options or {})
     t0 = time.perf_counter()
     seeds = np.asarray(seeds, np.int64)
-    report: dict = {"impl": f"mjx-{impl}", "n_seeds": int(len(seeds)), "versions": versions()}
+    report: dict = {"impl": f"mjx-{impl}", "n_seeds": int(len(seeds)), "versions": versions(),
+                    "mjx_options": mjx_options}
     per_break = {}
     for break_it in ("none", "split-tee"):
         progress(f"[compare] {break_it}: MJX-{impl} ...")
-        mjx_backend = MjxBackend(Scenario(SceneSpec(break_it)), impl)
+        mjx_backend = MjxBackend(Scenario(SceneSpec(break_it)), impl, **mjx_options)
         mjx_r = mjx_backend.run(seeds, trace=True)
         scene = mjx_backend.runner.scene  # what MJX simulated (capsule pusher on impl=jax)
         progress(f"[compare] {break_it}: CPU reference ...")
@@ -303,6 +310,8 @@ def render_markdown(r: dict) -> str:
         f"Device: {w['structure']['device']}; pusher simulated: {w['structure']['pusher_shape']}; "
         f"tree: {w['structure']['tree']['n_bodies']} bodies, nq={w['structure']['nq']} nv={w['structure']['nv']}. "
         f"The CPU reference runs the same pusher shape. Versions: {r['versions']}.",
+        *([f"", f"MJX solver options changed from the scene's: {r['mjx_options']} (the CPU reference keeps the scene's)."]
+          if r.get("mjx_options") else []),
         "",
         "## Must agree",
         "| check | welded | split-tee |",

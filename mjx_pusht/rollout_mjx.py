@@ -254,12 +254,21 @@ class MjxRunner:
             (d, acc, ovf, qs), _ = jax.lax.scan(body, (d, acc0, jnp.zeros((), jnp.int32), qs0), (steps, ctrl))
             return acc, layout.tee_pose(d.qpos), layout.pusher_xy(d.qpos), ovf, qs
 
-        fn = jax.jit(jax.vmap(one_seed))
+        fn = jax.vmap(one_seed)
+        sharding = self._sharding(batch)
+        if sharding is not None:
+            # shard_map, not jit's automatic partitioning: MJX-Warp is an FFI custom call
+            # with no partitioning rule, which XLA would run whole on every device. Under
+            # shard_map each device steps only its own worlds (and sizes buffers for them).
+            # check_vma is off because MJX-Warp's FFI drops the varying-axis type of its
+            # outputs, which lax.scan then rejects as a carry mismatch (mujoco#3426).
+            spec = sharding.spec
+            fn = jax.shard_map(fn, mesh=sharding.mesh, in_specs=(spec, spec, spec), out_specs=spec, check_vma=False)
+        fn = jax.jit(fn)
         t0 = time.perf_counter()
         qpos = jnp.zeros((batch, model.nq), self.dtype)
         acc = invariants_init(batch, jnp)
         acc = jax.tree.map(lambda a: a.astype(self.dtype) if a.dtype != bool else a, acc)
-        sharding = self._sharding(batch)
         if sharding is not None:
             qpos, acc = jax.device_put((qpos, acc), sharding)
         combo = jnp.zeros((batch,), jnp.int32)

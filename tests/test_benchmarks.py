@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
+
+import pytest
 
 from benchmarks import harness, table
 
@@ -28,3 +33,17 @@ def test_readme_table_is_rendered_from_the_committed_results():
     readme = (table.ROOT / "README.md").read_text()
     block = readme[readme.index(table.BEGIN) + len(table.BEGIN): readme.index(table.END)].strip()
     assert block == table.render().strip()
+
+
+@pytest.mark.slow
+def test_harness_measures_a_backend_sharded_over_two_devices_with_its_scaling(tmp_path):
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu"}
+    r = subprocess.run([sys.executable, "-m", "benchmarks.harness", "--tier", "two", "--backends", "mjx-jax",
+                        "--batches", "4", "--repeats", "1", "--device-counts", "1,2", "--out", str(tmp_path)],
+                       capture_output=True, text=True, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    b = json.loads((tmp_path / "two.json").read_text())["backends"]
+    assert b["mjx-jax"]["devices"] == 1 and b["mjx-jax-x2"]["devices"] == 2
+    assert b["mjx-jax-x2"]["device"].endswith(" x2")
+    one, two = b["mjx-jax"]["rows"][0]["steps_per_second"], b["mjx-jax-x2"]["rows"][0]["steps_per_second"]
+    assert b["mjx-jax-x2"]["scaling_efficiency"]["4"] == pytest.approx(two / (2 * one), abs=1e-3)

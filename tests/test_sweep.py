@@ -72,21 +72,27 @@ def test_split_tee_is_split_on_every_seed_and_backend(mjx_jax_runs, cpu_runs):
 
 
 SHARD_SCRIPT = """
-import numpy as np, jax
+import sys, numpy as np, jax
 from mjx_pusht.backends import MjxBackend
 from mjx_pusht.scenario import Scenario
 assert len(jax.devices()) == 2, jax.devices()
+impl = sys.argv[1]
+opts = {"x64": True} if impl == "jax" else {}
 seeds = np.arange(8)
-one = MjxBackend(Scenario(), "jax", devices=jax.devices()[:1], x64=True).run(seeds)
-two = MjxBackend(Scenario(), "jax", devices=jax.devices(), x64=True).run(seeds)
+one = MjxBackend(Scenario(), impl, devices=jax.devices()[:1], **opts).run(seeds)
+two = MjxBackend(Scenario(), impl, devices=jax.devices(), **opts)
+assert two.device.endswith(" x2"), two.device
+two = two.run(seeds)
 for name, a in one.columns().items():
     b = two.columns()[name]
-    if a.dtype == bool or name == "seed":
+    if a.dtype == bool or name == "seed" or impl == "warp":
         np.testing.assert_array_equal(a, b, err_msg=name)
     else:
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12, err_msg=name)
 print("SHARDED_OK")
 """
+
+TWO_CPU_DEVICES = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu"}
 
 
 @pytest.mark.slow
@@ -94,8 +100,16 @@ def test_sweep_sharded_over_two_cpu_devices_gives_the_same_rows():
     # In float64 the sharded batch reproduces the unsharded one to 1e-12 on every column.
     # (In float32 any change of compiled program, a batch size as much as a sharding,
     # moves post-contact poses by ~1e-4: see README, "Determinism".)
-    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu"}
-    r = subprocess.run([sys.executable, "-c", SHARD_SCRIPT], capture_output=True, text=True, env=env)
+    r = subprocess.run([sys.executable, "-c", SHARD_SCRIPT, "jax"], capture_output=True, text=True, env=TWO_CPU_DEVICES)
+    assert "SHARDED_OK" in r.stdout, r.stderr[-2000:]
+
+
+@pytest.mark.slow
+@pytest.mark.warp
+def test_mjx_warp_sharded_over_two_devices_steps_each_shard_alone_and_gives_identical_rows():
+    # MJX-Warp is an FFI call that XLA cannot partition; under shard_map each device runs
+    # only its own worlds. Warp's kernels are per world, so the rows are bit-identical.
+    r = subprocess.run([sys.executable, "-c", SHARD_SCRIPT, "warp"], capture_output=True, text=True, env=TWO_CPU_DEVICES)
     assert "SHARDED_OK" in r.stdout, r.stderr[-2000:]
 
 
