@@ -104,8 +104,15 @@ def main(argv=None) -> int:
     p.add_argument("--e2e-chunk", type=int, default=None)
     p.add_argument("--device-counts", default="1",
                    help="comma list: run each MJX backend sharded over the first K devices too (e.g. 1,2)")
+    p.add_argument("--warp-buffers", default=None, metavar="C,R",
+                   help="fix MJX-Warp's contacts and constraint rows per world (default: start small, grow on overflow)")
+    p.add_argument("--scan-unroll", type=int, default=1, help="MJX steps per scan iteration")
     p.add_argument("--out", type=Path, default=RESULTS)
     args = p.parse_args(argv)
+    mjx_opts = {"scan_unroll": args.scan_unroll} if args.scan_unroll != 1 else {}
+    if args.warp_buffers:
+        c, r = (int(x) for x in args.warp_buffers.split(","))
+        mjx_opts |= {"contacts_per_world": c, "constraints_per_world": r}
     scenario = Scenario()
     total = scenario.schedule.total_steps
     on_cpu = args.tier == "cpu"
@@ -121,7 +128,8 @@ def main(argv=None) -> int:
         for k in ([1] if name == "cpu" else counts):
             key = name if k == 1 else f"{name}-x{k}"
             result["backends"][key] = measure_backend(name, scenario, cpu_batches if name == "cpu" else mjx_batches,
-                                                      args.repeats, total, devices=k)
+                                                      args.repeats, total, devices=k,
+                                                      **(mjx_opts if name == "mjx-warp" else {}))
     add_scaling(result)
     if args.e2e:
         result["end_to_end"] = end_to_end(resolve_auto(args.e2e_backend), scenario, args.e2e, args.e2e_chunk)
@@ -135,9 +143,8 @@ def main(argv=None) -> int:
 
 
 def measure_backend(name: str, scenario: Scenario, batches: list[int], repeats: int, total: int,
-                    devices: int = 1) -> dict:
+                    devices: int = 1, **kwargs) -> dict:
     """One backend over batch sizes; errors (cannot run here, out of memory) are recorded as results."""
-    kwargs = {}
     if devices > 1:
         import jax
 
