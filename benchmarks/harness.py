@@ -106,13 +106,12 @@ def main(argv=None) -> int:
                    help="comma list: run each MJX backend sharded over the first K devices too (e.g. 1,2)")
     p.add_argument("--warp-buffers", default=None, metavar="C,R",
                    help="fix MJX-Warp's contacts and constraint rows per world (default: start small, grow on overflow)")
-    p.add_argument("--scan-unroll", type=int, default=1, help="MJX steps per scan iteration")
     p.add_argument("--out", type=Path, default=RESULTS)
     args = p.parse_args(argv)
-    mjx_opts = {"scan_unroll": args.scan_unroll} if args.scan_unroll != 1 else {}
+    mjx_opts = {}
     if args.warp_buffers:
         c, r = (int(x) for x in args.warp_buffers.split(","))
-        mjx_opts |= {"contacts_per_world": c, "constraints_per_world": r}
+        mjx_opts = {"contacts_per_world": c, "constraints_per_world": r}
     scenario = Scenario()
     total = scenario.schedule.total_steps
     on_cpu = args.tier == "cpu"

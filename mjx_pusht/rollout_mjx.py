@@ -105,8 +105,6 @@ class MjxConfig:
     # MJX-Warp buffers per world; None: start at the typical need and grow on overflow
     contacts_per_world: int | None = None
     constraints_per_world: int | None = None
-    # steps per scan iteration: fewer loop-condition round trips between MJX-Warp calls
-    scan_unroll: int = 1
 
 
 def simulated_scene(scenario: Scenario, impl: str) -> SceneSpec:
@@ -253,8 +251,7 @@ class MjxRunner:
 
             d = d0.replace(qpos=qpos0)
             qs0 = jnp.zeros((schedule.total_steps if trace else 0, model.nq), qpos0.dtype)
-            (d, acc, ovf, qs), _ = jax.lax.scan(body, (d, acc0, jnp.zeros((), jnp.int32), qs0), (steps, ctrl),
-                                                unroll=self.cfg.scan_unroll)
+            (d, acc, ovf, qs), _ = jax.lax.scan(body, (d, acc0, jnp.zeros((), jnp.int32), qs0), (steps, ctrl))
             return acc, layout.tee_pose(d.qpos), layout.pusher_xy(d.qpos), ovf, qs
 
         fn = jax.vmap(one_seed)
