@@ -199,40 +199,49 @@ class MjxRunner:
             batched.append(not same)
         return treedef, leaves, batched
 
-    def _row_model(self, combo):
+    def _model_leaves(self, device=None):
+        """The model's array leaves (the stacked grid's when there is one), on `device` if given."""
+        import jax
+
+        leaves = self._stacked[1] if self._stacked is not None else jax.tree.leaves(self.mx)
+        return leaves if device is None else [jax.device_put(x, device) for x in leaves]
+
+    def _row_model(self, leaves, combo):
+        """The model of one row: the grid's stacked leaves indexed by the row's combination."""
         import jax
 
         if self._stacked is None:
-            return self.mx
-        treedef, leaves, batched = self._stacked
-        return jax.tree.unflatten(treedef, [l[combo] if b else l for l, b in zip(leaves, batched)])
+            return jax.tree.unflatten(jax.tree.structure(self.mx), leaves)
+        treedef, _, batched = self._stacked
+        return jax.tree.unflatten(treedef, [x[combo] if b else x for x, b in zip(leaves, batched)])
 
     @property
     def device_name(self) -> str:
         d = self.devices[0]
         return f"{d.platform}:{getattr(d, 'device_kind', d.platform)}" + (f" x{len(self.devices)}" if len(self.devices) > 1 else "")
 
+    def _initial_data(self, device, worlds: int):
+        from mujoco import mjx
+
+        if self.cfg.impl == "warp":
+            return mjx.make_data(self.model, impl="warp", device=device,
+                                 naconmax=worlds * self.buffers[0], njmax=self.buffers[1])
+        return mjx.make_data(self.model, impl="jax", device=device)
+
     def _build(self, batch: int, trace: bool):
+        """Compile the rollout for one batch shape; returns launch(qpos0, acc, combo) -> host arrays."""
         import jax
         import jax.numpy as jnp
         from mujoco import mjx
 
         model, layout, schedule = self.model, self.layout, self.scenario.schedule
         warp = self.cfg.impl == "warp"
-        if warp:
-            per_dev = batch // len(self.devices)
-            d0 = mjx.make_data(
-                model, impl="warp", device=self.devices[0],
-                naconmax=per_dev * self.buffers[0], njmax=self.buffers[1],
-            )
-        else:
-            d0 = mjx.make_data(model, impl="jax", device=self.devices[0])
-        ctrl = jnp.asarray(schedule.controls(), self.dtype)
-        steps = jnp.arange(schedule.total_steps)
+        ctrl = np.asarray(schedule.controls(), self.dtype)
+        steps = np.arange(schedule.total_steps)
         settle_step = schedule.settle_steps - 1
 
-        def one_seed(qpos0, acc0, combo):
-            mx = self._row_model(combo)
+        def one_seed(leaves, d0, qpos0, acc0, combo):
+            mx = self._row_model(leaves, combo)
 
             def body(carry, xs):
                 d, acc, ovf, qs = carry
@@ -254,29 +263,53 @@ class MjxRunner:
             (d, acc, ovf, qs), _ = jax.lax.scan(body, (d, acc0, jnp.zeros((), jnp.int32), qs0), (steps, ctrl))
             return acc, layout.tee_pose(d.qpos), layout.pusher_xy(d.qpos), ovf, qs
 
-        fn = jax.vmap(one_seed)
-        sharding = self._sharding(batch)
-        if sharding is not None:
-            # shard_map, not jit's automatic partitioning: MJX-Warp is an FFI custom call
-            # with no partitioning rule, which XLA would run whole on every device. Under
-            # shard_map each device steps only its own worlds (and sizes buffers for them).
-            # check_vma is off because MJX-Warp's FFI drops the varying-axis type of its
-            # outputs, which lax.scan then rejects as a carry mismatch (mujoco#3426).
-            spec = sharding.spec
-            fn = jax.shard_map(fn, mesh=sharding.mesh, in_specs=(spec, spec, spec), out_specs=spec, check_vma=False)
-        fn = jax.jit(fn)
+        batched = jax.vmap(one_seed, in_axes=(None, None, 0, 0, 0))
+        n_dev = len(self.devices)
+        if n_dev > 1 and batch % n_dev:
+            raise ValueError(f"batch {batch} does not divide over {n_dev} devices")
+        per_dev = batch // n_dev
+
+        def inputs(n):
+            acc = jax.tree.map(lambda a: a.astype(self.dtype) if a.dtype != bool else a, invariants_init(n, jnp))
+            return jnp.zeros((n, model.nq), self.dtype), acc, jnp.zeros((n,), jnp.int32)
+
         t0 = time.perf_counter()
-        qpos = jnp.zeros((batch, model.nq), self.dtype)
-        acc = invariants_init(batch, jnp)
-        acc = jax.tree.map(lambda a: a.astype(self.dtype) if a.dtype != bool else a, acc)
-        if sharding is not None:
-            qpos, acc = jax.device_put((qpos, acc), sharding)
-        combo = jnp.zeros((batch,), jnp.int32)
-        if sharding is not None:
-            combo = jax.device_put(combo, sharding)
-        compiled = fn.lower(qpos, acc, combo).compile()
+        if warp and n_dev > 1:
+            # One single-device program per GPU, dispatched asynchronously, each on its own
+            # slice of the batch. XLA cannot partition MJX-Warp's FFI call, and compiling it
+            # under shard_map crashed XLA on a 2 x H200 host (segfault in backend compile),
+            # while the single-device program is the one every other path runs.
+            progs = []
+            for dev in self.devices:
+                leaves, d0 = self._model_leaves(dev), self._initial_data(dev, per_dev)
+                args = jax.device_put(inputs(per_dev), dev)
+                progs.append((jax.jit(batched).lower(leaves, d0, *args).compile(), leaves, d0, dev))
+
+            def launch(qpos0, acc, combo):
+                outs = []
+                for i, (prog, leaves, d0, dev) in enumerate(progs):
+                    part = jax.tree.map(lambda x: x[i * per_dev:(i + 1) * per_dev], (qpos0, acc, combo))
+                    outs.append(prog(leaves, d0, *jax.device_put(part, dev)))  # async: all GPUs run at once
+                outs = jax.device_get(outs)
+                return jax.tree.map(lambda *xs: np.concatenate(xs), *outs)
+        else:
+            leaves, d0 = self._model_leaves(), self._initial_data(self.devices[0], per_dev)
+            fn = functools.partial(batched, leaves, d0)  # model and data as constants of the program
+            sharding = self._sharding(batch)
+            if sharding is not None:
+                # shard_map, so each device steps only its own worlds; check_vma is off because
+                # MJX-Warp's FFI drops the varying-axis type of its outputs, which lax.scan then
+                # rejects as a carry mismatch (mujoco#3426).
+                spec = sharding.spec
+                fn = jax.shard_map(fn, mesh=sharding.mesh, in_specs=(spec,) * 3, out_specs=spec, check_vma=False)
+            args = inputs(batch) if sharding is None else jax.device_put(inputs(batch), sharding)
+            prog = jax.jit(fn).lower(*args).compile()
+
+            def launch(qpos0, acc, combo):
+                args = (qpos0, acc, combo) if sharding is None else jax.device_put((qpos0, acc, combo), sharding)
+                return jax.device_get(prog(*args))
         self.compile_seconds += time.perf_counter() - t0
-        return compiled, sharding
+        return launch
 
     def _sharding(self, batch: int):
         if len(self.devices) == 1:
@@ -302,16 +335,14 @@ class MjxRunner:
         key = (batch, trace, self.buffers)
         if key not in self._fns:
             self._fns[key] = self._build(batch, trace)
-        fn, sharding = self._fns[key]
+        launch = self._fns[key]
         poses = start_poses(seeds) if poses is None else poses
         qpos0 = self.layout.initial_qpos(self.model, np.concatenate([poses, np.repeat(poses[-1:], batch - n, 0)]))
         acc = jax.tree.map(lambda a: a.astype(self.dtype) if a.dtype != bool else a, invariants_init(batch, jnp))
         qpos0 = jnp.asarray(qpos0, self.dtype)
         combos = np.zeros(n, np.int64) if combos is None else np.asarray(combos, np.int64)
         combo = jnp.asarray(np.concatenate([combos, np.repeat(combos[-1:], batch - n)]), jnp.int32)
-        if sharding is not None:
-            qpos0, acc, combo = jax.device_put((qpos0, acc, combo), sharding)
-        acc, final, pusher, ovf, qs = jax.device_get(fn(qpos0, acc, combo))
+        acc, final, pusher, ovf, qs = launch(qpos0, acc, combo)
         ovf = np.asarray(ovf)[:n]
         dropped = (ovf & _DROP_BITS) != 0
         if dropped.any() and self._grow():
