@@ -24,7 +24,11 @@ case "$stage" in
             --out "$OUT/results/$tier-profile-large.json" 2>&1 | tee "$OUT/$stage.log" ;;
   compare-warp-tol) python3 -m mjx_pusht compare --seeds 4096 --backend mjx-warp --no-root-cause --tolerance "${TOL:-1e-6}" \
             --out "$OUT/compare-mjx-warp-tol${TOL:-1e-6}" 2>&1 | tee "$OUT/$stage.log" ;;
+  tier)   python3 -m benchmarks.harness --tier "$tier" --backends cpu,mjx-warp --cpu-batches 65536 \
+            --batches 4096,65536,131072,262144 --repeats 3 --e2e 1000000 --e2e-chunk "${CHUNK:-65536}" \
+            --out "$OUT/results" > "$OUT/$stage.log" 2>&1 ;;
   sharded) python3 -m benchmarks.harness --tier "$tier" --backends cpu,mjx-warp --cpu-batches 65536 \
-            --batches 65536,131072,262144 --repeats 2 --device-counts 1,2 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
+            --batches 65536,131072,262144 --repeats 3 --device-counts 1,2 --e2e 1000000 --e2e-chunk 131072 \
+            --out "$OUT/results" > "$OUT/$stage.log" 2>&1 ;;
   *) echo "unknown stage $stage" >&2; exit 2 ;;
 esac

@@ -86,7 +86,7 @@ def end_to_end(name: str, scenario: Scenario, n: int, chunk: int | None) -> dict
         finish(Path(d), run)
         size = (Path(d) / "per_seed.parquet").stat().st_size
     wall = time.perf_counter() - t0
-    return {"backend": name, "n_seeds": n, "wall_seconds": round(wall, 2), "compile_seconds": round(run.compile_seconds, 2),
+    return {"backend": name, "device": backend.device, "n_seeds": n, "wall_seconds": round(wall, 2), "compile_seconds": round(run.compile_seconds, 2),
             "warp_buffers": getattr(backend, "buffer_info", None),
             "rigid_fraction": float(run.rollouts.rigid.mean()), "parquet_bytes": size,
             "steps_per_second_end_to_end": round(n * scenario.schedule.total_steps / wall, 1)}

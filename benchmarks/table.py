@@ -13,42 +13,57 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 BEGIN, END = "<!-- bench-table:begin -->", "<!-- bench-table:end -->"
-TIERS = [("cpu", ["cpu"]), ("h100", ["h100-warp", "h100-warp-tight", "h100-e2e", "h100-jax"]), ("h200", ["h200"]), ("h200-x2", ["h200-x2"])]
+# Each tier's current results; superseded runs live in results/history/ and benchmarks/NOTES.md.
+TIERS = [("cpu", ["cpu"]), ("h100", ["h100", "h100-jax"]), ("h200", ["h200"]), ("h200-x2", ["h200-x2"])]
 
 
-def _rows(files: list[str]):
-    for f in files:
-        p = RESULTS / f"{f}.json"
-        if p.exists():
-            r = json.loads(p.read_text())
-            for name, b in r["backends"].items():
-                for row in b.get("rows", []):
-                    yield r, name, b, row
+def _load(name: str) -> dict | None:
+    p = RESULTS / f"{name}.json"
+    return json.loads(p.read_text()) if p.exists() else None
+
+
+def _best(b: dict) -> dict | None:
+    rows = [r for r in b.get("rows", []) if "steps_per_second" in r]
+    return max(rows, key=lambda r: r["steps_per_second"]) if rows else None
 
 
 def render() -> str:
-    lines = ["| tier | device | backend | batch | steps/s | 4096 seeds x 160 steps at this rate (s) | compile (s) | status |",
+    lines = ["| tier | device | backend | batch | steps/s | 4096 seeds x 160 steps at this rate (s) | first call (s) | status |",
              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    notes = []
     for tier, files in TIERS:
-        rows = list(_rows(files))
-        if not rows:
+        results = [(f, r) for f in files if (r := _load(f))]
+        if not results:
             lines.append(f"| {tier} | - | - | - | - | - | - | pending |")
             continue
-        for r, name, b, row in rows:
-            if "steps_per_second" not in row:
-                lines.append(f"| {tier} | {r['device']} | {name} | {row['batch']:,} | failed: {row['error'][:60]} | - | - | measured |")
-                continue
-            sweep = 4096 * r["total_steps"] / row["steps_per_second"]
-            lines.append(f"| {tier} | {r['device']} | {name} ({b['device']}) | {row['batch']:,} | "
-                         f"{row['steps_per_second']:,.0f} | {sweep:.2f} | {row['compile_seconds']:.1f} | measured {r['date']} |")
-    e2e = [json.loads((RESULTS / f"{f}.json").read_text()).get("end_to_end") for _, fs in TIERS for f in fs
-           if (RESULTS / f"{f}.json").exists()]
-    for tier_files, e in zip([f for _, fs in TIERS for f in fs if (RESULTS / f"{f}.json").exists()], e2e):
-        if e:
-            lines.append("")
-            lines.append(f"End to end ({tier_files}): {e['n_seeds']:,} seeds on {e['backend']} (start poses, compile, "
-                         f"rollout, per_seed.parquet written) in {e['wall_seconds']:.1f} s.")
-    return "\n".join(lines)
+        for f, r in results:
+            for name, b in r["backends"].items():
+                for row in b.get("rows", []):
+                    if "steps_per_second" not in row:
+                        lines.append(f"| {tier} | {r['device']} | {name} | {row['batch']:,} | failed: {row['error'][:60]} "
+                                     f"| - | - | measured {r['date']} |")
+                        continue
+                    sweep = 4096 * r["total_steps"] / row["steps_per_second"]
+                    lines.append(f"| {tier} | {r['device']} | {name} ({b['device']}) | {row['batch']:,} | "
+                                 f"{row['steps_per_second']:,.0f} | {sweep:.2f} | {row['first_call_seconds']:.1f} | "
+                                 f"measured {r['date']} |")
+            cpu = _best(r["backends"].get("cpu", {}))
+            for name, b in r["backends"].items():
+                best = _best(b)
+                if name != "cpu" and best and cpu:
+                    notes.append(f"{tier} ({f}.json): {name} peaks at {best['steps_per_second'] / 1e6:.3g} M steps/s "
+                                 f"(batch {best['batch']:,}), {best['steps_per_second'] / cpu['steps_per_second']:.3g}x "
+                                 f"the same run's all-core CPU rollout ({cpu['steps_per_second'] / 1e6:.3g} M, "
+                                 f"{r['backends']['cpu'].get('threads', '?')} threads).")
+                if "scaling_efficiency" in b:
+                    eff = ", ".join(f"{int(k):,}: {v:.2f}" for k, v in b["scaling_efficiency"].items())
+                    notes.append(f"{tier}: {name} scaling efficiency (K-device rate / K x one-device rate, same batch): {eff}.")
+            e = r.get("end_to_end")
+            if e and f == files[0]:
+                on = f" ({e['device']})" if "device" in e else ""
+                notes.append(f"{tier}: end to end, {e['n_seeds']:,} seeds on {e['backend']}{on} (start poses, compile, "
+                             f"rollout, per_seed.parquet written) in {e['wall_seconds']:.1f} s.")
+    return "\n".join(lines + [""] + [f"- {n}" for n in notes])
 
 
 def main(argv=None) -> int:

@@ -144,7 +144,8 @@ class MjxRunner:
         self.scene = simulated_scene(scenario, cfg.impl)
         self.model = _mj_model(self.scene, cfg)
         self.layout = QposLayout.of(self.model)
-        self.devices = list(devices) if devices else jax.devices()
+        # MJX-Warp runs one program per local GPU; under jax.distributed only local ones are reachable
+        self.devices = list(devices) if devices else (jax.local_devices() if cfg.impl == "warp" else jax.devices())
         self.compile_seconds = 0.0
         self._fns: dict = {}
         from mujoco import mjx
