@@ -135,7 +135,7 @@ def cmd_tree(args) -> int:
 
 def cmd_scene(args) -> int:
     from mjx_pusht.backends import CpuBackend
-    from mjx_pusht.outputs import atomic_write_json, prepare_out_dir
+    from mjx_pusht.outputs import atomic_write_json, drop_stale, prepare_out_dir
     from mjx_pusht.results import scene_metrics
     from mjx_pusht.scenario import Scenario
     from mjx_pusht.schedule import SMOKE_NUDGE_STEPS, Schedule
@@ -163,23 +163,23 @@ def cmd_scene(args) -> int:
 
         record_run(out / "scene.rrd", backend.model, run)
         print(f"recording: {out / 'scene.rrd'} - open it with: rerun {out / 'scene.rrd'}")
+    else:
+        drop_stale(out / "scene.rrd")
     banner.done()
     return 0
 
 
 def cmd_sweep(args) -> int:
     from mjx_pusht.backends import make_backend, resolve
-    from mjx_pusht.outputs import atomic_write_json, prepare_out_dir
+    from mjx_pusht.outputs import atomic_write_json, drop_stale, prepare_out_dir
+    from mjx_pusht.params import parse_param
     from mjx_pusht.scenario import Scenario
     from mjx_pusht.schedule import Schedule
     from mjx_pusht.scene import SceneSpec
     from mjx_pusht.seeds import parse_seeds
-    from mjx_pusht.sweep import check_resumable, finish, run_sweep, summarize
+    from mjx_pusht.sweep import check_resumable, finish, rows_for, run_sweep, summarize
     from mjx_pusht.tier import Banner
     from mjx_pusht.tree import read_tree
-
-    from mjx_pusht.params import parse_param
-    from mjx_pusht.sweep import rows_for
 
     seeds = parse_seeds(args.seeds)
     params = tuple((n, tuple(v)) for n, v in (parse_param(t) for t in args.param))
@@ -230,6 +230,8 @@ def cmd_sweep(args) -> int:
         traced = backend.run(r.seeds[shown], trace=True, combos=combos[shown])
         record_sweep(out / "sweep.rrd", backend.model, traced, r, row_labels(r, shown))
         print(f"recording: {out / 'sweep.rrd'} ({len(shown)} seeds side by side) - open it with: rerun {out / 'sweep.rrd'}")
+    else:
+        drop_stale(out / "sweep.rrd")
     banner.done()
     return 0
 

@@ -31,12 +31,26 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp makes 0600; results should read like any file written
         with os.fdopen(fd, "wb") as f:
             f.write(data)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def drop_stale(path: Path) -> None:
+    """Remove an output of an earlier run that this run replaces but does not rewrite (a recording)."""
+    if path.exists():
+        path.unlink()
+        print(f"removed {path}: it recorded an earlier run, and this run was not recorded")
 
 
 def atomic_write_json(path: Path, obj) -> None:
