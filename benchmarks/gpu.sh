@@ -20,10 +20,6 @@ case "$stage" in
   compare-jax) python3 -m mjx_pusht compare --seeds 4096 --backend mjx-jax --out "$OUT/compare-mjx-jax" 2>&1 | tee "$OUT/$stage.log" ;;
   profile) python3 -m benchmarks.profile_warp --batch 65536 --rate-batches 65536 \
             --out "$OUT/results/$tier-profile.json" 2>&1 | tee "$OUT/$stage.log" ;;
-  profile-large) python3 -m benchmarks.profile_warp --batch 4096 --rate-batches 262144 --settings "${SETTINGS:-default,tol=1e-6}" \
-            --out "$OUT/results/$tier-profile-large.json" 2>&1 | tee "$OUT/$stage.log" ;;
-  compare-warp-tol) python3 -m mjx_pusht compare --seeds 4096 --backend mjx-warp --no-root-cause --tolerance "${TOL:-1e-6}" \
-            --out "$OUT/compare-mjx-warp-tol${TOL:-1e-6}" 2>&1 | tee "$OUT/$stage.log" ;;
   tier)   python3 -m benchmarks.harness --tier "$tier" --backends cpu,mjx-warp --cpu-batches 65536 \
             --batches 4096,65536,131072,262144 --repeats 3 --e2e 1000000 --e2e-chunk "${CHUNK:-65536}" \
             --out "$OUT/results" > "$OUT/$stage.log" 2>&1 ;;

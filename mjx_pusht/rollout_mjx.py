@@ -148,20 +148,13 @@ class MjxRunner:
         self.devices = list(devices) if devices else (jax.local_devices() if cfg.impl == "warp" else jax.devices())
         self.compile_seconds = 0.0
         self._fns: dict = {}
-        from mujoco import mjx
-
-        self.mx = mjx.put_model(self.model, impl=cfg.impl, device=self.devices[0])
         self.buffers = (
             cfg.contacts_per_world or START_CONTACTS_PER_WORLD,
             cfg.constraints_per_world or START_ROWS_PER_WORLD,
         )
         self.growths = 0
         self.grid = scenario.grid()
-        self._stacked = self._stack_grid() if len(self.grid) > 1 else None
-        if len(self.grid) == 1 and scenario.params:
-            from mjx_pusht.params import apply
-
-            self.mx = mjx.put_model(apply(self.model, self.grid[0]), impl=cfg.impl, device=self.devices[0])
+        self._model = self._put_grid()
         # x64 is process-wide in JAX: once on, every later runner computes in float64 too
         self.dtype = np.float64 if jax.config.jax_enable_x64 else np.float32
 
@@ -178,12 +171,13 @@ class MjxRunner:
               f"{self.buffers[1]} rows per world", file=sys.stderr)
         return True
 
-    def _stack_grid(self):
-        """The grid's models as one Model whose differing leaves carry a leading combo axis.
+    def _put_grid(self):
+        """The grid's models as (treedef, leaves, batched): differing leaves carry a leading combo axis.
 
         Each combination is the CPU model edited and re-derived (params.apply), put on
         the device; only the leaves that differ are stacked, so the rollout gathers a
-        row's model by index inside one compiled program.
+        row's model by index inside one compiled program. With no parameters swept
+        there is one combination and nothing is stacked.
         """
         import jax
         import jax.numpy as jnp
@@ -191,31 +185,35 @@ class MjxRunner:
 
         from mjx_pusht.params import apply
 
-        mxs = [mjx.put_model(apply(self.model, g), impl=self.cfg.impl, device=self.devices[0]) for g in self.grid]
-        flat = [jax.tree.flatten(m) for m in mxs]
-        treedef = flat[0][1]
+        models = [apply(self.model, g) for g in self.grid] if self.scenario.params else [self.model]
+        flat = [jax.tree.flatten(mjx.put_model(m, impl=self.cfg.impl, device=self.devices[0])) for m in models]
         leaves, batched = [], []
         for column in zip(*(f[0] for f in flat)):
             same = all(np.array_equal(np.asarray(column[0]), np.asarray(c)) for c in column[1:])
             leaves.append(column[0] if same else jnp.stack([jnp.asarray(c) for c in column]))
             batched.append(not same)
-        return treedef, leaves, batched
+        return flat[0][1], leaves, batched
 
     def _model_leaves(self, device=None):
-        """The model's array leaves (the stacked grid's when there is one), on `device` if given."""
+        """The model's array leaves, on `device` if given."""
         import jax
 
-        leaves = self._stacked[1] if self._stacked is not None else jax.tree.leaves(self.mx)
+        leaves = self._model[1]
         return leaves if device is None else [jax.device_put(x, device) for x in leaves]
 
     def _row_model(self, leaves, combo):
-        """The model of one row: the grid's stacked leaves indexed by the row's combination."""
+        """The model of one row: stacked leaves indexed by the row's parameter combination."""
         import jax
 
-        if self._stacked is None:
-            return jax.tree.unflatten(jax.tree.structure(self.mx), leaves)
-        treedef, _, batched = self._stacked
+        treedef, _, batched = self._model
         return jax.tree.unflatten(treedef, [x[combo] if b else x for x, b in zip(leaves, batched)])
+
+    def _acc0(self, n: int):
+        """Fresh invariant accumulators for n rows, in the runner's float type."""
+        import jax
+        import jax.numpy as jnp
+
+        return jax.tree.map(lambda a: a.astype(self.dtype) if a.dtype != bool else a, invariants_init(n, jnp))
 
     @property
     def device_name(self) -> str:
@@ -272,8 +270,7 @@ class MjxRunner:
         per_dev = batch // n_dev
 
         def inputs(n):
-            acc = jax.tree.map(lambda a: a.astype(self.dtype) if a.dtype != bool else a, invariants_init(n, jnp))
-            return jnp.zeros((n, model.nq), self.dtype), acc, jnp.zeros((n,), jnp.int32)
+            return jnp.zeros((n, model.nq), self.dtype), self._acc0(n), jnp.zeros((n,), jnp.int32)
 
         t0 = time.perf_counter()
         if warp and n_dev > 1:
@@ -323,15 +320,12 @@ class MjxRunner:
             return None
         from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-        if batch % len(self.devices):
-            raise ValueError(f"batch {batch} does not divide over {len(self.devices)} devices")
         mesh = Mesh(np.array(self.devices), ("seeds",))
         return NamedSharding(mesh, PartitionSpec("seeds"))
 
     def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None,
             poses: np.ndarray | None = None) -> Rollouts:
         """Roll out `seeds` (padded up to `batch` so one compiled shape serves every chunk)."""
-        import jax
         import jax.numpy as jnp
 
         seeds = np.asarray(seeds, dtype=np.int64)
@@ -345,7 +339,7 @@ class MjxRunner:
         launch = self._fns[key]
         poses = start_poses(seeds) if poses is None else poses
         qpos0 = self.layout.initial_qpos(self.model, np.concatenate([poses, np.repeat(poses[-1:], batch - n, 0)]))
-        acc = jax.tree.map(lambda a: a.astype(self.dtype) if a.dtype != bool else a, invariants_init(batch, jnp))
+        acc = self._acc0(batch)
         qpos0 = jnp.asarray(qpos0, self.dtype)
         combos = np.zeros(n, np.int64) if combos is None else np.asarray(combos, np.int64)
         combo = jnp.asarray(np.concatenate([combos, np.repeat(combos[-1:], batch - n)]), jnp.int32)
