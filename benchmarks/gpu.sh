@@ -26,5 +26,7 @@ case "$stage" in
   sharded) python3 -m benchmarks.harness --tier "$tier" --backends cpu,mjx-warp --cpu-batches 65536 \
             --batches 65536,131072,262144 --repeats 3 --device-counts 1,2 --e2e 1000000 --e2e-chunk 131072 \
             --out "$OUT/results" > "$OUT/$stage.log" 2>&1 ;;
+  modes)  python3 -m benchmarks.warp_modes --batch 65536 --out "$OUT/results/$tier-warp-modes.json" \
+            --cache-root "$HOME/modes-cache" > "$OUT/$stage.log" 2>&1 ;;
   *) echo "unknown stage $stage" >&2; exit 2 ;;
 esac

@@ -106,6 +106,12 @@ class MjxConfig:
     # MJX-Warp buffers per world; None: start at the typical need and grow on overflow
     contacts_per_world: int | None = None
     constraints_per_world: int | None = None
+    # MJX-Warp only: Warp's run-to-run deterministic atomics (process-wide once on; slower)
+    deterministic: bool = False
+    # MJX-Warp only: who captures the CUDA graph, a warp.JaxCallableGraphMode name; None: MJX's default
+    graph_mode: str | None = None
+    # MJX-Warp only: compile the scene's kernels on all cores up front (False: lazily, one by one)
+    precompile: bool = True
 
 
 def simulated_scene(scenario: Scenario, impl: str) -> SceneSpec:
@@ -153,6 +159,17 @@ class MjxRunner:
             cfg.constraints_per_world or START_ROWS_PER_WORLD,
         )
         self.growths = 0
+        self.warp_kernels: dict = {}
+        if cfg.impl == "warp":
+            from mjx_pusht import warp_kernels
+
+            if cfg.deterministic:
+                warp_kernels.set_deterministic(True)
+            # every kernel the scene needs, compiled on all cores before the first (serial, lazy) launch
+            if cfg.precompile:
+                self.warp_kernels = warp_kernels.precompile(self.model, self.devices)
+            self.warp_kernels["deterministic"] = warp_kernels.deterministic()
+            self.compile_seconds += self.warp_kernels.get("find_seconds", 0.0) + self.warp_kernels.get("compile_seconds", 0.0)
         self.grid = scenario.grid()
         self._model = self._put_grid()
         # x64 is process-wide in JAX: once on, every later runner computes in float64 too
@@ -186,7 +203,12 @@ class MjxRunner:
         from mjx_pusht.params import apply
 
         models = [apply(self.model, g) for g in self.grid] if self.scenario.params else [self.model]
-        flat = [jax.tree.flatten(mjx.put_model(m, impl=self.cfg.impl, device=self.devices[0])) for m in models]
+        kw = {}
+        if self.cfg.graph_mode is not None:
+            import warp as wp
+
+            kw["graph_mode"] = wp.JaxCallableGraphMode[self.cfg.graph_mode]
+        flat = [jax.tree.flatten(mjx.put_model(m, impl=self.cfg.impl, device=self.devices[0], **kw)) for m in models]
         leaves, batched = [], []
         for column in zip(*(f[0] for f in flat)):
             same = all(np.array_equal(np.asarray(column[0]), np.asarray(c)) for c in column[1:])

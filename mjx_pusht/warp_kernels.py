@@ -1,0 +1,122 @@
+"""MuJoCo Warp's kernels: compile the ones this scene launches on every core at once, and pick determinism.
+
+Warp compiles a module the first time one of its kernels launches, one after the other, so
+MJX-Warp's first call on a fresh machine is mostly compilation (93-134 s on an H100 host,
+benchmarks/NOTES.md). `precompile` steps MuJoCo Warp once with every launch recorded instead of
+run, which names the modules this scene needs without compiling anything, then compiles those
+in parallel. What the recording misses still compiles lazily at first launch, as before, so the
+worst case is the old one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+
+import mujoco
+
+# Warp's own module for the wrappers MJX registers with jax.ffi; JAX loads it when tracing.
+_FFI_MODULE = "mujoco.mjx.warp.ffi"
+
+
+@contextlib.contextmanager
+def _launches_recorded(need: dict):
+    """Inside: wp.launch / wp.launch_tiled record (block_dim -> modules) and run nothing.
+
+    Both branches of wp.capture_if and one pass of a wp.capture_while body are taken, so the
+    kernels behind data-dependent control flow (the solver loop) are created too.
+    """
+    import warp as wp
+
+    saved = wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while
+
+    def record(kernel, *args, block_dim=None, **kwargs):
+        need.setdefault(block_dim, set()).add(kernel.module)
+
+    def both_branches(condition, on_true=None, on_false=None, **kwargs):
+        for branch in (on_true, on_false):
+            if callable(branch):
+                branch(**kwargs)
+
+    def body_once(condition, while_body, **kwargs):
+        while_body(**kwargs)
+
+    wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while = record, record, both_branches, body_once
+    try:
+        yield
+    finally:
+        wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while = saved
+
+
+def scene_modules(model: mujoco.MjModel, device=None) -> dict:
+    """The Warp modules one MuJoCo Warp step launches on `model`, keyed by block_dim; nothing is compiled."""
+    import warp as wp
+    from mujoco.mjx.third_party import mujoco_warp as mjw
+
+    need: dict = {}
+    with wp.ScopedDevice(device):
+        m = mjw.put_model(model)
+        # one world, small buffers: the kernels a step creates depend on the model, not the batch;
+        # njmax > 0 so the constraint solver's path is taken
+        d = mjw.put_data(model, mujoco.MjData(model), nworld=1, nconmax=16, njmax=48)
+        with _launches_recorded(need):
+            mjw.step(m, d)
+    ffi = wp.get_module(_FFI_MODULE)
+    need.setdefault(None, set()).add(ffi)
+    return need
+
+
+def warp_device(jax_device):
+    """The Warp device a JAX device runs MJX-Warp on."""
+    import warp as wp
+
+    return wp.device_from_jax(jax_device)
+
+
+def precompile(model: mujoco.MjModel, jax_devices, workers: int | None = None) -> dict:
+    """Compile the scene's MuJoCo Warp kernels for `jax_devices` on `workers` threads (default: all cores).
+
+    Returns what was done: modules found, seconds to find them, seconds to compile (or load from
+    Warp's kernel cache, ~1 s when warm). Raises nothing: a failure to find the modules leaves
+    compilation to the first launch, and is reported in the returned dict.
+    """
+    import warp as wp
+
+    workers = workers or os.cpu_count() or 1
+    devices = [warp_device(d) for d in jax_devices]
+    t0 = time.perf_counter()
+    try:
+        need = scene_modules(model, devices[0])
+    except Exception as e:  # an internal change in MuJoCo Warp: fall back to lazy compilation
+        return {"modules": 0, "error": f"{type(e).__name__}: {e}"}
+    found = time.perf_counter() - t0
+    for block_dim, modules in need.items():
+        wp.force_load(device=devices, modules=sorted(modules, key=lambda m: m.name), block_dim=block_dim,
+                      max_workers=workers)
+    return {"modules": sum(len(v) for v in need.values()), "find_seconds": round(found, 3),
+            "compile_seconds": round(time.perf_counter() - t0 - found, 3), "workers": workers}
+
+
+def set_deterministic(on: bool) -> None:
+    """Warp's RUN_TO_RUN mode for every MuJoCo Warp module, existing and future; process-wide.
+
+    Atomics that hand out contact slots and accumulate sums are what made MJX-Warp reruns differ
+    (benchmarks/NOTES.md); Warp's deterministic mode replays them in a fixed order instead, at a
+    cost in speed, and compiles different kernels (a separate entry in Warp's kernel cache).
+    """
+    import warp as wp
+    from warp._src.context import user_modules
+
+    mode = wp.DeterministicMode.RUN_TO_RUN if on else wp.DeterministicMode.NOT_GUARANTEED
+    wp.config.deterministic = mode  # modules MuJoCo Warp creates from now on (per-scene kernels)
+    for name, module in list(user_modules.items()):
+        if module.options.get("deterministic") != mode:
+            module.options["deterministic"] = mode
+            module.mark_modified()
+
+
+def deterministic() -> bool:
+    import warp as wp
+
+    return wp.config.deterministic != wp.DeterministicMode.NOT_GUARANTEED
