@@ -27,6 +27,9 @@ case "$stage" in
             --batches 65536,131072,262144 --repeats 3 --device-counts 1,2 --e2e 1000000 --e2e-chunk 131072 \
             --out "$OUT/results" > "$OUT/$stage.log" 2>&1 ;;
   modes)  python3 -m benchmarks.warp_modes --batch 65536 --out "$OUT/results/$tier-warp-modes.json" \
-            --cache-root "$HOME/modes-cache" > "$OUT/$stage.log" 2>&1 ;;
+            --only "${ONLY:-cold-lazy,cold,warm,rate-default,cold-deterministic,rate-deterministic,trace-default}" \
+            --cache-root "$HOME/modes-cache" > "$OUT/$stage.log" 2>&1; mkdir -p "$OUT/modes"; cp "$HOME"/modes-cache/*.log "$OUT/modes/" ;;
+  batches) python3 -m benchmarks.harness --tier "$tier-batches" --backends mjx-warp \
+            --batches 32768,49152,65536,98304 --repeats 3 --out "$OUT/results" > "$OUT/$stage.log" 2>&1 ;;
   *) echo "unknown stage $stage" >&2; exit 2 ;;
 esac

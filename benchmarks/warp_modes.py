@@ -40,9 +40,10 @@ def _runner(cfg: dict):
 def first_call(cfg: dict, seeds: int) -> dict:
     t0 = time.perf_counter()
     r = _runner(cfg)
+    built = time.perf_counter() - t0
     out = r.run(np.arange(seeds))
-    return {"first_call_seconds": round(time.perf_counter() - t0, 2), "warp_kernels": r.warp_kernels,
-            "rigid_fraction": float(out.rigid.mean())}
+    return {"first_call_seconds": round(time.perf_counter() - t0, 2), "runner_init_seconds": round(built, 2),
+            "warp_kernels": r.warp_kernels, "rigid_fraction": float(out.rigid.mean())}
 
 
 def rate(cfg: dict, batch: int, repeats: int, det_seeds: int) -> dict:
@@ -179,6 +180,7 @@ def main(argv=None) -> int:
         proc = subprocess.run([sys.executable, "-m", "benchmarks.warp_modes", "--one", kind, "--cfg", json.dumps(cfg),
                                "--batch", str(a.batch), "--repeats", str(a.repeats), "--seeds", str(a.seeds),
                                "--result", str(res)], env=env, capture_output=True, text=True)
+        (root / f"{name}.log").write_text(proc.stdout + proc.stderr)  # Warp's per-module load times
         row = json.loads(res.read_text()) if proc.returncode == 0 and res.exists() else {
             "error": f"exit {proc.returncode}", "stderr_tail": proc.stderr[-2000:]}
         row.update(process_seconds=round(time.perf_counter() - t0, 1), cfg=cfg, xla_flags=xla)

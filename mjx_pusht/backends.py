@@ -98,6 +98,11 @@ class MjxBackend:
         return {"contacts_per_world": c, "rows_per_world": r, "growths": self.runner.growths}
 
     @property
+    def warp_kernels(self) -> dict | None:
+        """MJX-Warp's kernel set-up: modules compiled up front, seconds, and whether atomics are deterministic."""
+        return self.runner.warp_kernels or None
+
+    @property
     def default_chunk(self) -> int:
         on_gpu = self.runner.devices[0].platform == "gpu"
         per = 4096 if on_gpu else 64

@@ -310,7 +310,7 @@ def render_markdown(r: dict) -> str:
         f"Device: {w['structure']['device']}; pusher simulated: {w['structure']['pusher_shape']}; "
         f"tree: {w['structure']['tree']['n_bodies']} bodies, nq={w['structure']['nq']} nv={w['structure']['nv']}. "
         f"The CPU reference runs the same pusher shape. Versions: {r['versions']}.",
-        *(["", f"MJX solver options changed from the scene's: {r['mjx_options']} (the CPU reference keeps the scene's)."]
+        *(["", f"MJX options changed from the scene's: {r['mjx_options']} (the CPU reference keeps the scene's)."]
           if r.get("mjx_options") else []),
         "",
         "## Must agree",

@@ -184,6 +184,7 @@ def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s
         "versions": versions(),
         "pusher_shape": backend.pusher,
         "warp_buffers": getattr(backend, "buffer_info", None),
+        "warp_kernels": getattr(backend, "warp_kernels", None),
         "n_seeds": n,
         "steps": schedule.nudge_steps,
         "settle_steps": schedule.settle_steps,

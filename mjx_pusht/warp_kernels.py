@@ -49,19 +49,23 @@ def _launches_recorded(need: dict):
         wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while = saved
 
 
-def scene_modules(model: mujoco.MjModel, device=None) -> dict:
+def scene_modules(model: mujoco.MjModel, device=None, timings: dict | None = None) -> dict:
     """The Warp modules one MuJoCo Warp step launches on `model`, keyed by block_dim; nothing is compiled."""
     import warp as wp
     from mujoco.mjx.third_party import mujoco_warp as mjw
 
     need: dict = {}
+    timings = {} if timings is None else timings
+    t0 = time.perf_counter()
     with wp.ScopedDevice(device):
         m = mjw.put_model(model)
         # one world, small buffers: the kernels a step creates depend on the model, not the batch;
         # njmax > 0 so the constraint solver's path is taken
         d = mjw.put_data(model, mujoco.MjData(model), nworld=1, nconmax=16, njmax=48)
+        timings["put_seconds"] = round(time.perf_counter() - t0, 3)
         with _launches_recorded(need):
             mjw.step(m, d)
+        timings["dry_step_seconds"] = round(time.perf_counter() - t0 - timings["put_seconds"], 3)
     ffi = wp.get_module(_FFI_MODULE)
     need.setdefault(None, set()).add(ffi)
     return need
@@ -84,18 +88,20 @@ def precompile(model: mujoco.MjModel, jax_devices, workers: int | None = None) -
     import warp as wp
 
     workers = workers or os.cpu_count() or 1
-    devices = [warp_device(d) for d in jax_devices]
     t0 = time.perf_counter()
+    devices = [warp_device(d) for d in jax_devices]
+    out: dict = {"init_seconds": round(time.perf_counter() - t0, 3)}  # Warp's own start (CUDA, NVRTC)
     try:
-        need = scene_modules(model, devices[0])
+        need = scene_modules(model, devices[0], out)
     except Exception as e:  # an internal change in MuJoCo Warp: fall back to lazy compilation
         return {"modules": 0, "error": f"{type(e).__name__}: {e}"}
     found = time.perf_counter() - t0
     for block_dim, modules in need.items():
         wp.force_load(device=devices, modules=sorted(modules, key=lambda m: m.name), block_dim=block_dim,
                       max_workers=workers)
-    return {"modules": sum(len(v) for v in need.values()), "find_seconds": round(found, 3),
-            "compile_seconds": round(time.perf_counter() - t0 - found, 3), "workers": workers}
+    out.update(modules=sum(len(v) for v in need.values()), find_seconds=round(found, 3),
+               compile_seconds=round(time.perf_counter() - t0 - found, 3), workers=workers)
+    return out
 
 
 def set_deterministic(on: bool) -> None:

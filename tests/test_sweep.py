@@ -264,3 +264,32 @@ def test_a_chunk_too_big_for_memory_is_halved_automatically(tmp_path):
     assert bound.batches[:3] == [32, 16, 8] and max(bound.batches[3:]) == 8
     ref = run_sweep(CpuBackend(Scenario()), seeds, tmp_path / "b", config=config, chunk=32, progress=False)
     np.testing.assert_array_equal(run.rollouts.final, ref.rollouts.final)
+
+
+def test_the_dry_step_finds_every_warp_module_a_real_step_launches(mjx_warp_runs):
+    """The up-front parallel compile is only complete if the recorded step saw every module the real one uses."""
+    import mujoco
+    import warp as wp
+    from mujoco.mjx.third_party import mujoco_warp as mjw
+
+    from mjx_pusht.rollout_mjx import MjxConfig, _mj_model, simulated_scene
+    from mjx_pusht.warp_kernels import scene_modules
+
+    for break_it in ("none", "split-tee"):
+        model = _mj_model(simulated_scene(Scenario(SceneSpec(break_it)), "warp"), MjxConfig(impl="warp"))
+        found = set().union(*scene_modules(model, "cpu").values())
+        launched = set()
+        real_launch = wp.launch
+
+        def spy(kernel, *args, **kwargs):
+            launched.add(kernel.module)
+            return real_launch(kernel, *args, **kwargs)
+
+        m, d = mjw.put_model(model), mjw.put_data(model, mujoco.MjData(model), nworld=2, nconmax=16, njmax=48)
+        wp.launch = spy
+        try:
+            for _ in range(3):
+                mjw.step(m, d)
+        finally:
+            wp.launch = real_launch
+        assert launched and launched <= found, sorted(x.name for x in launched - found)
