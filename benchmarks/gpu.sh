@@ -28,7 +28,7 @@ case "$stage" in
             --out "$OUT/results" > "$OUT/$stage.log" 2>&1 ;;
   modes)  python3 -m benchmarks.warp_modes --batch 65536 --out "$OUT/results/$tier-warp-modes.json" \
             --only "${ONLY:-cold-lazy,cold,warm,rate-default,cold-deterministic,rate-deterministic,trace-default}" \
-            --cache-root "$HOME/modes-cache" > "$OUT/$stage.log" 2>&1; mkdir -p "$OUT/modes"; cp "$HOME"/modes-cache/*.log "$OUT/modes/" ;;
+            --cache-root "$HOME/modes-cache" --log-dir "$OUT/modes" --timeout "${VARIANT_TIMEOUT:-300}" > "$OUT/$stage.log" 2>&1 ;;
   batches) python3 -m benchmarks.harness --tier "$tier-batches" --backends mjx-warp \
             --batches 32768,49152,65536,98304 --repeats 3 --out "$OUT/results" > "$OUT/$stage.log" 2>&1 ;;
   *) echo "unknown stage $stage" >&2; exit 2 ;;

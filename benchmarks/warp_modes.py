@@ -155,6 +155,8 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, default=4096)
     p.add_argument("--only", default=None, help="comma list of variant names")
     p.add_argument("--cache-root", type=Path, default=None, help="where the fresh caches go (default: a temp dir)")
+    p.add_argument("--log-dir", type=Path, default=None, help="one log per variant (default: the cache root)")
+    p.add_argument("--timeout", type=float, default=300, help="seconds a variant may take before it is stopped")
     p.add_argument("--one", dest="kind", default=None, help=argparse.SUPPRESS)
     p.add_argument("--cfg", default="{}", help=argparse.SUPPRESS)
     p.add_argument("--result", type=Path, default=None, help=argparse.SUPPRESS)
@@ -177,12 +179,18 @@ def main(argv=None) -> int:
             env["XLA_FLAGS"] = (env.get("XLA_FLAGS", "") + " " + xla).strip()
         res = root / f"{name}.json"
         t0 = time.perf_counter()
-        proc = subprocess.run([sys.executable, "-m", "benchmarks.warp_modes", "--one", kind, "--cfg", json.dumps(cfg),
-                               "--batch", str(a.batch), "--repeats", str(a.repeats), "--seeds", str(a.seeds),
-                               "--result", str(res)], env=env, capture_output=True, text=True)
-        (root / f"{name}.log").write_text(proc.stdout + proc.stderr)  # Warp's per-module load times
-        row = json.loads(res.read_text()) if proc.returncode == 0 and res.exists() else {
-            "error": f"exit {proc.returncode}", "stderr_tail": proc.stderr[-2000:]}
+        log = (a.log_dir or root) / f"{name}.log"  # Warp's per-module load times, written as they come
+        log.parent.mkdir(parents=True, exist_ok=True)
+        with open(log, "w") as f:
+            try:
+                rc = subprocess.run([sys.executable, "-m", "benchmarks.warp_modes", "--one", kind, "--cfg",
+                                     json.dumps(cfg), "--batch", str(a.batch), "--repeats", str(a.repeats),
+                                     "--seeds", str(a.seeds), "--result", str(res)],
+                                    env=env, stdout=f, stderr=subprocess.STDOUT, timeout=a.timeout).returncode
+            except subprocess.TimeoutExpired:
+                rc = f"timed out after {a.timeout} s"
+        row = json.loads(res.read_text()) if rc == 0 and res.exists() else {
+            "error": f"exit {rc}", "log_tail": log.read_text()[-2000:]}
         row.update(process_seconds=round(time.perf_counter() - t0, 1), cfg=cfg, xla_flags=xla)
         out["variants"][name] = row
         print(name, json.dumps(row)[:600], flush=True)
