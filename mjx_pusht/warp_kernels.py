@@ -25,11 +25,13 @@ def _launches_recorded(need: dict):
     """Inside: wp.launch / wp.launch_tiled record (block_dim -> modules) and run nothing.
 
     Both branches of wp.capture_if and one pass of a wp.capture_while body are taken, so the
-    kernels behind data-dependent control flow (the solver loop) are created too.
+    kernels behind data-dependent control flow (the solver loop) are created too. CUDA occupancy
+    queries (wp.get_suggested_block_size, which MuJoCo Warp uses to size grids) would load, so
+    compile, the kernel's module on the spot, one at a time: they get a placeholder answer.
     """
     import warp as wp
 
-    saved = wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while
+    saved = wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while, wp.get_suggested_block_size
 
     def record(kernel, *args, block_dim=None, **kwargs):
         need.setdefault(block_dim, set()).add(kernel.module)
@@ -42,11 +44,15 @@ def _launches_recorded(need: dict):
     def body_once(condition, while_body, **kwargs):
         while_body(**kwargs)
 
+    def occupancy(kernel, *args, **kwargs):
+        return 256, 1  # sizes grids that are never launched; the launch that follows records the module
+
     wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while = record, record, both_branches, body_once
+    wp.get_suggested_block_size = occupancy
     try:
         yield
     finally:
-        wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while = saved
+        wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while, wp.get_suggested_block_size = saved
 
 
 def scene_modules(model: mujoco.MjModel, device=None, timings: dict | None = None) -> dict:
