@@ -99,7 +99,7 @@ class MjxBackend:
 
     @property
     def warp_kernels(self) -> dict | None:
-        """MJX-Warp's kernel set-up: modules compiled up front, seconds, and whether atomics are deterministic."""
+        """MJX-Warp's kernel set-up: modules compiled up front, seconds, and whether Warp's atomics were deterministic."""
         return self.runner.warp_kernels or None
 
     @property

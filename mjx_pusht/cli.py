@@ -85,8 +85,6 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--record", type=_nonneg, default=4, help="seeds to show side by side in sweep.rrd (default 4)")
     w.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip sweep.rrd")
     w.add_argument("--no-progress", dest="progress", action="store_false")
-    w.add_argument("--deterministic", action="store_true",
-                   help="mjx-warp: Warp's run-to-run deterministic atomics, so reruns match bit for bit (slower)")
     w.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
                    help="sweep a physical parameter as a grid: kv, tee_damping, tee_frictionloss, tee_mass; "
                         "VALUES is a,b,c, lo:hi:n (evenly spaced) or ~lo:hi:n (n random draws) (repeatable)")
@@ -100,7 +98,6 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--tolerance", type=_positive_float, default=None,
                    help="MJX solver tolerance instead of the scene's 1e-8 (the CPU reference keeps its own)")
     c.add_argument("--iterations", type=_positive, default=None, help="MJX solver iterations instead of the scene's")
-    c.add_argument("--deterministic", action="store_true", help="mjx-warp: Warp's run-to-run deterministic atomics")
     return p
 
 
@@ -114,13 +111,9 @@ def cmd_compare(args) -> int:
     seeds = parse_seeds(args.seeds)
     if args.backend not in ("mjx-jax", "mjx-warp"):
         raise BackendError(f"compare takes --backend mjx-jax or mjx-warp, not {args.backend!r}")
-    if args.deterministic and args.backend != "mjx-warp":
-        raise UsageError("--deterministic is for mjx-warp (mjx-jax reruns are already bit-identical on one device)")
     out = prepare_out_dir(args.out)
     banner = Banner("compare")
     opts = {k: v for k, v in (("tolerance", args.tolerance), ("iterations", args.iterations)) if v is not None}
-    if args.deterministic:
-        opts["deterministic"] = True
     r = compare(seeds, args.backend.split("-")[1], out, root_cause=args.root_cause, mjx_options=opts)
     w = r["none"]
     print(f"settle_max_abs_err {w['settle_max_abs_err']:.2e} (split-tee {r['split-tee']['settle_max_abs_err']:.2e}); "
@@ -193,19 +186,15 @@ def cmd_sweep(args) -> int:
     if len({n for n, _ in params}) != len(params):
         raise UsageError("each --param NAME may be given once")
     name, why = resolve(args.backend)
-    if args.deterministic and name != "mjx-warp":
-        raise UsageError(f"--deterministic is for mjx-warp; {name} reruns are already bit-identical")
     schedule = Schedule(nudge_steps=args.steps)
     config = {"backend": name, "break_it": args.break_it, "steps": args.steps, "params": [[n, list(v)] for n, v in params]}
-    if args.deterministic:
-        config["deterministic"] = True  # a resumed sweep must not mix the two kinds of chunk
     scenario = Scenario(SceneSpec(args.break_it), schedule, params)
     row_seeds, combos = rows_for(seeds, len(scenario.grid()))
     out = prepare_out_dir(args.out)
     check_resumable(out, row_seeds, config, args.resume)
     banner = Banner("sweep")
     print(f"backend: {name} ({why})")
-    backend = make_backend(name, scenario, **({"deterministic": True} if args.deterministic else {}))
+    backend = make_backend(name, scenario)
     print(read_tree(backend.model).describe())
     print(f"pusher shape simulated: {backend.pusher}" + (" (substituted: MJX's JAX backend has no cylinder-box collision)"
                                                           if backend.pusher != scenario.scene.pusher else ""))

@@ -106,8 +106,6 @@ class MjxConfig:
     # MJX-Warp buffers per world; None: start at the typical need and grow on overflow
     contacts_per_world: int | None = None
     constraints_per_world: int | None = None
-    # MJX-Warp only: Warp's run-to-run deterministic atomics (process-wide once on; slower)
-    deterministic: bool = False
     # MJX-Warp only: who captures the CUDA graph, a warp.JaxCallableGraphMode name; None: MJX's default
     graph_mode: str | None = None
     # MJX-Warp only: compile the scene's kernels on all cores up front (False: lazily, one by one)
@@ -161,14 +159,15 @@ class MjxRunner:
         self.growths = 0
         self.warp_kernels: dict = {}
         if cfg.impl == "warp":
+            import warp as wp
+
             from mjx_pusht import warp_kernels
 
-            if cfg.deterministic:
-                warp_kernels.set_deterministic(True)
             # every kernel the scene needs, compiled on all cores before the first (serial, lazy) launch
             if cfg.precompile:
                 self.warp_kernels = warp_kernels.precompile(self.model, self.devices)
-            self.warp_kernels["deterministic"] = warp_kernels.deterministic()
+            # Warp's RUN_TO_RUN atomics, if a caller turned them on (benchmarks/warp_modes.py measures them)
+            self.warp_kernels["deterministic_atomics"] = wp.config.deterministic != wp.DeterministicMode.NOT_GUARANTEED
             self.compile_seconds += self.warp_kernels.get("find_seconds", 0.0) + self.warp_kernels.get("compile_seconds", 0.0)
         self.grid = scenario.grid()
         self._model = self._put_grid()

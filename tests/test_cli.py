@@ -72,8 +72,6 @@ def _one_line_error(capsys, argv, code):
         ["scene", "--seed", "-1"],
         ["sweep", "--steps", "0"],
         ["sweep", "--break", "nope"],
-        ["sweep", "--backend", "cpu", "--deterministic", "--seeds", "4"],
-        ["compare", "--backend", "mjx-jax", "--deterministic", "--seeds", "4"],
     ],
 )
 def test_bad_flags_get_one_line_and_exit_2(capsys, argv):
