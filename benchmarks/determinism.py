@@ -19,10 +19,16 @@ from mjx_pusht.tier import tier
 
 def rerun_report(name: str, n: int, repeats: int = 3) -> dict:
     backend = make_backend(name, Scenario())
+    return {"backend": name, "device": backend.device, "n_seeds": n, "repeats": repeats,
+            "reruns": reruns(backend, n, repeats)}
+
+
+def reruns(backend, n: int, repeats: int = 3) -> list[dict]:
+    """Seeds 0..n-1 `repeats` times on one backend: per rerun, rows byte-identical to the first run."""
     seeds = np.arange(n)
     runs = [backend.run(seeds, batch=n) for _ in range(repeats)]
     ref = runs[0].columns()
-    out = {"backend": name, "device": backend.device, "n_seeds": n, "repeats": repeats, "reruns": []}
+    out = []
     for r in runs[1:]:
         cols = r.columns()
         same_row = np.ones(n, bool)
@@ -31,7 +37,7 @@ def rerun_report(name: str, n: int, repeats: int = 3) -> dict:
             same_row &= cols[k] == v
             if v.dtype != bool:
                 worst = max(worst, float(np.abs(cols[k] - v).max()))
-        out["reruns"].append({"identical_rows": int(same_row.sum()), "max_abs_diff": worst})
+        out.append({"identical_rows": int(same_row.sum()), "max_abs_diff": worst})
     return out
 
 

@@ -30,8 +30,8 @@ import numpy as np
 COMMAND_BUFFERS = "--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL"
 
 
-def _runner(cfg: dict):
-    from mjx_pusht.rollout_mjx import MjxConfig, MjxRunner
+def _backend(cfg: dict):
+    from mjx_pusht.backends import MjxBackend
     from mjx_pusht.scenario import Scenario
 
     cfg = dict(cfg)
@@ -40,39 +40,27 @@ def _runner(cfg: dict):
 
         # before MuJoCo Warp creates its modules, so every kernel compiles with ordered atomics
         wp.config.deterministic = wp.DeterministicMode.RUN_TO_RUN
-    return MjxRunner(Scenario(), MjxConfig(impl="warp", **cfg))
+    return MjxBackend(Scenario(), "warp", **cfg)
 
 
 def first_call(cfg: dict, seeds: int) -> dict:
     t0 = time.perf_counter()
-    r = _runner(cfg)
+    b = _backend(cfg)
     built = time.perf_counter() - t0
-    out = r.run(np.arange(seeds))
+    out = b.run(np.arange(seeds))
     return {"first_call_seconds": round(time.perf_counter() - t0, 2), "runner_init_seconds": round(built, 2),
-            "warp_kernels": r.warp_kernels, "rigid_fraction": float(out.rigid.mean())}
+            "warp_kernels": b.warp_kernels, "rigid_fraction": float(out.rigid.mean())}
 
 
 def rate(cfg: dict, batch: int, repeats: int, det_seeds: int) -> dict:
-    from mjx_pusht.reset import start_poses
+    from benchmarks.determinism import reruns
+    from benchmarks.harness import measure
 
-    r = _runner(cfg)
-    seeds = np.arange(batch)
-    poses = start_poses(seeds)
-    t0 = time.perf_counter()
-    r.run(seeds, poses=poses)
-    first = time.perf_counter() - t0
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        r.run(seeds, poses=poses)
-        times.append(time.perf_counter() - t0)
-    run = float(np.median(times))
-    steps = r.scenario.schedule.total_steps
-    runs = [r.run(np.arange(det_seeds)).columns() for _ in range(3)]
-    same = [int(np.all([runs[i][k] == runs[0][k] for k in runs[0]], axis=0).sum()) for i in (1, 2)]
-    return {"batch": batch, "steps_per_second": round(batch * steps / run, 1), "run_seconds": round(run, 4),
-            "first_call_seconds": round(first, 2), "repeats": repeats, "warp_kernels": r.warp_kernels,
-            "rerun_identical_rows": same, "rerun_seeds": det_seeds}
+    b = _backend(cfg)
+    row = measure(b, batch, repeats, b.scenario.schedule.total_steps)
+    row.update(warp_kernels=b.warp_kernels, rerun_seeds=det_seeds,
+               rerun_identical_rows=[r["identical_rows"] for r in reruns(b, det_seeds)])
+    return row
 
 
 def trace(cfg: dict, batch: int) -> dict:
@@ -80,13 +68,13 @@ def trace(cfg: dict, batch: int) -> dict:
     import jax
     from jax.profiler import ProfileData
 
-    r = _runner(cfg)
+    b = _backend(cfg)
     seeds = np.arange(batch)
-    r.run(seeds)
+    b.run(seeds)
     logdir = tempfile.mkdtemp()
     with jax.profiler.trace(logdir):
         t0 = time.perf_counter()
-        r.run(seeds)
+        b.run(seeds)
         wall = time.perf_counter() - t0
     pd = ProfileData.from_file(glob.glob(f"{logdir}/**/*.xplane.pb", recursive=True)[-1])
     by_name: dict[str, float] = {}
@@ -177,6 +165,9 @@ def main(argv=None) -> int:
     root = a.cache_root or Path(tempfile.mkdtemp(prefix="warp-modes-"))
     out: dict = {"tier": tier(), "versions": versions(), "batch": a.batch, "variants": {}}
     only = set(a.only.split(",")) if a.only else None
+    unknown = (only or set()) - {v[0] for v in VARIANTS}
+    if unknown:
+        p.error(f"unknown variant(s) {', '.join(sorted(unknown))}; choose from {', '.join(v[0] for v in VARIANTS)}")
     for name, kind, cfg, tag, xla in VARIANTS:
         if only and name not in only:
             continue

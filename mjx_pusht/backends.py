@@ -99,7 +99,7 @@ class MjxBackend:
 
     @property
     def warp_kernels(self) -> dict | None:
-        """MJX-Warp's kernel set-up: modules compiled up front, seconds, and whether Warp's atomics were deterministic."""
+        """MJX-Warp's kernel set-up: modules found and compiled up front, and the seconds each took."""
         return self.runner.warp_kernels or None
 
     @property

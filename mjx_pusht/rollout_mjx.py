@@ -158,16 +158,11 @@ class MjxRunner:
         )
         self.growths = 0
         self.warp_kernels: dict = {}
-        if cfg.impl == "warp":
-            import warp as wp
-
+        if cfg.impl == "warp" and cfg.precompile:
             from mjx_pusht import warp_kernels
 
             # every kernel the scene needs, compiled on all cores before the first (serial, lazy) launch
-            if cfg.precompile:
-                self.warp_kernels = warp_kernels.precompile(self.model, self.devices)
-            # Warp's RUN_TO_RUN atomics, if a caller turned them on (benchmarks/warp_modes.py measures them)
-            self.warp_kernels["deterministic_atomics"] = wp.config.deterministic != wp.DeterministicMode.NOT_GUARANTEED
+            self.warp_kernels = warp_kernels.precompile(self.model, self.devices)
             self.compile_seconds += self.warp_kernels.get("find_seconds", 0.0) + self.warp_kernels.get("compile_seconds", 0.0)
         self.grid = scenario.grid()
         self._model = self._put_grid()

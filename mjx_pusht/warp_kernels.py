@@ -22,8 +22,8 @@ _FFI_MODULE = "mujoco.mjx.warp.ffi"
 
 
 @contextlib.contextmanager
-def _launches_recorded(need: dict):
-    """Inside: wp.launch / wp.launch_tiled record (block_dim -> modules) and run nothing.
+def _launches_recorded(need: set):
+    """Inside: wp.launch / wp.launch_tiled record (module, block_dim) and run nothing.
 
     Both branches of wp.capture_if and one pass of a wp.capture_while body are taken, so the
     kernels behind data-dependent control flow (the solver loop) are created too. CUDA occupancy
@@ -35,7 +35,7 @@ def _launches_recorded(need: dict):
     saved = wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while, wp.get_suggested_block_size
 
     def record(kernel, *args, block_dim=None, **kwargs):
-        need.setdefault(block_dim, set()).add(kernel.module)
+        need.add((kernel.module, block_dim))
 
     def both_branches(condition, on_true=None, on_false=None, **kwargs):
         for branch in (on_true, on_false):
@@ -56,25 +56,19 @@ def _launches_recorded(need: dict):
         wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while, wp.get_suggested_block_size = saved
 
 
-def scene_modules(model: mujoco.MjModel, device=None, timings: dict | None = None) -> dict:
-    """The Warp modules one MuJoCo Warp step launches on `model`, keyed by block_dim; nothing is compiled."""
+def scene_modules(model: mujoco.MjModel, device=None) -> set:
+    """(module, block_dim) for every Warp module one MuJoCo Warp step launches on `model`; nothing is compiled."""
     import warp as wp
     from mujoco.mjx.third_party import mujoco_warp as mjw
 
-    need: dict = {}
-    timings = {} if timings is None else timings
-    t0 = time.perf_counter()
+    need: set = {(wp.get_module(_FFI_MODULE), None)}
     with wp.ScopedDevice(device):
         m = mjw.put_model(model)
         # one world, small buffers: the kernels a step creates depend on the model, not the batch;
         # njmax > 0 so the constraint solver's path is taken
         d = mjw.put_data(model, mujoco.MjData(model), nworld=1, nconmax=16, njmax=48)
-        timings["put_seconds"] = round(time.perf_counter() - t0, 3)
         with _launches_recorded(need):
             mjw.step(m, d)
-        timings["dry_step_seconds"] = round(time.perf_counter() - t0 - timings["put_seconds"], 3)
-    ffi = wp.get_module(_FFI_MODULE)
-    need.setdefault(None, set()).add(ffi)
     return need
 
 
@@ -88,28 +82,27 @@ def warp_device(jax_device):
 def precompile(model: mujoco.MjModel, jax_devices, workers: int | None = None) -> dict:
     """Compile the scene's MuJoCo Warp kernels for `jax_devices` on `workers` threads (default: all cores).
 
-    Returns what was done: modules found, seconds to find them, seconds to compile (or load from
-    Warp's kernel cache, ~1 s when warm). Raises nothing: a failure to find the modules leaves
-    compilation to the first launch, and is reported in the returned dict.
+    Returns modules found, seconds to find them and seconds to compile them (or load them from
+    Warp's kernel cache, under 1 s when warm). If the dry step fails (an internal change in
+    MuJoCo Warp), nothing is compiled here and the returned dict says why: the kernels then
+    compile at first launch, as without this.
     """
     import warp as wp
 
     workers = workers or os.cpu_count() or 1
     t0 = time.perf_counter()
     devices = [warp_device(d) for d in jax_devices]
-    out: dict = {"init_seconds": round(time.perf_counter() - t0, 3)}  # Warp's own start (CUDA, NVRTC)
     try:
-        need = scene_modules(model, devices[0], out)
-    except Exception as e:  # an internal change in MuJoCo Warp: fall back to lazy compilation
+        need = scene_modules(model, devices[0])
+    except Exception as e:
         return {"modules": 0, "error": f"{type(e).__name__}: {e}"}
     found = time.perf_counter() - t0
     # One pool over every (module, block_dim): the slowest modules, MuJoCo Warp's GJK/EPA kernels
     # (35 s of NVRTC each on an H100 host), start first and set the wall time; a pool per
     # block_dim group would add the groups' times up (52 s instead of 36 s, measured).
-    jobs = sorted(((m, bd) for bd, mods in need.items() for m in mods), key=lambda j: ("ccd" not in j[0].name, j[0].name))
+    jobs = sorted(need, key=lambda j: ("ccd" not in j[0].name, j[0].name, str(j[1])))
     with ThreadPoolExecutor(workers) as pool:
         for f in [pool.submit(wp.force_load, device=devices, modules=[m], block_dim=bd, max_workers=0) for m, bd in jobs]:
             f.result()
-    out.update(modules=sum(len(v) for v in need.values()), find_seconds=round(found, 3),
-               compile_seconds=round(time.perf_counter() - t0 - found, 3), workers=workers)
-    return out
+    return {"modules": len(jobs), "find_seconds": round(found, 3),
+            "compile_seconds": round(time.perf_counter() - t0 - found, 3), "workers": workers}

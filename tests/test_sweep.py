@@ -277,7 +277,7 @@ def test_the_dry_step_finds_every_warp_module_a_real_step_launches(mjx_warp_runs
 
     for break_it in ("none", "split-tee"):
         model = _mj_model(simulated_scene(Scenario(SceneSpec(break_it)), "warp"), MjxConfig(impl="warp"))
-        found = set().union(*scene_modules(model, "cpu").values())
+        found = {module for module, _ in scene_modules(model, "cpu")}
         launched = set()
         real_launch = wp.launch
 
