@@ -1,7 +1,13 @@
 """The reset contract: seed -> start pose, the single source of start poses for every backend.
 
-One PCG64 generator per seed draws x, then y, then yaw, in that order, so seed s
-starts the same in a sweep of a million as in `mjx-pusht scene --seed s`.
+Two distributions, each drawn from one PCG64 generator per seed (`np.random.default_rng(seed)`),
+so seed s starts the same in a batch of a million as alone, on every backend:
+
+- `chapter`: the chapter's reset. x, then y, then yaw of the tee, in that order, from small
+  ranges just north of the target; the pusher starts at (0, -0.25).
+- `task`: gym-pusht's random start. The tee anywhere in the walled workspace at any yaw, clear
+  of the walls (x, y, yaw drawn in that order); then up to `PUSHER_TRIES` pusher positions
+  (x, y pairs) anywhere in the workspace, the first one clear of the tee taken.
 """
 
 from __future__ import annotations
@@ -12,10 +18,22 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
+from mjx_pusht.task import distance_to_tee
+
 TEE_X_RANGE = (-0.03, 0.03)
 TEE_Y_RANGE = (0.02, 0.06)
 TEE_YAW_RANGE = (-0.2, 0.2)
 PUSHER_START_Y = -0.25
+RESETS = ("chapter", "task")
+
+# task: the walls' inner faces are at +-0.39 m. A tee centre within TASK_TEE_HALF keeps every point
+# of the T (reach 0.106 m) 1 cm clear of them; a pusher centre within TASK_PUSHER_HALF keeps the
+# cylinder (radius 0.015 m) 1.5 cm clear, and CLEARANCE keeps it that far from the tee's outline.
+TASK_TEE_HALF = 0.27
+TASK_PUSHER_HALF = 0.36
+PUSHER_RADIUS = 0.015
+CLEARANCE = 0.01
+PUSHER_TRIES = 16  # a draw lands on the (inflated) T with p < 0.05, so 16 tries all fail with p < 1e-20
 
 
 def start_pose(seed: int) -> tuple[float, float, float]:
@@ -27,15 +45,39 @@ def start_pose(seed: int) -> tuple[float, float, float]:
     return x, y, yaw
 
 
-def _serial_poses(seeds) -> np.ndarray:
-    return np.array([start_pose(int(s)) for s in seeds], dtype=np.float64).reshape(-1, 3)
+def task_start(seed: int) -> tuple[float, float, float, float, float]:
+    """The task reset for one seed: tee (x, y, yaw) anywhere clear of the walls, then the pusher clear of the tee."""
+    rng = np.random.default_rng(seed)
+    x = float(rng.uniform(-TASK_TEE_HALF, TASK_TEE_HALF))
+    y = float(rng.uniform(-TASK_TEE_HALF, TASK_TEE_HALF))
+    yaw = float(rng.uniform(-np.pi, np.pi))
+    tries = rng.uniform(-TASK_PUSHER_HALF, TASK_PUSHER_HALF, size=(PUSHER_TRIES, 2))
+    clear = distance_to_tee(tries, np.array([x, y, yaw])[None]) > PUSHER_RADIUS + CLEARANCE
+    px, py = tries[int(np.argmax(clear))]  # the first clear one (argmax finds the first True)
+    return x, y, yaw, float(px), float(py)
+
+
+def start_state(seed: int, reset: str = "chapter") -> tuple[float, ...]:
+    """Tee (x, y, yaw) and pusher (x, y) at reset for one seed."""
+    if reset == "chapter":
+        return (*start_pose(seed), 0.0, PUSHER_START_Y)
+    if reset == "task":
+        return task_start(seed)
+    raise ValueError(f"unknown reset {reset!r}; choose from {', '.join(RESETS)}")
+
+
+def _serial_poses(seeds, reset: str = "chapter") -> np.ndarray:
+    if reset == "chapter":
+        return np.array([start_pose(int(s)) for s in seeds], dtype=np.float64).reshape(-1, 3)
+    return np.array([start_state(int(s), reset) for s in seeds], dtype=np.float64).reshape(-1, 5)
 
 
 _POOL_MIN = 50_000  # below this a process pool costs more than it saves (~20 us a seed serially)
 
 
-def start_poses(seeds: Sequence[int] | np.ndarray, *, workers: int | None = None) -> np.ndarray:
-    """(N, 3) float64 start poses, row i from seed i's own generator.
+def start_poses(seeds: Sequence[int] | np.ndarray, *, workers: int | None = None, reset: str = "chapter") -> np.ndarray:
+    """(N, 3) float64 tee start poses for `chapter` ((N, 5) with the pusher's (x, y) for `task`),
+    row i from seed i's own generator.
 
     Seeding a PCG64 generator per seed costs ~20 us, 20 s for a million seeds, so
     large sweeps split the seeds over processes; every row is still drawn by
@@ -48,12 +90,14 @@ def start_poses(seeds: Sequence[int] | np.ndarray, *, workers: int | None = None
     seeds = np.asarray(seeds, dtype=np.int64).reshape(-1)
     if workers is None:
         workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if reset not in RESETS:
+        raise ValueError(f"unknown reset {reset!r}; choose from {', '.join(RESETS)}")
     if len(seeds) < _POOL_MIN or workers < 2:
-        return _serial_poses(seeds)
+        return _serial_poses(seeds, reset)
     parts = np.array_split(seeds, 4 * workers)
     # spawn, not fork: the caller may already run JAX/XLA threads, which fork would copy mid-flight
     with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-        return np.concatenate(list(pool.map(_serial_poses, parts)))
+        return np.concatenate(list(pool.map(_serial_poses, parts, [reset] * len(parts))))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,19 +139,23 @@ class QposLayout:
         return qpos[..., list(self.pusher)]
 
     def initial_qpos(self, model: mujoco.MjModel, poses: np.ndarray) -> np.ndarray:
-        """(N, nq) start qpos: qpos0 with the tee at each pose and the pusher south of it.
+        """(N, nq) start qpos: qpos0 with the tee at each pose and the pusher south of it
+        (or, for (N, 5) starts, where columns 3 and 4 put it).
 
         Only the tee's own joints are seeded; in split-tee the stem body keeps its
         qpos0, which is exactly why that T cannot be set down as one piece.
         """
         qpos = np.tile(model.qpos0, (len(poses), 1))
         if self.tee is not None:
-            qpos[:, list(self.tee)] = poses
+            qpos[:, list(self.tee)] = poses[:, :3]
         else:
             a = self.tee_free
             qpos[:, a], qpos[:, a + 1] = poses[:, 0], poses[:, 1]
             qpos[:, a + 3] = np.cos(poses[:, 2] / 2)
             qpos[:, a + 4 : a + 6] = 0.0
             qpos[:, a + 6] = np.sin(poses[:, 2] / 2)
-        qpos[:, self.pusher[1]] = PUSHER_START_Y
+        if poses.shape[1] >= 5:
+            qpos[:, list(self.pusher)] = poses[:, 3:5]
+        else:
+            qpos[:, self.pusher[1]] = PUSHER_START_Y
         return qpos

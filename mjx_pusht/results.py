@@ -22,10 +22,11 @@ COLUMNS = (
 
 @dataclasses.dataclass
 class Trace:
-    """Per-step state for a few seeds: qpos at the start (frame 0) and after every step."""
+    """Per-step state for a few seeds: qpos at the start (frame 0) and after every physics step."""
 
-    qpos: np.ndarray  # (N, total_steps + 1, nq)
+    qpos: np.ndarray  # (N, physics_steps + 1, nq)
     dt: float
+    frame_skip: int = 1  # physics steps per control step: frame k * frame_skip ends control step k
 
 
 @dataclasses.dataclass
@@ -43,6 +44,10 @@ class Rollouts:
     contained: np.ndarray  # (N,) bool: the tee's centre stayed inside the walls at every step
     trace: Trace | None = None
     params: dict[str, np.ndarray] | None = None  # per row: the swept parameter values it ran with
+    pusher_start: np.ndarray | None = None  # (N, 2) pusher x, y at reset
+    # per row: the episode's bookkeeping (task.episode_init): done, success, steps_to_success,
+    # length, return, coverage, best_coverage; final/pusher_final are the episode's end state
+    episode: dict[str, np.ndarray] | None = None
 
     @property
     def rigid(self) -> np.ndarray:
@@ -91,11 +96,41 @@ class Rollouts:
 
     @classmethod
     def concat(cls, parts: list["Rollouts"]) -> "Rollouts":
-        fields = [f.name for f in dataclasses.fields(cls) if f.name not in ("trace", "params")]
+        optional = ("trace", "params", "pusher_start", "episode")
+        fields = [f.name for f in dataclasses.fields(cls) if f.name not in optional]
         out = cls(**{f: np.concatenate([getattr(p, f) for p in parts]) for f in fields})
         if parts and parts[0].params:
             out.params = {k: np.concatenate([p.params[k] for p in parts]) for k in parts[0].params}
+        if parts and all(p.pusher_start is not None for p in parts):
+            out.pusher_start = np.concatenate([p.pusher_start for p in parts])
+        if parts and all(p.episode is not None for p in parts):
+            out.episode = {k: np.concatenate([p.episode[k] for p in parts]) for k in parts[0].episode}
         return out
+
+    @classmethod
+    def empty(cls) -> "Rollouts":
+        z = np.zeros((0, 3))
+        b = np.zeros(0, bool)
+        return cls(np.zeros(0, np.int64), z, z, z, np.zeros((0, 2)), np.zeros(0), np.zeros(0), b, b)
+
+
+def from_carry(seeds, poses, pusher_start, carry) -> Rollouts:
+    """A backend's final carry as per-seed rows (float64 on the host), whichever backend made it."""
+    acc, ep = carry["inv"], carry["ep"]
+    f64 = lambda a: np.asarray(a, np.float64)  # noqa: E731
+    return Rollouts(
+        seeds=seeds,
+        start=f64(poses[:, :3]),
+        settled=f64(acc["tee_settled"]),
+        final=f64(carry["final"]),
+        pusher_final=f64(carry["pusher_final"]),
+        gap_settled=f64(acc["gap_settled"]),
+        gap_max_dev=f64(acc["gap_max_dev"]),
+        finite=np.asarray(acc["finite"], bool),
+        contained=np.asarray(acc["contained"], bool),
+        pusher_start=f64(pusher_start),
+        episode={k: np.asarray(v) for k, v in ep.items()},
+    )
 
 
 def round6(v) -> float:

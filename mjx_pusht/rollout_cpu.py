@@ -1,8 +1,15 @@
-"""The CPU backend: MuJoCo C in float64 through `mujoco.rollout` on every core.
+"""The CPU backend: MuJoCo C in float64, the determinism reference.
 
-This is the determinism reference: each seed's rollout is exactly the chapter's
-mj_step loop (fresh warm start, the same controls), so row s of a sweep equals
-`mjx-pusht scene --seed s` to the last bit.
+Each seed's rollout is exactly the chapter's mj_step loop (a fresh MjData, the warm start
+carried from step to step), so row s of a sweep equals `mjx-pusht scene --seed s` to the
+last bit. The rollout itself is `episode.py`'s, shared with MJX; this module only steps
+MuJoCo, in one of two ways that give the same bits:
+
+- a controller that ignores its observation (`open_loop`) is rolled out in one
+  `mujoco.rollout` call on every core, and its commands are checked step by step against
+  what the controller says while the rollout is replayed;
+- a feedback controller steps one MjData per seed between control steps (`mj_step` holds
+  Python's lock between physics steps, so this runs on one core).
 """
 
 from __future__ import annotations
@@ -14,9 +21,10 @@ import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
-from mjx_pusht.metrics import invariants_init, invariants_update
+from mjx_pusht.controllers import seed_key
+from mjx_pusht.episode import after_control_step, after_physics_step, begin, decide
 from mjx_pusht.reset import QposLayout, start_poses
-from mjx_pusht.results import Rollouts, Trace
+from mjx_pusht.results import Rollouts, Trace, from_carry
 from mjx_pusht.scenario import Scenario
 from mjx_pusht.scene import build_model
 
@@ -44,6 +52,56 @@ def initial_states(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
     return states
 
 
+class _Replay:
+    """An open-loop batch: the whole trajectory from `mujoco.rollout`, handed out one control step at a time."""
+
+    def __init__(self, pool, models, datas, model, qpos0, ctrl, frame_skip):
+        n = len(qpos0)
+        self.ctrl, self.fs, self.k = ctrl, frame_skip, 0
+        state, self.sens = pool.rollout(
+            models, datas, initial_states(model, qpos0), np.repeat(ctrl, frame_skip, axis=0)[None],
+            initial_warmstart=np.zeros((n, model.nv)),  # as a fresh MjData: no carry-over between seeds
+        )
+        self.qpos = state[:, :, 1 : 1 + model.nq]
+        self.qvel = state[:, :, 1 + model.nq : 1 + model.nq + model.nv]
+
+    def advance(self, u, live):
+        if not np.array_equal(u[live], np.broadcast_to(self.ctrl[self.k], u[live].shape)):
+            raise RuntimeError("an open-loop controller commanded something other than its open_loop() table")
+        s = slice(self.k * self.fs, (self.k + 1) * self.fs)
+        self.k += 1
+        return self.qpos[:, s].swapaxes(0, 1), self.qvel[:, s].swapaxes(0, 1), self.sens[:, s].swapaxes(0, 1)
+
+
+class _Lockstep:
+    """A feedback batch: one MjData per seed, stepped `frame_skip` times per control step."""
+
+    def __init__(self, models, model, qpos0, frame_skip):
+        self.models = models if isinstance(models, list) else [model] * len(qpos0)
+        self.datas = []
+        for m, q in zip(self.models, qpos0):
+            d = mujoco.MjData(m)
+            d.qpos[:] = q
+            self.datas.append(d)
+        self.fs = frame_skip
+        n = len(qpos0)
+        self.qpos = np.zeros((frame_skip, n, model.nq))
+        self.qvel = np.zeros((frame_skip, n, model.nv))
+        self.sens = np.zeros((frame_skip, n, model.nsensordata))
+
+    def advance(self, u, live):
+        step = mujoco.mj_step
+        for i in np.flatnonzero(live):  # an ended episode is not stepped: nothing it does is kept
+            m, d = self.models[i], self.datas[i]
+            d.ctrl[:] = u[i]
+            for j in range(self.fs):
+                step(m, d)
+                self.qpos[j, i] = d.qpos
+                self.qvel[j, i] = d.qvel
+                self.sens[j, i] = d.sensordata
+        return self.qpos, self.qvel, self.sens
+
+
 def run_cpu(
     scenario: Scenario,
     seeds: np.ndarray,
@@ -54,10 +112,10 @@ def run_cpu(
     combos: np.ndarray | None = None,
     poses: np.ndarray | None = None,
 ) -> Rollouts:
-    """Roll out every seed on the CPU and reduce each to its per-seed row.
+    """Roll out every seed on the CPU under the scenario's controller and reduce each to its per-seed row.
 
-    `combos[i]` picks row i's parameter combination from `scenario.grid()`; each
-    row runs on its own parameterised MjModel (mujoco.rollout takes one per row).
+    `combos[i]` picks row i's parameter combination from `scenario.grid()`; each row runs on
+    its own parameterised MjModel.
     """
     model = model if model is not None else _model(scenario)
     grid = scenario.grid()
@@ -69,11 +127,11 @@ def run_cpu(
     seeds = np.asarray(seeds, dtype=np.int64)
     nthread = nthread or default_threads()
     layout = QposLayout.of(model)
-    schedule = scenario.schedule
-    ctrl = schedule.controls()[None]  # (1, T, nu), broadcast over the batch
-    bar = slice(0, 3)  # sensor order as authored: bar_pos then stem_pos
-    stem = slice(3, 6)
-    poses = start_poses(seeds) if poses is None else poses  # a sweep draws them once, for every chunk
+    controller, episode = scenario.driver()
+    fs = episode.frame_skip
+    table = controller.open_loop(episode.max_steps, fs)
+    settle_step = scenario.schedule.settle_steps - 1
+    poses = start_poses(seeds, reset=scenario.reset) if poses is None else poses  # a sweep draws them once
     parts, traces = [], []
     datas = [mujoco.MjData(model) for _ in range(nthread)]
     with mj_rollout.Rollout(nthread=nthread) as pool:
@@ -81,43 +139,31 @@ def run_cpu(
             qpos0 = layout.initial_qpos(model, poses[lo : lo + _CHUNK])
             n = len(qpos0)
             row_models = [models[c] for c in combos[lo : lo + n]] if scenario.params else model
-            state, sensor = pool.rollout(
-                row_models, datas, initial_states(model, qpos0), ctrl,
-                nstep=schedule.total_steps,
-                initial_warmstart=np.zeros((n, model.nv)),  # as a fresh MjData: no carry-over between seeds
-            )
-            qpos = state[:, :, 1 : 1 + model.nq]
-            qvel = state[:, :, 1 + model.nq : 1 + model.nq + model.nv]
-            acc = invariants_init(n, np)
-            for t in range(schedule.total_steps):
-                acc = invariants_update(
-                    acc, t, schedule.settle_steps - 1, layout.tee_pose(qpos[:, t]), qpos[:, t], qvel[:, t],
-                    sensor[:, t, bar], sensor[:, t, stem],
-                )
-            parts.append(
-                Rollouts(
-                    seeds=seeds[lo : lo + n],
-                    start=poses[lo : lo + n],
-                    settled=acc["tee_settled"],
-                    final=layout.tee_pose(qpos[:, -1]),
-                    pusher_final=layout.pusher_xy(qpos[:, -1]),
-                    gap_settled=acc["gap_settled"],
-                    gap_max_dev=acc["gap_max_dev"],
-                    finite=acc["finite"],
-                    contained=acc["contained"],
-                )
-            )
+            if table is not None:
+                stepper = _Replay(pool, row_models, datas, model, qpos0, table, fs)
+            else:
+                stepper = _Lockstep(row_models, model, qpos0, fs)
+            key = seed_key(seeds[lo : lo + n])
+            carry = begin(layout, qpos0, key, controller, episode, np)
+            qpos, frames = qpos0, [qpos0[:, None]]
+            for k in range(episode.max_steps):
+                live = ~carry["ep"]["done"]
+                if table is None and not live.any() and not trace:
+                    break  # every episode has ended: the rest would change nothing
+                u, carry = decide(carry, qpos, k, key, controller, layout, np)
+                qs, vs, ss = stepper.advance(u, live)
+                for j in range(fs):
+                    carry = after_physics_step(carry, k * fs + j, settle_step, layout, qs[j], vs[j], ss[j], np)
+                qpos = qs[-1].copy()
+                carry = after_control_step(carry, k, layout, qpos, episode, np)
+                if trace:
+                    frames.append(qs.swapaxes(0, 1).copy())
+            parts.append(from_carry(seeds[lo : lo + n], poses[lo : lo + n], layout.pusher_xy(qpos0), carry))
             if trace:
-                traces.append(np.concatenate([qpos0[:, None], qpos], axis=1))
-    out = Rollouts.concat(parts) if parts else _empty()
+                traces.append(np.concatenate(frames, axis=1))
+    out = Rollouts.concat(parts) if parts else Rollouts.empty()
     if scenario.params:
         out.params = {name: np.array([grid[c][name] for c in combos]) for name, _ in scenario.params}
     if trace:
-        out.trace = Trace(np.concatenate(traces), float(model.opt.timestep))
+        out.trace = Trace(np.concatenate(traces), float(model.opt.timestep), fs)
     return out
-
-
-def _empty() -> Rollouts:
-    z = np.zeros((0, 3))
-    b = np.zeros(0, bool)
-    return Rollouts(np.zeros(0, np.int64), z, z, z, np.zeros((0, 2)), np.zeros(0), np.zeros(0), b, b)

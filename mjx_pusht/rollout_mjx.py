@@ -21,9 +21,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjx_pusht.metrics import invariants_init, invariants_update
+from mjx_pusht.controllers import seed_key
+from mjx_pusht.episode import after_control_step, after_physics_step, begin, decide
 from mjx_pusht.reset import QposLayout, start_poses
-from mjx_pusht.results import Rollouts, Trace
+from mjx_pusht.results import Rollouts, Trace, from_carry
 from mjx_pusht.scenario import Scenario
 from mjx_pusht.scene import SceneSpec, build_model
 
@@ -224,13 +225,6 @@ class MjxRunner:
         treedef, _, batched = self._model
         return jax.tree.unflatten(treedef, [x[combo] if b else x for x, b in zip(leaves, batched)])
 
-    def _acc0(self, n: int):
-        """Fresh invariant accumulators for n rows, in the runner's float type."""
-        import jax
-        import jax.numpy as jnp
-
-        return jax.tree.map(lambda a: a.astype(self.dtype) if a.dtype != bool else a, invariants_init(n, jnp))
-
     @property
     def device_name(self) -> str:
         d = self.devices[0]
@@ -245,39 +239,51 @@ class MjxRunner:
         return mjx.make_data(self.model, impl="jax", device=device)
 
     def _build(self, batch: int, trace: bool):
-        """Compile the rollout for one batch shape; returns launch(qpos0, acc, combo) -> host arrays."""
+        """Compile the rollout for one batch shape; returns launch(qpos0, key, combo) -> host arrays.
+
+        The rollout is episode.py's: a scan over control steps (the controller inside the
+        compiled program, no host round trip), each a scan over `frame_skip` physics steps.
+        """
         import jax
         import jax.numpy as jnp
         from mujoco import mjx
 
-        model, layout, schedule = self.model, self.layout, self.scenario.schedule
+        model, layout = self.model, self.layout
+        controller, episode = self.scenario.driver()
         warp = self.cfg.impl == "warp"
-        ctrl = np.asarray(schedule.controls(), self.dtype)
-        steps = np.arange(schedule.total_steps)
-        settle_step = schedule.settle_steps - 1
+        fs, settle_step = episode.frame_skip, self.scenario.schedule.settle_steps - 1
 
-        def one_seed(leaves, d0, qpos0, acc0, combo):
+        def one_seed(leaves, d0, qpos0, key, combo):
             mx = self._row_model(leaves, combo)
 
-            def body(carry, xs):
-                d, acc, ovf, qs = carry
-                t, u = xs
-                d = mjx.step(mx, d.replace(ctrl=u))
-                s = d.sensordata
-                acc = invariants_update(acc, t, settle_step, layout.tee_pose(d.qpos), d.qpos, d.qvel, s[0:3], s[3:6])
-                if warp:
-                    ovf = ovf | d._impl.overflow
-                if trace:
-                    # Written into the carry, not stacked as scan output: under MJX-Warp's
-                    # CUDA-graph capture on an H100 the stacked per-step qpos came back
-                    # stale (frame 1 read as qpos0) while the carried state was right.
-                    qs = qs.at[t].set(d.qpos)
-                return (d, acc, ovf, qs), None
+            def control_step(outer, k):
+                d, carry, ovf, qs = outer
+                u, carry = decide(carry, d.qpos, k, key, controller, layout, jnp)
+
+                def physics_step(inner, j):
+                    d, carry, ovf, qs = inner
+                    t = k * fs + j
+                    d = mjx.step(mx, d.replace(ctrl=u))
+                    carry = after_physics_step(carry, t, settle_step, layout, d.qpos, d.qvel, d.sensordata, jnp)
+                    if warp:
+                        ovf = ovf | d._impl.overflow
+                    if trace:
+                        # Written into the carry, not stacked as scan output: under MJX-Warp's
+                        # CUDA-graph capture on an H100 the stacked per-step qpos came back
+                        # stale (frame 1 read as qpos0) while the carried state was right.
+                        qs = qs.at[t].set(d.qpos)
+                    return (d, carry, ovf, qs), None
+
+                (d, carry, ovf, qs), _ = jax.lax.scan(physics_step, (d, carry, ovf, qs), jnp.arange(fs))
+                carry = after_control_step(carry, k, layout, d.qpos, episode, jnp)
+                return (d, carry, ovf, qs), None
 
             d = d0.replace(qpos=qpos0)
-            qs0 = jnp.zeros((schedule.total_steps if trace else 0, model.nq), qpos0.dtype)
-            (d, acc, ovf, qs), _ = jax.lax.scan(body, (d, acc0, jnp.zeros((), jnp.int32), qs0), (steps, ctrl))
-            return acc, layout.tee_pose(d.qpos), layout.pusher_xy(d.qpos), ovf, qs
+            carry = begin(layout, qpos0, key, controller, episode, jnp)
+            qs0 = jnp.zeros((episode.physics_steps if trace else 0, model.nq), qpos0.dtype)
+            (d, carry, ovf, qs), _ = jax.lax.scan(
+                control_step, (d, carry, jnp.zeros((), jnp.int32), qs0), jnp.arange(episode.max_steps))
+            return carry, ovf, qs
 
         batched = jax.vmap(one_seed, in_axes=(None, None, 0, 0, 0))
         n_dev = len(self.devices)
@@ -286,7 +292,7 @@ class MjxRunner:
         per_dev = batch // n_dev
 
         def inputs(n):
-            return jnp.zeros((n, model.nq), self.dtype), self._acc0(n), jnp.zeros((n,), jnp.int32)
+            return jnp.zeros((n, model.nq), self.dtype), jnp.zeros((n, 2), jnp.uint32), jnp.zeros((n,), jnp.int32)
 
         t0 = time.perf_counter()
         if warp and n_dev > 1:
@@ -300,10 +306,10 @@ class MjxRunner:
                 args = jax.device_put(inputs(per_dev), dev)
                 progs.append((jax.jit(batched).lower(leaves, d0, *args).compile(), leaves, d0, dev))
 
-            def launch(qpos0, acc, combo):
+            def launch(qpos0, key, combo):
                 def one_device(i):
                     prog, leaves, d0, dev = progs[i]
-                    part = jax.tree.map(lambda x: x[i * per_dev:(i + 1) * per_dev], (qpos0, acc, combo))
+                    part = jax.tree.map(lambda x: x[i * per_dev:(i + 1) * per_dev], (qpos0, key, combo))
                     return jax.device_get(prog(leaves, d0, *jax.device_put(part, dev)))
 
                 # A thread per GPU: the rollout's while loop reads its predicate on the host
@@ -325,8 +331,8 @@ class MjxRunner:
             args = inputs(batch) if sharding is None else jax.device_put(inputs(batch), sharding)
             prog = jax.jit(fn).lower(*args).compile()
 
-            def launch(qpos0, acc, combo):
-                args = (qpos0, acc, combo) if sharding is None else jax.device_put((qpos0, acc, combo), sharding)
+            def launch(qpos0, key, combo):
+                args = (qpos0, key, combo) if sharding is None else jax.device_put((qpos0, key, combo), sharding)
                 return jax.device_get(prog(*args))
         self.compile_seconds += time.perf_counter() - t0
         return launch
@@ -342,6 +348,7 @@ class MjxRunner:
     def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None,
             poses: np.ndarray | None = None) -> Rollouts:
         """Roll out `seeds` (padded up to `batch` so one compiled shape serves every chunk)."""
+        import jax
         import jax.numpy as jnp
 
         seeds = np.asarray(seeds, dtype=np.int64)
@@ -353,13 +360,13 @@ class MjxRunner:
         if key not in self._fns:
             self._fns[key] = self._build(batch, trace)
         launch = self._fns[key]
-        poses = start_poses(seeds) if poses is None else poses
+        poses = start_poses(seeds, reset=self.scenario.reset) if poses is None else poses
         qpos0 = self.layout.initial_qpos(self.model, np.concatenate([poses, np.repeat(poses[-1:], batch - n, 0)]))
-        acc = self._acc0(batch)
+        key = seed_key(np.concatenate([seeds, np.repeat(seeds[-1:], batch - n)]))
         qpos0 = jnp.asarray(qpos0, self.dtype)
         combos = np.zeros(n, np.int64) if combos is None else np.asarray(combos, np.int64)
         combo = jnp.asarray(np.concatenate([combos, np.repeat(combos[-1:], batch - n)]), jnp.int32)
-        acc, final, pusher, ovf, qs = launch(qpos0, acc, combo)
+        carry, ovf, qs = launch(qpos0, jnp.asarray(key), combo)
         ovf = np.asarray(ovf)[:n]
         dropped = (ovf & _DROP_BITS) != 0
         if dropped.any() and self._grow():
@@ -371,17 +378,14 @@ class MjxRunner:
                 f"the buffers were fixed at {self.buffers} (contacts, rows) per world: raise them"
             )
         f64 = lambda a: np.asarray(a, np.float64)[:n]  # noqa: E731
-        out = Rollouts(
-            seeds=seeds, start=poses, settled=f64(acc["tee_settled"]), final=f64(final), pusher_final=f64(pusher),
-            gap_settled=f64(acc["gap_settled"]), gap_max_dev=f64(acc["gap_max_dev"]), finite=np.asarray(acc["finite"])[:n],
-            contained=np.asarray(acc["contained"])[:n],
-        )
+        carry = jax.tree.map(lambda a: np.asarray(a)[:n], carry)
+        q0 = np.asarray(qpos0, np.float64)[:n]
+        out = from_carry(seeds, poses, self.layout.pusher_xy(q0), carry)
         if self.scenario.params:
             out.params = {name: np.array([self.grid[c][name] for c in combos]) for name, _ in self.scenario.params}
         if trace:
-            out.trace = Trace(
-                np.concatenate([np.asarray(qpos0, np.float64)[:n, None], f64(qs)], axis=1), float(self.model.opt.timestep)
-            )
+            out.trace = Trace(np.concatenate([q0[:, None], f64(qs)], axis=1), float(self.model.opt.timestep),
+                              self.scenario.driver()[1].frame_skip)
             # the trace and the carried state are two paths to one answer: they must agree
             last = self.layout.tee_pose(out.trace.qpos[:, -1])
             if not np.array_equal(last[out.finite], out.final[out.finite]):

@@ -1,4 +1,4 @@
-"""One scenario, many backends: the scene, the schedule and the seeds' start poses."""
+"""One scenario, many backends: the scene, the reset, what drives the pusher, and how long it runs."""
 
 from __future__ import annotations
 
@@ -10,17 +10,42 @@ from mjx_pusht.scene import SceneSpec
 
 @dataclasses.dataclass(frozen=True)
 class Scenario:
-    """What to simulate; every backend takes this and seeds, and returns `Rollouts`."""
+    """What to simulate; every backend takes this and seeds, and returns `Rollouts`.
+
+    With no `controller` the scenario is the chapter's study: the schedule (settle, then
+    nudge) commanded every physics step for its total length, no episode termination.
+    With one, it is an episode of the task: `episode` says the control rate, the length and
+    whether success ends it (see `episode.Episode`).
+    """
 
     scene: SceneSpec = SceneSpec()
     schedule: Schedule = Schedule()
     params: tuple[tuple[str, tuple[float, ...]], ...] = ()  # (name, values) pairs swept as a grid
+    reset: str = "chapter"  # reset.RESETS
+    controller: object | None = None  # a controllers.Controller
+    episode: object | None = None  # an episode.Episode; None with a controller: the defaults
+
+    def __post_init__(self) -> None:
+        from mjx_pusht.reset import RESETS
+
+        if self.reset not in RESETS:
+            raise ValueError(f"unknown reset {self.reset!r}; choose from {', '.join(RESETS)}")
 
     def grid(self) -> list[dict[str, float]]:
         """Every parameter combination; a single empty one when nothing is swept."""
         from mjx_pusht.params import grid
 
         return grid({name: list(values) for name, values in self.params})
+
+    def driver(self):
+        """(controller, episode) that run this scenario: the chapter's schedule when no controller is given."""
+        from mjx_pusht.controllers import Nudge
+        from mjx_pusht.episode import Episode
+
+        if self.controller is None:
+            return Nudge(schedule=self.schedule), Episode(frame_skip=1, max_steps=self.schedule.total_steps,
+                                                          terminate=False)
+        return self.controller, self.episode or Episode()
 
     @property
     def break_it(self) -> str:

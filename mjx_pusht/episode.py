@@ -1,0 +1,96 @@
+"""One rollout, whatever steps the physics: observe, act, step `frame_skip` times, fold in the invariants and the reward.
+
+These functions are the body of every backend's rollout. They take the backend's arrays
+(NumPy batches on the CPU, one world's JAX arrays inside MJX's vmapped scan) and never know
+which backend called them; the backends only differ in how they step MuJoCo.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from mjx_pusht.metrics import invariants_init, invariants_update
+from mjx_pusht.task import SUCCESS_COVERAGE, coverage, episode_init, episode_update, observe, to_ctrl
+
+
+@dataclasses.dataclass(frozen=True)
+class Episode:
+    """How long a rollout runs and when it ends.
+
+    `frame_skip` physics steps per control step (10: 100 Hz physics, 10 Hz control, as gym-pusht
+    and Diffusion Policy run), `max_steps` control steps at most (the truncation), and whether
+    reaching `success` coverage ends the episode (a study of a fixed schedule runs to the end).
+    """
+
+    frame_skip: int = 10
+    max_steps: int = 300
+    terminate: bool = True
+    success: float = SUCCESS_COVERAGE
+
+    def __post_init__(self) -> None:
+        if self.frame_skip < 1:
+            raise ValueError(f"frame_skip must be a positive number of physics steps, got {self.frame_skip}")
+        if self.max_steps < 1:
+            raise ValueError(f"--max-steps must be a positive number of control steps, got {self.max_steps}")
+
+    @property
+    def physics_steps(self) -> int:
+        return self.frame_skip * self.max_steps
+
+
+def _where(xp, cond, old, new):
+    """Per-row select over a dict of arrays: rows where `cond` holds keep `old`."""
+    out = {}
+    for k in new:
+        c = cond
+        while c.ndim < new[k].ndim:
+            c = c[..., None]
+        out[k] = xp.where(c, old[k], new[k])
+    return out
+
+
+def begin(layout, qpos0, key, controller, episode: Episode, xp):
+    """The rollout's carry at reset: invariants, episode bookkeeping, the controller's state, the poses at the end."""
+    tee = layout.tee_pose(qpos0)
+    n = tee.shape[:-1]
+    acc = invariants_init(n[0] if n else 1, xp)
+    if not n:  # one world (under vmap): drop the batch axis invariants_init adds
+        acc = {k: v[0] for k, v in acc.items()}
+    acc = {k: (xp.astype(v, qpos0.dtype) if v.dtype != xp.bool else v) for k, v in acc.items()}
+    return {
+        "inv": acc,
+        "ep": episode_init(coverage(tee), episode.success, episode.terminate, xp),
+        "ctrl": controller.init(key),
+        "final": tee,
+        "pusher_final": layout.pusher_xy(qpos0),
+    }
+
+
+def decide(carry, qpos, k, key, controller, layout, xp):
+    """The servo ctrl for control step k, and the controller's next state. A finished episode's pusher stops."""
+    obs = observe(layout.pusher_xy(qpos), layout.tee_pose(qpos))
+    action, cstate = controller.act(carry["ctrl"], obs, k, key)
+    action = xp.astype(xp.asarray(action), qpos.dtype)
+    u = to_ctrl(action, obs["state"][..., 0:2], controller.action_type)
+    u = xp.where(carry["ep"]["done"][..., None], 0.0, u)
+    return u, {**carry, "ctrl": cstate}
+
+
+def after_physics_step(carry, t, settle_step, layout, qpos, qvel, sensordata, xp):
+    """Fold physics step t into the invariants; an episode that has ended stops changing them."""
+    acc = invariants_update(carry["inv"], t, settle_step, layout.tee_pose(qpos), qpos, qvel,
+                            sensordata[..., 0:3], sensordata[..., 3:6])
+    return {**carry, "inv": _where(xp, carry["ep"]["done"], carry["inv"], acc)}
+
+
+def after_control_step(carry, k, layout, qpos, episode: Episode, xp):
+    """Score control step k: reward = coverage after it; the episode's end state is kept while it runs."""
+    tee = layout.tee_pose(qpos)
+    live = ~carry["ep"]["done"]
+    ep = episode_update(carry["ep"], coverage(tee), k, episode.success, episode.terminate)
+    return {
+        **carry,
+        "ep": ep,
+        "final": xp.where(live[..., None], tee, carry["final"]),
+        "pusher_final": xp.where(live[..., None], layout.pusher_xy(qpos), carry["pusher_final"]),
+    }

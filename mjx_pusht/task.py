@@ -1,0 +1,228 @@
+"""The PushT task, written once for NumPy and JAX arrays: observations, actions, coverage, reward, termination.
+
+Every function here takes arrays with any leading batch shape and reads its array
+namespace from its input (`x.__array_namespace__()`), so the CPU backend calls it on
+(N, ...) NumPy batches and the MJX backends call it per world inside a vmapped,
+jitted scan. There is one definition of what the task is, whatever steps the physics.
+
+Conventions (metres, radians, world frame, z up, the target T at the origin with yaw 0):
+- observation `state` = [pusher x, pusher y, tee x, tee y, tee yaw]; the tee's (x, y)
+  is its body origin, the centre of the bar, which is also the point it yaws about;
+- observation `keypoints` = the T's 8 outline corners in the world frame, (x, y) each,
+  counter-clockwise from the bar's top-left corner (16 values);
+- action `velocity` = the pusher servos' own ctrl, m/s, clipped to the ctrlrange [-1, 1];
+- action `position` = a target (x, y) for the pusher, tracked by the velocity command
+  `POSITION_GAIN * (target - pusher)`, clipped to the ctrlrange (gym-pusht's convention
+  of commanding positions, here on velocity servos);
+- reward = coverage of the target T by the block T, in [0, 1]; an episode terminates
+  at coverage >= `SUCCESS_COVERAGE` and is truncated after `max_steps` control steps.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# The T in its own frame (origin = bar centre): bar and stem as (centre_x, centre_y, half_x, half_y),
+# from the scene's geoms (scene.TEE_WELDED_MJCF).
+T_RECTS = ((0.0, 0.0, 0.06, 0.015), (0.0, -0.06, 0.015, 0.045))
+T_AREA = sum(4 * hx * hy for _, _, hx, hy in T_RECTS)
+# The outline, counter-clockwise from the bar's top-left corner.
+T_OUTLINE = (
+    (-0.06, 0.015), (-0.06, -0.015), (-0.015, -0.015), (-0.015, -0.105),
+    (0.015, -0.105), (0.015, -0.015), (0.06, -0.015), (0.06, 0.015),
+)
+# Every point of a T lies within this distance of its origin (the stem's far corners).
+T_REACH = max(math.hypot(abs(cx) + hx, abs(cy) + hy) for cx, cy, hx, hy in T_RECTS)
+TARGET_POSE = (0.0, 0.0, 0.0)
+SUCCESS_COVERAGE = 0.95
+CTRL_LIMIT = 1.0  # the servos' ctrlrange, m/s (scene.ACTUATOR_MJCF)
+POSITION_GAIN = 10.0  # 1/s: a position action closes 63% of its error in one 0.1 s control step
+ACTION_TYPES = ("velocity", "position")
+OBS_TYPES = ("state", "keypoints")
+STATE_DIM = 5
+KEYPOINTS_DIM = 16
+
+
+def _xp(a):
+    return a.__array_namespace__()
+
+
+def wrap_angle(a):
+    """Wrap to (-pi, pi]."""
+    xp = _xp(a)
+    w = (a + math.pi) % (2 * math.pi) - math.pi
+    return xp.where(w == -math.pi, math.pi, w)
+
+
+def rotate(pose, local):
+    """Points given in a T's frame placed at `pose` (..., 3): (..., K, 2) world points from (K, 2) local ones."""
+    xp = _xp(pose)
+    c, s = xp.cos(pose[..., 2])[..., None], xp.sin(pose[..., 2])[..., None]
+    lx, ly = local[:, 0], local[:, 1]
+    return xp.stack([c * lx - s * ly + pose[..., 0:1], s * lx + c * ly + pose[..., 1:2]], axis=-1)
+
+
+def distance_to_tee(points, pose):
+    """Distance from (..., 2) world points to the T at (..., 3) poses (0 inside it)."""
+    xp = _xp(pose)
+    c, s = xp.cos(pose[..., 2]), xp.sin(pose[..., 2])
+    dx, dy = points[..., 0] - pose[..., 0], points[..., 1] - pose[..., 1]
+    lx, ly = c * dx + s * dy, -s * dx + c * dy
+    out = None
+    for cx, cy, hx, hy in T_RECTS:
+        ox = xp.maximum(xp.abs(lx - cx) - hx, 0.0)
+        oy = xp.maximum(xp.abs(ly - cy) - hy, 0.0)
+        d = xp.sqrt(ox * ox + oy * oy)
+        out = d if out is None else xp.minimum(out, d)
+    return out
+
+
+def keypoints(pose):
+    """(..., 16) the T's outline corners in the world frame, from (..., 3) tee poses."""
+    xp = _xp(pose)
+    pts = rotate(pose, xp.asarray(T_OUTLINE, dtype=pose.dtype))
+    return xp.reshape(pts, pts.shape[:-2] + (KEYPOINTS_DIM,))
+
+
+def observe(pusher_xy, tee_pose) -> dict:
+    """The observation dict every controller receives: `state` (..., 5) and `keypoints` (..., 16)."""
+    xp = _xp(tee_pose)
+    return {"state": xp.concat([pusher_xy, tee_pose], axis=-1), "keypoints": keypoints(tee_pose)}
+
+
+def to_ctrl(action, pusher_xy, action_type: str):
+    """Servo ctrl (..., 2) from an action: velocity as given, or a position target tracked proportionally."""
+    xp = _xp(action)
+    if action_type == "velocity":
+        u = action
+    elif action_type == "position":
+        u = POSITION_GAIN * (action - pusher_xy)
+    else:
+        raise ValueError(f"unknown action type {action_type!r}; choose from {', '.join(ACTION_TYPES)}")
+    # NaN from a broken policy becomes 0, not a NaN ctrl that would poison the physics silently
+    u = xp.where(xp.isfinite(u), u, 0.0)
+    return xp.clip(u, -CTRL_LIMIT, CTRL_LIMIT)
+
+
+# -- coverage: exact area of (block T intersect target T) over the T's area ----------------------
+# A T is two disjoint rectangles, so the overlap of two Ts is the sum of four convex rectangle
+# intersections. Each is a Sutherland-Hodgman clip kept in a fixed 8-vertex buffer (a rectangle
+# clipped by 4 half-planes has at most 8 vertices), branch-free so it traces under jit and vmap.
+_SLOTS = 8
+
+
+def _next_index(n, xp):
+    i = xp.arange(_SLOTS)
+    return xp.where(i + 1 < n[..., None], i + 1, 0)
+
+
+def _take(pts, idx, xp):
+    return xp.take_along_axis(pts, xp.stack([idx, idx], axis=-1), axis=-2)
+
+
+def _clip(pts, n, a, b):
+    """Clip polygons (..., 8, 2) with n valid vertices by the half-plane left of edge a->b."""
+    xp = _xp(pts)
+    valid = xp.arange(_SLOTS) < n[..., None]
+    q = _take(pts, _next_index(n, xp), xp)
+    ex, ey = (b - a)[..., None, 0], (b - a)[..., None, 1]
+
+    def side(p):
+        return ex * (p[..., 1] - a[..., None, 1]) - ey * (p[..., 0] - a[..., None, 0])
+
+    sp, sq = side(pts), side(q)
+    keep = (sp >= 0) & valid
+    crosses = ((sp >= 0) != (sq >= 0)) & valid
+    denom = sp - sq
+    t = sp / xp.where(denom == 0, 1.0, denom)
+    cut = pts + t[..., None] * (q - pts)
+    # candidates in order: vertex i (if kept), then edge i's crossing (if any)
+    cand = xp.reshape(xp.stack([pts, cut], axis=-2), pts.shape[:-2] + (2 * _SLOTS, 2))
+    emit = xp.reshape(xp.stack([keep, crosses], axis=-1), keep.shape[:-1] + (2 * _SLOTS,))
+    slot = xp.cumulative_sum(xp.astype(emit, xp.int32), axis=-1) - 1
+    pick = (slot[..., None, :] == xp.arange(_SLOTS)[:, None]) & emit[..., None, :]  # (..., 8, 16)
+    out = xp.sum(xp.where(pick[..., None], cand[..., None, :, :], 0.0), axis=-2)
+    return out, xp.sum(xp.astype(emit, xp.int32), axis=-1)
+
+
+def _area(pts, n):
+    xp = _xp(pts)
+    q = _take(pts, _next_index(n, xp), xp)
+    cross = pts[..., 0] * q[..., 1] - q[..., 0] * pts[..., 1]
+    return 0.5 * xp.abs(xp.sum(xp.where(xp.arange(_SLOTS) < n[..., None], cross, 0.0), axis=-1))
+
+
+def _rect_corners(pose, rect):
+    xp = _xp(pose)
+    cx, cy, hx, hy = rect
+    local = xp.asarray([[cx - hx, cy - hy], [cx + hx, cy - hy], [cx + hx, cy + hy], [cx - hx, cy + hy]], dtype=pose.dtype)
+    return rotate(pose, local)
+
+
+def _rect_overlap(pa, ra, pb, rb):
+    xp = _xp(pa)
+    subject = _rect_corners(pa, ra)
+    clipper = _rect_corners(pb, rb)
+    pts = xp.concat([subject, xp.zeros(subject.shape[:-2] + (_SLOTS - 4, 2), dtype=subject.dtype)], axis=-2)
+    n = xp.full(pa.shape[:-1], 4, dtype=xp.int32)
+    for k in range(4):
+        pts, n = _clip(pts, n, clipper[..., k, :], clipper[..., (k + 1) % 4, :])
+    return _area(pts, n)
+
+
+def coverage(pose, target=TARGET_POSE):
+    """Fraction of the target T's area covered by the block T at (..., 3) poses, in [0, 1]."""
+    xp = _xp(pose)
+    tgt = xp.broadcast_to(xp.asarray(target, dtype=pose.dtype), pose.shape)
+    inter = sum(_rect_overlap(pose, ra, tgt, rb) for ra in T_RECTS for rb in T_RECTS)
+    return xp.clip(inter / T_AREA, 0.0, 1.0)
+
+
+def coverage_np(pose, target=TARGET_POSE, block: int = 16384) -> np.ndarray:
+    """`coverage` for large host batches: only poses within reach of the target can overlap it
+    (exact shortcut), and the rest are done in blocks to bound the temporaries."""
+    pose = np.atleast_2d(np.asarray(pose, np.float64))
+    tgt = np.broadcast_to(np.asarray(target, np.float64), pose.shape)
+    out = np.zeros(len(pose))
+    near = np.flatnonzero(np.hypot(pose[:, 0] - tgt[:, 0], pose[:, 1] - tgt[:, 1]) < 2 * T_REACH)
+    for lo in range(0, len(near), block):
+        idx = near[lo : lo + block]
+        out[idx] = coverage(pose[idx], tgt[idx])
+    return out
+
+
+# -- episodes ------------------------------------------------------------------------------------
+def episode_init(coverage0, success: float, terminate: bool, xp):
+    """Per-world episode bookkeeping at reset. An episode that starts covered is over before its first step
+    (when episodes terminate at all: a study run of a fixed schedule never does)."""
+    hit = coverage0 >= success
+    done = hit & terminate
+    zeros = xp.zeros(coverage0.shape, dtype=coverage0.dtype)
+    return {
+        "done": done,
+        "success": hit,
+        "steps_to_success": xp.astype(xp.where(hit, 0, -1), xp.int32),
+        "length": xp.zeros(coverage0.shape, dtype=xp.int32),
+        "return": zeros,
+        "coverage": coverage0,
+        "best_coverage": coverage0,
+    }
+
+
+def episode_update(ep, reward, k, success: float, terminate: bool):
+    """Fold control step k's reward (the coverage after it) into the episode; finished episodes stay frozen."""
+    xp = _xp(reward)
+    live = ~ep["done"]
+    hit = live & (reward >= success)
+    k1 = xp.astype(xp.asarray(k + 1), xp.int32)
+    return {
+        "done": (ep["done"] | hit) if terminate else ep["done"],
+        "success": ep["success"] | hit,
+        "steps_to_success": xp.where(hit & (ep["steps_to_success"] < 0), k1, ep["steps_to_success"]),
+        "length": xp.where(live, k1, ep["length"]),
+        "return": xp.where(live, ep["return"] + reward, ep["return"]),
+        "coverage": xp.where(live, reward, ep["coverage"]),
+        "best_coverage": xp.where(live, xp.maximum(ep["best_coverage"], reward), ep["best_coverage"]),
+    }
