@@ -89,6 +89,26 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sweep a physical parameter as a grid: kv, tee_damping, tee_frictionloss, tee_mass; "
                         "VALUES is a,b,c, lo:hi:n (evenly spaced) or ~lo:hi:n (n random draws) (repeatable)")
 
+    e = sub.add_parser("eval", help="a controller on many start states: per_episode.parquet, success rate + interval")
+    e.add_argument("--controller", default="expert",
+                   help="zero, nudge, random, expert (default), or your own as package.module:function")
+    e.add_argument("--action", choices=("velocity", "position"), default=None,
+                   help="what your controller's actions mean (default velocity; built-ins command velocities)")
+    e.add_argument("--reset", choices=("task", "chapter"), default="task", help="start distribution (default task)")
+    e.add_argument("--seeds", default="512", help="N (0..N-1), A:B, or a,b,c (default 512)")
+    e.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
+    e.add_argument("--max-steps", type=_positive, default=300, help="control steps before truncation (default 300)")
+    e.add_argument("--frame-skip", type=_positive, default=10, help="physics steps per control step (default 10)")
+    e.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
+    e.add_argument("--out", type=Path, default=Path("outputs/eval"))
+    e.add_argument("--chunk", type=_positive, default=None, help="episodes per batch (default: by backend)")
+    e.add_argument("--resume", action="store_true", help="finish an interrupted evaluation in --out")
+    e.add_argument("--record", type=_nonneg, default=4, help="episodes to show side by side in eval.rrd (default 4)")
+    e.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip eval.rrd")
+    e.add_argument("--no-progress", dest="progress", action="store_false")
+    e.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
+                   help="evaluate under a grid of physical parameters, as in sweep (repeatable)")
+
     c = sub.add_parser("compare", help="CPU vs MJX fidelity report: compare.json, compare.md, compare.png")
     c.add_argument("--seeds", default="64", help="N, A:B or a,b,c (default 64)")
     c.add_argument("--backend", default="mjx-jax", help="mjx-jax or mjx-warp (default mjx-jax)")
@@ -236,7 +256,82 @@ def cmd_sweep(args) -> int:
     return 0
 
 
-COMMANDS = {"scene": cmd_scene, "tree": cmd_tree, "sweep": cmd_sweep, "compare": cmd_compare}
+def cmd_eval(args) -> int:
+    from mjx_pusht.backends import make_backend, resolve
+    from mjx_pusht.controllers import describe, load
+    from mjx_pusht.episode import Episode
+    from mjx_pusht.evaluate import summarize_episodes
+    from mjx_pusht.outputs import atomic_write_json, drop_stale, prepare_out_dir
+    from mjx_pusht.params import parse_param
+    from mjx_pusht.scenario import Scenario
+    from mjx_pusht.scene import SceneSpec
+    from mjx_pusht.seeds import parse_seeds
+    from mjx_pusht.sweep import check_resumable, finish, rows_for, run_sweep
+    from mjx_pusht.tier import Banner
+
+    seeds = parse_seeds(args.seeds)
+    params = tuple((n, tuple(v)) for n, v in (parse_param(t) for t in args.param))
+    if len({n for n, _ in params}) != len(params):
+        raise UsageError("each --param NAME may be given once")
+    episode = Episode(frame_skip=args.frame_skip, max_steps=args.max_steps)
+    controller = load(args.controller, action_type=args.action, frame_skip=args.frame_skip)
+    name, why = resolve(args.backend)
+    config = {"command": "eval", "backend": name, "controller": args.controller, "action": controller.action_type,
+              "reset": args.reset, "break_it": args.break_it, "max_steps": args.max_steps,
+              "frame_skip": args.frame_skip, "params": [[n, list(v)] for n, v in params]}
+    scenario = Scenario(SceneSpec(args.break_it), params=params, reset=args.reset, controller=controller, episode=episode)
+    row_seeds, combos = rows_for(seeds, len(scenario.grid()))
+    out = prepare_out_dir(args.out)
+    check_resumable(out, row_seeds, config, args.resume)
+    banner = Banner("eval")
+    print(f"backend: {name} ({why})")
+    backend = make_backend(name, scenario)
+    print(f"controller: {describe(controller)}; reset: {args.reset}; {len(seeds)} episodes of at most "
+          f"{args.max_steps} control steps x {args.frame_skip} physics steps; device: {backend.device}; "
+          f"pusher shape: {backend.pusher}")
+    # feedback on MuJoCo C runs one core per batch: small chunks keep the progress bar (and --resume) fine-grained
+    chunk = args.chunk or (256 if name == "cpu" else backend.default_chunk)
+    try:
+        run = run_sweep(backend, row_seeds, out, config=config, chunk=chunk, resume=args.resume,
+                        progress=args.progress, combos=combos, episodes=True)
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: finished chunks are kept in {out}; rerun with --resume to finish", file=sys.stderr)
+        return 130
+    r = run.rollouts
+    from mjx_pusht.backends import versions
+
+    summary = {"config": config, "backend": backend.name, "device": backend.device, "versions": versions(),
+               "pusher_shape": backend.pusher, "controller": describe(controller),
+               "success_coverage": episode.success, **summarize_episodes(r),
+               "compile_seconds": round(run.compile_seconds, 3), "run_seconds": round(run.run_seconds, 3)}
+    finish(out, run, name="per_episode.parquet", episodes=True)
+    atomic_write_json(out / "summary.json", summary)
+    lo, hi = summary["success_rate_ci95"]
+    print(f"success: {summary['n_success']} of {summary['n_finite']} episodes ({summary['success_rate']:.1%}, "
+          f"95% interval {lo:.1%}-{hi:.1%}); median steps to success {summary['median_steps_to_success']}; "
+          f"median final coverage {summary['final_coverage'].get('median', float('nan')):.3f}")
+    if summary["n_non_finite"]:
+        print(f"WARNING: {summary['n_non_finite']} episodes went non-finite (flagged, left out of the rate): "
+              f"{summary['non_finite_seeds'][:10]}")
+    if summary["n_escaped"] and args.break_it != "free-tee":
+        print(f"WARNING: {summary['n_escaped']} episodes left the walled workspace: {summary['escaped_seeds'][:10]}")
+    if args.break_it == "none" and summary["n_rigid"] != len(r):
+        print(f"WARNING: the welded T came apart in {len(r) - summary['n_rigid']} episodes")
+    print(f"table: {out / 'per_episode.parquet'}\nsummary: {out / 'summary.json'}")
+    if args.rerun and args.record > 0:
+        from mjx_pusht.record import record_episodes, row_labels
+
+        shown = np.arange(min(args.record, len(r)))
+        traced = backend.run(r.seeds[shown], trace=True, combos=combos[shown])
+        record_episodes(out / "eval.rrd", backend.model, traced, r, row_labels(r, shown))
+        print(f"recording: {out / 'eval.rrd'} ({len(shown)} episodes side by side) - open it with: rerun {out / 'eval.rrd'}")
+    else:
+        drop_stale(out / "eval.rrd")
+    banner.done()
+    return 0
+
+
+COMMANDS = {"scene": cmd_scene, "tree": cmd_tree, "sweep": cmd_sweep, "eval": cmd_eval, "compare": cmd_compare}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from mjx_pusht.backends import BackendError
+from mjx_pusht.controllers import ControllerError
 from mjx_pusht.outputs import OutputError
 from mjx_pusht.params import ParamError
 from mjx_pusht.rollout_mjx import BufferOverflow
@@ -11,5 +12,5 @@ from mjx_pusht.sweep import ResumeError
 from mjx_pusht.tree import TreeMismatch
 
 KNOWN_ERRORS: tuple[type[BaseException], ...] = (
-    BackendError, OutputError, ParamError, BufferOverflow, SeedSpecError, ResumeError, TreeMismatch, ValueError,
+    BackendError, ControllerError, OutputError, ParamError, BufferOverflow, SeedSpecError, ResumeError, TreeMismatch, ValueError,
 )

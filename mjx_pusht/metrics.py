@@ -56,9 +56,10 @@ def invariants_update(acc, t, settle_step, tee_pose, qpos, qvel, bar_pos, stem_p
     """
     xp = _xp(qpos)
     gap = weld_gap(bar_pos, stem_pos)
-    at_settle = t == settle_step
+    at_settle = t == settle_step  # a scalar, or per row when rows are at different steps (an env's batch)
+    at_pose = at_settle[..., None] if getattr(at_settle, "ndim", 0) else at_settle
     return {
-        "tee_settled": xp.where(at_settle, tee_pose, acc["tee_settled"]),
+        "tee_settled": xp.where(at_pose, tee_pose, acc["tee_settled"]),
         "gap_settled": xp.where(at_settle, gap, acc["gap_settled"]),
         # maximum propagates NaN, so a diverged seed can never read as rigid
         "gap_max_dev": xp.maximum(acc["gap_max_dev"], abs(gap - WELD_GAP)),

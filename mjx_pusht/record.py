@@ -155,3 +155,45 @@ def row_labels(rollouts: Rollouts, rows: np.ndarray) -> list[str]:
             label += f"_{name}_{v[i]:g}".replace(".", "p")
         out.append(label)
     return out
+
+
+def record_episodes(path: Path, model: mujoco.MjModel, traced: Rollouts, everyone: Rollouts,
+                    labels: list[str] | None = None) -> Path:
+    """Closed-loop episodes side by side (world/seed_S/...), their coverage and reward over sim_time
+    (plots/coverage/seed_S, plots/reward/seed_S), and the outcome over every episode (outcomes/...)."""
+    import rerun as rr
+
+    from mjx_pusht.reset import QposLayout
+    from mjx_pusht.task import SUCCESS_COVERAGE, coverage_np
+
+    assert traced.trace is not None and traced.episode is not None
+    layout = QposLayout.of(model)
+    fs, dt = traced.trace.frame_skip, traced.trace.dt
+    rec = rr.RecordingStream("mjx_pusht_eval")
+    with rec:
+        rec.save(str(path))
+        labels = labels or [f"seed_{int(s)}" for s in traced.seeds]
+        rr.log("plots/coverage/success", rr.SeriesLines(colors=[[120, 120, 120]], names=["success at 0.95"]), static=True)
+        for k, label in enumerate(labels):
+            root = f"world/{label}"
+            frames = int(traced.episode["length"][k]) * fs + 1  # the episode's own frames, not what ran after it ended
+            qpos = traced.trace.qpos[k, :frames]
+            rr.log(root, rr.Transform3D(translation=[k * SEED_SPACING, 0, 0]), static=True)
+            _log_static_scene(rr, root, model)
+            _log_frames(rr, root, model, qpos, dt, f"plots/weld_gap/{label}")
+            cov = coverage_np(layout.tee_pose(qpos))
+            tl = rr.TimeColumn("sim_time", duration=np.arange(frames) * dt)
+            rr.send_columns(f"plots/coverage/{label}", indexes=[tl], columns=rr.Scalars.columns(scalars=cov))
+            steps = np.arange(1, frames // fs + 1) * fs  # the frame that ends each control step
+            rr.send_columns(f"plots/reward/{label}", indexes=[rr.TimeColumn("sim_time", duration=steps * dt)],
+                            columns=rr.Scalars.columns(scalars=cov[steps]))
+        tl = rr.TimeColumn("sim_time", duration=[0.0, traced.trace.qpos.shape[1] * dt])
+        rr.send_columns("plots/coverage/success", indexes=[tl], columns=rr.Scalars.columns(scalars=[SUCCESS_COVERAGE] * 2))
+        ok = np.asarray(everyone.episode["success"], bool)
+        colors = np.where(ok[:, None], [[60, 160, 90]], [[220, 60, 60]])
+        rr.log("outcomes/final_xy", rr.Points2D(everyone.final[:, :2], colors=colors, radii=0.002), static=True)
+        rr.log("outcomes/final_coverage_histogram", rr.BarChart(_histogram(np.asarray(everyone.episode["coverage"]))),
+               static=True)
+    rec.flush()
+    rec.disconnect()
+    return path

@@ -19,6 +19,10 @@ COLUMNS = (
     "task_pos_err", "task_yaw_err", "task_coverage", "task_success",
 )
 
+# the eval table adds these (per episode), after the sweep's columns and any param_ columns
+EPISODE_COLUMNS = ("pusher_start_x", "pusher_start_y", "success", "steps_to_success", "episode_length",
+                   "final_coverage", "best_coverage", "return")
+
 
 @dataclasses.dataclass
 class Trace:
@@ -56,8 +60,9 @@ class Rollouts:
     def __len__(self) -> int:
         return len(self.seeds)
 
-    def columns(self) -> dict[str, np.ndarray]:
-        """The per-seed table as named columns (see COLUMNS)."""
+    def columns(self, *, episodes: bool = False) -> dict[str, np.ndarray]:
+        """The per-seed table as named columns (see COLUMNS); with `episodes`, the eval table
+        (EPISODE_COLUMNS added: the pusher's start and each episode's outcome)."""
         cols = {"seed": self.seeds.astype(np.int64)}
         for name, arr in (("start", self.start), ("tee_settled", self.settled), ("tee_final", self.final)):
             for k, axis in enumerate(("x", "y", "yaw")):
@@ -73,6 +78,17 @@ class Rollouts:
         score = task_score(self.final)
         for k, v in score.items():
             cols[f"task_{k}"] = v
+        if episodes:
+            if self.episode is None or self.pusher_start is None:
+                raise ValueError("these rollouts ran no episodes")
+            cols["pusher_start_x"], cols["pusher_start_y"] = self.pusher_start[:, 0], self.pusher_start[:, 1]
+            ep = self.episode
+            cols["success"] = np.asarray(ep["success"], bool)
+            cols["steps_to_success"] = np.asarray(ep["steps_to_success"], np.int64)
+            cols["episode_length"] = np.asarray(ep["length"], np.int64)
+            cols["final_coverage"] = np.asarray(ep["coverage"], np.float64)
+            cols["best_coverage"] = np.asarray(ep["best_coverage"], np.float64)
+            cols["return"] = np.asarray(ep["return"], np.float64)
         return cols
 
     @classmethod
@@ -92,6 +108,12 @@ class Rollouts:
             contained=np.asarray(cols["contained"], bool),
             params={k.removeprefix("param_"): np.asarray(v, np.float64) for k, v in cols.items()
                     if k.startswith("param_")} or None,
+            pusher_start=(np.stack([cols["pusher_start_x"], cols["pusher_start_y"]], -1).astype(np.float64)
+                          if "pusher_start_x" in cols else None),
+            episode=({"success": np.asarray(cols["success"], bool), "steps_to_success": np.asarray(cols["steps_to_success"]),
+                      "length": np.asarray(cols["episode_length"]), "coverage": np.asarray(cols["final_coverage"]),
+                      "best_coverage": np.asarray(cols["best_coverage"]), "return": np.asarray(cols["return"]),
+                      "done": np.asarray(cols["success"], bool)} if "success" in cols else None),
         )
 
     @classmethod

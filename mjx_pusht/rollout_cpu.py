@@ -89,6 +89,16 @@ class _Lockstep:
         self.qvel = np.zeros((frame_skip, n, model.nv))
         self.sens = np.zeros((frame_skip, n, model.nsensordata))
 
+    def copy(self) -> "_Lockstep":
+        """An independent copy (each MjData copied), so an earlier state can be stepped again."""
+        new = object.__new__(_Lockstep)
+        new.models, new.fs = self.models, self.fs
+        new.datas = [mujoco.MjData(m) for m in self.models]
+        for m, src, dst in zip(self.models, self.datas, new.datas):
+            mujoco.mj_copyData(dst, m, src)
+        new.qpos, new.qvel, new.sens = self.qpos.copy(), self.qvel.copy(), self.sens.copy()
+        return new
+
     def advance(self, u, live):
         step = mujoco.mj_step
         for i in np.flatnonzero(live):  # an ended episode is not stepped: nothing it does is kept

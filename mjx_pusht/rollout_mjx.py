@@ -132,6 +132,34 @@ def _mj_model(scene: SceneSpec, cfg: MjxConfig) -> mujoco.MjModel:
     return model
 
 
+def advance(mx, d, carry, u, k, frame_skip: int, settle_step: int, layout, warp: bool, ovf, qs=None):
+    """One control step of one world: `frame_skip` mjx.steps at ctrl u, each folded into the invariants.
+
+    `ovf` accumulates MJX-Warp's overflow bits; `qs`, when given, records qpos after every
+    physics step (the trace).
+    """
+    import jax
+    import jax.numpy as jnp
+    from mujoco import mjx
+
+    def physics_step(inner, j):
+        d, carry, ovf, qs = inner
+        t = k * frame_skip + j
+        d = mjx.step(mx, d.replace(ctrl=u))
+        carry = after_physics_step(carry, t, settle_step, layout, d.qpos, d.qvel, d.sensordata, jnp)
+        if warp:
+            ovf = ovf | d._impl.overflow
+        if qs is not None:
+            # Written into the carry, not stacked as scan output: under MJX-Warp's CUDA-graph
+            # capture on an H100 the stacked per-step qpos came back stale (frame 1 read as
+            # qpos0) while the carried state was right.
+            qs = qs.at[t].set(d.qpos)
+        return (d, carry, ovf, qs), None
+
+    (d, carry, ovf, qs), _ = jax.lax.scan(physics_step, (d, carry, ovf, qs), jnp.arange(frame_skip))
+    return d, carry, ovf, qs
+
+
 class MjxRunner:
     """Holds one put-on-device model and its jitted rollouts, one per (batch size, trace)."""
 
@@ -259,22 +287,8 @@ class MjxRunner:
             def control_step(outer, k):
                 d, carry, ovf, qs = outer
                 u, carry = decide(carry, d.qpos, k, key, controller, layout, jnp)
-
-                def physics_step(inner, j):
-                    d, carry, ovf, qs = inner
-                    t = k * fs + j
-                    d = mjx.step(mx, d.replace(ctrl=u))
-                    carry = after_physics_step(carry, t, settle_step, layout, d.qpos, d.qvel, d.sensordata, jnp)
-                    if warp:
-                        ovf = ovf | d._impl.overflow
-                    if trace:
-                        # Written into the carry, not stacked as scan output: under MJX-Warp's
-                        # CUDA-graph capture on an H100 the stacked per-step qpos came back
-                        # stale (frame 1 read as qpos0) while the carried state was right.
-                        qs = qs.at[t].set(d.qpos)
-                    return (d, carry, ovf, qs), None
-
-                (d, carry, ovf, qs), _ = jax.lax.scan(physics_step, (d, carry, ovf, qs), jnp.arange(fs))
+                d, carry, ovf, traced = advance(mx, d, carry, u, k, fs, settle_step, layout, warp, ovf, qs if trace else None)
+                qs = traced if trace else qs
                 carry = after_control_step(carry, k, layout, d.qpos, episode, jnp)
                 return (d, carry, ovf, qs), None
 

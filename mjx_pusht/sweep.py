@@ -85,6 +85,7 @@ def run_sweep(
     resume: bool = False,
     progress: bool = True,
     combos: np.ndarray | None = None,
+    episodes: bool = False,
 ) -> SweepRun:
     """Run every row (seed, or seed x parameter combination) in chunks, writing each chunk as it lands."""
     from tqdm import tqdm
@@ -103,8 +104,10 @@ def run_sweep(
     todo = np.flatnonzero(~done)
     from mjx_pusht.reset import start_poses
 
-    poses = np.zeros((len(seeds), 3))
-    poses[todo] = start_poses(seeds[todo])  # once for the whole sweep (a process pool when large)
+    scenario = getattr(backend, "scenario", None)
+    reset = scenario.reset if scenario is not None else "chapter"
+    poses = np.zeros((len(seeds), 3 if reset == "chapter" else 5))
+    poses[todo] = start_poses(seeds[todo], reset=reset)  # once for the whole sweep (a process pool when large)
     t0 = time.perf_counter()
     compile0 = backend.compile_seconds
     bar = tqdm(total=len(seeds), initial=int(done.sum()), unit="seed", disable=not progress, file=sys.stderr,
@@ -123,7 +126,7 @@ def run_sweep(
             chunk //= 2
             bar.write(f"out of memory at chunk {chunk * 2}; retrying with --chunk {chunk}")
             continue
-        atomic_write_table(parts / f"seeds-{lo:012d}-{hi:012d}.parquet", rows.columns())
+        atomic_write_table(parts / f"seeds-{lo:012d}-{hi:012d}.parquet", rows.columns(episodes=episodes))
         done[lo:hi] = True
         i += hi - lo
         bar.update(hi - lo)
@@ -137,9 +140,9 @@ def run_sweep(
     return SweepRun(rollouts, {}, compile_s, max(wall - compile_s, 1e-9))
 
 
-def finish(out: Path, run: SweepRun) -> None:
+def finish(out: Path, run: SweepRun, *, name: str = "per_seed.parquet", episodes: bool = False) -> None:
     """Write the table, then drop the chunk files (the table now holds them)."""
-    atomic_write_table(out / "per_seed.parquet", run.rollouts.columns())
+    atomic_write_table(out / name, run.rollouts.columns(episodes=episodes))
     shutil.rmtree(out / PARTS, ignore_errors=True)
 
 

@@ -1,0 +1,187 @@
+"""PushT as a functional environment, in the style of gymnax and MuJoCo Playground.
+
+    env = PushTEnv(backend="mjx-jax")          # or "cpu", "mjx-warp"
+    state = env.reset(np.arange(1024))         # one episode per seed
+    state = env.step(state, actions)           # actions (N, 2); every field of state is (N, ...)
+
+`step` is the control step every rollout runs (episode.py): the action becomes servo ctrl
+(`task.to_ctrl`), `frame_skip` physics steps follow, each folded into the weld-gap, finite and
+containment invariants, then reward = coverage, and the episode ends at coverage >= 0.95
+(`terminated`) or after `max_steps` control steps (`truncated`). An ended episode holds still
+and earns nothing until it is reset.
+
+On MJX `step_one(state, action)` is the pure single-world function: `step` is
+`jax.jit(jax.vmap(step_one))`, and a user may vmap, jit or scan it as they like. On `cpu` the
+same call takes NumPy arrays and steps MuJoCo C (the state holds its own copies of the MjData,
+so an old state stays valid). `reset` draws start poses on the host from each seed's own
+generator (reset.py), the same on every backend.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from mjx_pusht.controllers import Controller, seed_key
+from mjx_pusht.episode import Episode, after_control_step, after_physics_step, begin
+from mjx_pusht.reset import QposLayout, start_poses
+from mjx_pusht.scene import SceneSpec
+from mjx_pusht.task import ACTION_TYPES, observe, to_ctrl
+
+
+class State(NamedTuple):
+    """One batch of episodes. `data` is the backend's physics state; the rest is arrays."""
+
+    data: Any  # mjx.Data (batched) or the CPU's MjData copies
+    carry: dict  # episode.begin's carry: invariants, episode bookkeeping, end poses
+    obs: dict  # {"state": (N, 5), "keypoints": (N, 16)}
+    reward: Any  # (N,) coverage after the last step (0 for an ended episode)
+    terminated: Any  # (N,) bool: coverage reached the success threshold
+    truncated: Any  # (N,) bool: max_steps control steps taken without success
+    step: Any  # (N,) int32 control steps taken
+    key: Any  # (N, 2) uint32 seed words
+
+    @property
+    def metrics(self) -> dict:
+        """coverage, best_coverage, return, success, steps_to_success, and the invariants."""
+        ep, inv = self.carry["ep"], self.carry["inv"]
+        return {k: ep[k] for k in ("coverage", "best_coverage", "return", "success", "steps_to_success")} | {
+            "gap_max_dev": inv["gap_max_dev"], "finite": inv["finite"], "contained": inv["contained"]}
+
+
+class _Stateless(Controller):
+    """The environment takes actions from outside; its episode carry needs no controller state."""
+
+
+@dataclasses.dataclass
+class PushTEnv:
+    """A batch of PushT episodes on one backend (cpu, mjx-jax, mjx-warp)."""
+
+    backend: str = "cpu"
+    reset_kind: str = "task"
+    action_type: str = "velocity"
+    episode: Episode = Episode()
+    scene: SceneSpec = SceneSpec()
+
+    def __post_init__(self) -> None:
+        from mjx_pusht.backends import BackendError
+        from mjx_pusht.scenario import Scenario
+
+        if self.action_type not in ACTION_TYPES:
+            raise ValueError(f"unknown action type {self.action_type!r}; choose from {', '.join(ACTION_TYPES)}")
+        if self.backend not in ("cpu", "mjx-jax", "mjx-warp"):
+            raise BackendError(f"the environment runs on cpu, mjx-jax or mjx-warp, not {self.backend!r}")
+        self._ctrl = _Stateless(action_type=self.action_type)
+        self.scenario = Scenario(self.scene, reset=self.reset_kind, controller=self._ctrl, episode=self.episode)
+        self._settle = self.scenario.schedule.settle_steps - 1
+        if self.backend == "cpu":
+            from mjx_pusht.rollout_cpu import _model
+
+            self.model = _model(self.scenario)
+            self._xp = np
+        else:
+            import jax
+            import jax.numpy as jnp
+
+            from mjx_pusht.rollout_mjx import (MjxConfig, MjxRunner, constraints_per_world, contacts_per_world,
+                                               simulated_scene)
+            from mjx_pusht.scene import build_model
+
+            impl = self.backend.split("-")[1]
+            # Buffers at the scene's geometric bound: an environment cannot rerun a step, so it
+            # must never be able to drop a contact.
+            geometry = build_model(simulated_scene(self.scenario, impl))
+            cfg = MjxConfig(impl=impl, contacts_per_world=contacts_per_world(geometry),
+                            constraints_per_world=constraints_per_world(geometry))
+            self.runner = MjxRunner(self.scenario, cfg)
+            self.model = self.runner.model
+            self._xp = jnp
+            self._mx = self.runner._row_model(self.runner._model_leaves(), 0)
+            self.step = jax.jit(jax.vmap(self.step_one))
+        self.layout = QposLayout.of(self.model)
+
+    # -- reset ------------------------------------------------------------------------------------
+    def reset(self, seeds) -> State:
+        """A fresh episode per seed, from the reset distribution's start pose for that seed."""
+        seeds = np.asarray(seeds, np.int64).reshape(-1)
+        qpos0 = self.layout.initial_qpos(self.model, start_poses(seeds, reset=self.reset_kind))
+        key = seed_key(seeds)
+        if self.backend == "cpu":
+            from mjx_pusht.rollout_cpu import _Lockstep
+
+            data = _Lockstep(self.model, self.model, qpos0, self.episode.frame_skip)
+            return self._state(data, begin(self.layout, qpos0, key, self._ctrl, self.episode, np), qpos0, key, 0)
+        return self._reset_mjx(qpos0, key)
+
+    def _reset_mjx(self, qpos0, key) -> State:
+        import jax
+        import jax.numpy as jnp
+
+        d0 = self.runner._initial_data(self.runner.devices[0], len(qpos0))
+        q = jnp.asarray(qpos0, self.runner.dtype)
+        data = jax.vmap(lambda qp: d0.replace(qpos=qp))(q)
+        k = jnp.asarray(key)
+        carry = jax.vmap(lambda qp, kk: begin(self.layout, qp, kk, self._ctrl, self.episode, jnp))(q, k)
+        return self._state(data, carry, q, k, jnp.zeros(len(qpos0), jnp.int32))
+
+    def _state(self, data, carry, qpos, key, step) -> State:
+        xp = self._xp
+        ep = carry["ep"]
+        obs = observe(self.layout.pusher_xy(qpos), self.layout.tee_pose(qpos))
+        n = qpos.shape[:-1]
+        # an episode that starts covered is terminated at reset, before any step
+        return State(data, carry, obs, xp.zeros(n, dtype=qpos.dtype), ep["done"] & ep["success"],
+                     xp.zeros(n, dtype=bool), xp.zeros(n, dtype=xp.int32) + step, key)
+
+    # -- step -------------------------------------------------------------------------------------
+    def step_one(self, state: State, action) -> State:
+        """One world's control step (MJX): pure, jit- and vmap-able."""
+        import jax.numpy as jnp
+
+        from mjx_pusht.rollout_mjx import advance
+
+        return self._after(state, *self._advance_one(state, action, jnp, advance), jnp)
+
+    def _advance_one(self, state, action, xp, advance):
+        qpos = state.data.qpos
+        u = to_ctrl(xp.astype(xp.asarray(action), qpos.dtype), self.layout.pusher_xy(qpos), self.action_type)
+        u = xp.where(state.carry["ep"]["done"], 0.0, u)
+        d, carry, _, _ = advance(self._mx, state.data, state.carry, u, state.step, self.episode.frame_skip,
+                                 self._settle, self.layout, self.backend == "mjx-warp", xp.zeros((), xp.int32))
+        return d, carry
+
+    def _after(self, state, data, carry, xp) -> State:
+        was_done = state.carry["ep"]["done"]
+        qpos = data.qpos if not isinstance(data, np.ndarray) else data
+        carry = after_control_step(carry, state.step, self.layout, qpos, self.episode, xp)
+        ep = carry["ep"]
+        step = xp.where(was_done, state.step, state.step + 1)
+        reward = xp.where(was_done, 0.0, ep["coverage"])
+        terminated = ep["done"] & ep["success"]
+        truncated = ~terminated & (step >= self.episode.max_steps)
+        carry = {**carry, "ep": {**ep, "done": ep["done"] | truncated}}
+        obs = observe(self.layout.pusher_xy(qpos), self.layout.tee_pose(qpos))
+        return State(data, carry, obs, reward, terminated, truncated, step, state.key)
+
+    def _step_cpu(self, state: State, action) -> State:
+        """The batch's control step on MuJoCo C: the same episode.py functions on NumPy arrays."""
+        action = np.asarray(action, np.float64)
+        if action.shape != (len(state.step), 2):
+            raise ValueError(f"actions must have shape ({len(state.step)}, 2), got {action.shape}")
+        worlds = state.data.copy()
+        u = to_ctrl(action, state.obs["state"][:, 0:2], self.action_type)
+        live = ~state.carry["ep"]["done"]
+        u = np.where(live[:, None], u, 0.0)
+        qs, vs, ss = worlds.advance(u, live)
+        carry = state.carry
+        fs = self.episode.frame_skip
+        for j in range(fs):
+            t = state.step * fs + j  # per world: episodes may have ended at different steps
+            carry = after_physics_step(carry, t, self._settle, self.layout, qs[j], vs[j], ss[j], np)
+        new = self._after(state, qs[-1].copy(), carry, np)
+        return new._replace(data=worlds)
+
+    def step(self, state: State, action) -> State:  # replaced by jit(vmap(step_one)) on MJX
+        return self._step_cpu(state, action)

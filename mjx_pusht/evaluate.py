@@ -1,0 +1,64 @@
+"""Evaluation at scale: a controller on many start states, one episode per seed, and its success rate.
+
+The episodes run through the same backends, chunks, resume and out-of-memory halving as a
+sweep (sweep.run_sweep); this module adds the episode table and the summary a policy
+evaluation reports: the success rate with its 95% Wilson interval, steps to success, coverage
+and return.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from mjx_pusht.results import Rollouts
+
+
+def wilson(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """The Wilson score interval for a binomial proportion (95% by default): honest at 0 and 1."""
+    if n == 0:
+        return (0.0, 1.0)
+    p = successes / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def _stats(x: np.ndarray) -> dict:
+    x = np.asarray(x, float)
+    if x.size == 0:
+        return {"n": 0}
+    q = np.quantile(x, [0.05, 0.5, 0.95])
+    return {"n": int(x.size), "mean": float(x.mean()), "p05": float(q[0]), "median": float(q[1]), "p95": float(q[2]),
+            "min": float(x.min()), "max": float(x.max())}
+
+
+def summarize_episodes(r: Rollouts) -> dict:
+    """The episode outcomes: success rate and interval over finite episodes, steps to success, coverage, return."""
+    ep = r.episode
+    finite = r.finite
+    ok = np.asarray(ep["success"], bool) & finite
+    n = int(finite.sum())
+    k = int(ok.sum())
+    lo, hi = wilson(k, n)
+    steps = np.asarray(ep["steps_to_success"])[ok]
+    return {
+        "n_episodes": int(len(r)),
+        "n_finite": n,
+        "n_success": k,
+        "success_rate": k / n if n else 0.0,
+        "success_rate_ci95": [lo, hi],
+        "steps_to_success": _stats(steps),
+        "median_steps_to_success": float(np.median(steps)) if steps.size else None,
+        "final_coverage": _stats(np.asarray(ep["coverage"])[finite]),
+        "best_coverage": _stats(np.asarray(ep["best_coverage"])[finite]),
+        "return": _stats(np.asarray(ep["return"])[finite]),
+        "episode_length": _stats(np.asarray(ep["length"])[finite]),
+        "n_rigid": int(r.rigid.sum()),
+        "n_non_finite": int((~finite).sum()),
+        "non_finite_seeds": [int(s) for s in r.seeds[~finite][:100]],
+        "n_escaped": int((~r.contained).sum()),
+        "escaped_seeds": [int(s) for s in r.seeds[~r.contained][:100]],
+    }
