@@ -40,21 +40,22 @@ def seed_key(seeds) -> np.ndarray:
     return np.stack([(s & np.uint64(0xFFFFFFFF)).astype(np.uint32), (s >> np.uint64(32)).astype(np.uint32)], axis=-1)
 
 
-def _mix32(h):
+def _mix32(h, xp):
     """A 32-bit integer finaliser (lowbias32): every input bit flips about half the output bits."""
     h = h ^ (h >> 16)
-    h = h * 0x7FEB352D
+    h = h * xp.asarray(0x7FEB352D, dtype=xp.uint32)
     h = h ^ (h >> 15)
-    h = h * 0x846CA68B
+    h = h * xp.asarray(0x846CA68B, dtype=xp.uint32)
     return h ^ (h >> 16)
 
 
 def uniform_hash(key, t, lane: int):
     """A uniform draw in [0, 1) from (seed key, step, lane): counter-based, so identical in NumPy and JAX."""
     xp = _xp(key)
-    u32 = xp.uint32
-    t = xp.astype(xp.asarray(t), u32)
-    h = _mix32(key[..., 0] ^ _mix32(key[..., 1] ^ _mix32(t * 2 + u32(lane) + u32(0x9E3779B9))))
+    t = xp.astype(xp.asarray(t), xp.uint32)
+    salt = xp.asarray((0x9E3779B9 + lane) & 0xFFFFFFFF, dtype=xp.uint32)
+    with np.errstate(over="ignore"):  # wrap-around is the point (uint32 arithmetic mod 2**32)
+        h = _mix32(key[..., 0] ^ _mix32(key[..., 1] ^ _mix32(t * xp.asarray(2, dtype=xp.uint32) + salt, xp), xp), xp)
     return xp.astype(h >> 8, xp.float32) * (1.0 / (1 << 24))
 
 
@@ -277,7 +278,12 @@ class FromFunction(Controller):
     fn: Callable | None = None
 
     def act(self, carry, obs, t, key):
-        action = self.fn(obs, t)
+        try:
+            action = self.fn(obs, t)
+        except ControllerError:
+            raise
+        except Exception as e:  # noqa: BLE001 - a user's bug, said in one line with what it was
+            raise ControllerError(f"controller {self.name} raised {type(e).__name__}: {e}".splitlines()[0]) from None
         shape = getattr(action, "shape", None)
         want = obs["state"].shape[:-1] + (2,)
         if shape is None or tuple(shape) != tuple(want):

@@ -106,7 +106,15 @@ class PushTEnv:
     def reset(self, seeds) -> State:
         """A fresh episode per seed, from the reset distribution's start pose for that seed."""
         seeds = np.asarray(seeds, np.int64).reshape(-1)
-        qpos0 = self.layout.initial_qpos(self.model, start_poses(seeds, reset=self.reset_kind))
+        return self.reset_to(start_poses(seeds, reset=self.reset_kind), seeds)
+
+    def reset_to(self, starts, seeds=None) -> State:
+        """Episodes from given (N, 5) starts: tee x, y, yaw and pusher x, y (seeds key random controllers)."""
+        starts = np.atleast_2d(np.asarray(starts, np.float64))
+        if starts.ndim != 2 or starts.shape[1] not in (3, 5):
+            raise ValueError(f"starts must be (N, 5) tee x, y, yaw, pusher x, y (or (N, 3) tee only), got {starts.shape}")
+        seeds = np.zeros(len(starts), np.int64) if seeds is None else np.asarray(seeds, np.int64).reshape(-1)
+        qpos0 = self.layout.initial_qpos(self.model, starts)
         key = seed_key(seeds)
         if self.backend == "cpu":
             from mjx_pusht.rollout_cpu import _Lockstep

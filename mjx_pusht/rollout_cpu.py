@@ -85,7 +85,7 @@ class _Lockstep:
             self.datas.append(d)
         self.fs = frame_skip
         n = len(qpos0)
-        self.qpos = np.zeros((frame_skip, n, model.nq))
+        self.qpos = np.repeat(np.asarray(qpos0, np.float64)[None], frame_skip, axis=0)  # rows never stepped stay put
         self.qvel = np.zeros((frame_skip, n, model.nv))
         self.sens = np.zeros((frame_skip, n, model.nsensordata))
 
