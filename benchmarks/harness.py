@@ -54,7 +54,9 @@ def measure(backend, batch: int, repeats: int, total_steps: int) -> dict:
     from mjx_pusht.reset import start_poses
 
     seeds = np.arange(batch)
-    poses = start_poses(seeds)  # host-side set-up, timed by the end-to-end run, not here
+    scenario = getattr(backend, "scenario", None)
+    # host-side set-up, timed by the end-to-end run, not here
+    poses = start_poses(seeds, reset=scenario.reset if scenario is not None else "chapter")
     t0 = time.perf_counter()
     backend.run(seeds, batch=batch, poses=poses)
     first = time.perf_counter() - t0
@@ -106,6 +108,9 @@ def main(argv=None) -> int:
                    help="comma list: run each MJX backend sharded over the first K devices too (e.g. 1,2)")
     p.add_argument("--warp-buffers", default=None, metavar="C,R",
                    help="fix MJX-Warp's contacts and constraint rows per world (default: start small, grow on overflow)")
+    p.add_argument("--closed-loop", type=int, default=0, metavar="STEPS",
+                   help="also run each MJX backend with the expert in the scan on task starts for STEPS control steps "
+                        "(10 physics steps each, no early exit), beside the open-loop rows of the same run")
     p.add_argument("--out", type=Path, default=RESULTS)
     args = p.parse_args(argv)
     mjx_opts = {}
@@ -129,6 +134,8 @@ def main(argv=None) -> int:
             result["backends"][key] = measure_backend(name, scenario, cpu_batches if name == "cpu" else mjx_batches,
                                                       args.repeats, total, devices=k,
                                                       **(mjx_opts if name == "mjx-warp" else {}))
+    if args.closed_loop:
+        add_closed_loop(result, args, mjx_batches, mjx_opts)
     add_scaling(result)
     if args.e2e:
         result["end_to_end"] = end_to_end(resolve_auto(args.e2e_backend), scenario, args.e2e, args.e2e_chunk)
@@ -170,6 +177,27 @@ def measure_backend(name: str, scenario: Scenario, batches: list[int], repeats: 
     if name == "cpu":
         out["threads"] = backend.nthread
     return out
+
+
+def add_closed_loop(result: dict, args, batches: list[int], mjx_opts: dict) -> None:
+    """The expert inside the compiled scan: `<backend>-expert` rows, and their rate over the open-loop rate."""
+    from mjx_pusht.controllers import Expert
+    from mjx_pusht.episode import Episode
+
+    episode = Episode(max_steps=args.closed_loop)
+    closed = Scenario(reset="task", controller=Expert(), episode=episode)
+    for name in args.backends.split(","):
+        if not name.startswith("mjx-"):
+            continue
+        key = f"{name}-expert"
+        result["backends"][key] = b = measure_backend(name, closed, batches, args.repeats, episode.physics_steps,
+                                                      **(mjx_opts if name == "mjx-warp" else {}))
+        b["scenario"] = f"expert on task starts, {args.closed_loop} control steps x 10 physics steps"
+        open_rows = {r["batch"]: r["steps_per_second"] for r in result["backends"].get(name, {}).get("rows", [])
+                     if "steps_per_second" in r}
+        b["rate_over_open_loop"] = {str(r["batch"]): round(r["steps_per_second"] / open_rows[r["batch"]], 3)
+                                    for r in b.get("rows", []) if "steps_per_second" in r and r["batch"] in open_rows}
+        print(f"{key}: closed-loop rate / open-loop rate = {b['rate_over_open_loop']}", flush=True)
 
 
 def add_scaling(result: dict) -> None:

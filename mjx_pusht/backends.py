@@ -41,12 +41,15 @@ class CpuBackend:
     name: str = "cpu"
     compile_seconds: float = 0.0
     default_chunk: int = 16384
+    # processes for feedback controllers (see rollout_cpu.FeedbackPool); 1: this process only
+    workers: int = 1
 
     def __post_init__(self) -> None:
         from mjx_pusht.rollout_cpu import _model, default_threads
 
         self.nthread = self.nthread or default_threads()
         self.model = _model(self.scenario)
+        self._pool = None
 
     @property
     def pusher(self) -> str:
@@ -58,10 +61,21 @@ class CpuBackend:
 
     def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None,
             poses=None) -> Rollouts:
-        from mjx_pusht.rollout_cpu import run_cpu
+        from mjx_pusht.rollout_cpu import FeedbackPool, run_cpu
 
+        controller, episode = self.scenario.driver()
+        feedback = controller.open_loop(episode.max_steps, episode.frame_skip) is None
+        if feedback and self.workers > 1 and not trace and len(seeds) >= 2 * self.workers:
+            if self._pool is None:
+                self._pool = FeedbackPool(self.workers)
+            return self._pool.run(self.scenario, seeds, combos=combos, poses=poses)
         return run_cpu(self.scenario, seeds, trace=trace, nthread=self.nthread, model=self.model, combos=combos,
                        poses=poses)
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.close()
+            self._pool = None
 
 
 class MjxBackend:
@@ -140,7 +154,7 @@ def resolve(name: str) -> tuple[str, str]:
 def make_backend(name: str, scenario: Scenario, **kwargs):
     """Build a backend by name (after `resolve`); MJX keyword options pass through."""
     if name == "cpu":
-        return CpuBackend(scenario, nthread=kwargs.get("nthread"))
+        return CpuBackend(scenario, nthread=kwargs.get("nthread"), workers=kwargs.get("workers", 1))
     if name in ("mjx-jax", "mjx-warp"):
         kwargs.pop("nthread", None)
         return MjxBackend(scenario, name.split("-")[1], **kwargs)

@@ -118,6 +118,11 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--tolerance", type=_positive_float, default=None,
                    help="MJX solver tolerance instead of the scene's 1e-8 (the CPU reference keeps its own)")
     c.add_argument("--iterations", type=_positive, default=None, help="MJX solver iterations instead of the scene's")
+    c.add_argument("--controller", default=None,
+                   help="compare closed-loop episodes of this controller instead (e.g. expert): success rates, "
+                        "per-seed agreement, final poses")
+    c.add_argument("--reset", choices=("task", "chapter"), default="task", help="closed loop: start distribution")
+    c.add_argument("--max-steps", type=_positive, default=300, help="closed loop: control steps per episode")
     return p
 
 
@@ -133,6 +138,22 @@ def cmd_compare(args) -> int:
         raise BackendError(f"compare takes --backend mjx-jax or mjx-warp, not {args.backend!r}")
     out = prepare_out_dir(args.out)
     banner = Banner("compare")
+    if args.controller:
+        from mjx_pusht.compare import compare_episodes
+        from mjx_pusht.controllers import load
+        from mjx_pusht.episode import Episode
+
+        from mjx_pusht.rollout_cpu import default_threads
+
+        r = compare_episodes(seeds, args.backend.split("-")[1], out, controller=load(args.controller),
+                             reset=args.reset, episode=Episode(max_steps=args.max_steps), workers=default_threads())
+        d = r["success_difference_mjx_minus_cpu"]
+        print(f"success: cpu {r['cpu']['success_rate']:.2%}, {r['impl']} {r['mjx']['success_rate']:.2%} "
+              f"(difference {d['difference']:+.2%}, 95% {d['ci95'][0]:+.2%} to {d['ci95'][1]:+.2%}); same verdict on "
+              f"{r['per_seed_success_agreement']['mjx_vs_cpu']:.2%} of seeds")
+        print(f"report: {out / 'compare_episodes.md'}\njson: {out / 'compare_episodes.json'}")
+        banner.done()
+        return 0
     opts = {k: v for k, v in (("tolerance", args.tolerance), ("iterations", args.iterations)) if v is not None}
     r = compare(seeds, args.backend.split("-")[1], out, root_cause=args.root_cause, mjx_options=opts)
     w = r["none"]
@@ -285,18 +306,23 @@ def cmd_eval(args) -> int:
     check_resumable(out, row_seeds, config, args.resume)
     banner = Banner("eval")
     print(f"backend: {name} ({why})")
-    backend = make_backend(name, scenario)
+    from mjx_pusht.rollout_cpu import default_threads
+
+    backend = make_backend(name, scenario, workers=default_threads())  # cpu: a process per core
     print(f"controller: {describe(controller)}; reset: {args.reset}; {len(seeds)} episodes of at most "
           f"{args.max_steps} control steps x {args.frame_skip} physics steps; device: {backend.device}; "
           f"pusher shape: {backend.pusher}")
-    # feedback on MuJoCo C runs one core per batch: small chunks keep the progress bar (and --resume) fine-grained
-    chunk = args.chunk or (256 if name == "cpu" else backend.default_chunk)
+    # small chunks on the CPU keep the progress bar (and --resume) fine-grained
+    chunk = args.chunk or (128 * default_threads() if name == "cpu" else backend.default_chunk)
     try:
         run = run_sweep(backend, row_seeds, out, config=config, chunk=chunk, resume=args.resume,
                         progress=args.progress, combos=combos, episodes=True)
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished chunks are kept in {out}; rerun with --resume to finish", file=sys.stderr)
         return 130
+    finally:
+        if hasattr(backend, "close"):
+            backend.close()
     r = run.rollouts
     from mjx_pusht.backends import versions
 

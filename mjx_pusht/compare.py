@@ -375,3 +375,111 @@ def _fmt(d: dict) -> str:
     if not d.get("n"):
         return "none"
     return f"median {d['median']:.3g} (p05 {d['p05']:.3g}, p95 {d['p95']:.3g}, n={d['n']})"
+
+
+# --- closed loop: is a success rate measured on MJX the one MuJoCo gives? -----------------------
+def _paired_diff(a: np.ndarray, b: np.ndarray, z: float = 1.959964) -> dict:
+    """Difference of two success rates on the same seeds, with a 95% interval from the paired
+    (discordant-pair) variance: mjx - cpu."""
+    n = len(a)
+    only_a, only_b = int((a & ~b).sum()), int((~a & b).sum())
+    diff = (only_a - only_b) / n
+    se = np.sqrt(max(only_a + only_b - (only_a - only_b) ** 2 / n, 0.0)) / n
+    return {"difference": diff, "ci95": [diff - z * se, diff + z * se], "only_mjx": only_a, "only_cpu": only_b}
+
+
+def compare_episodes(seeds: np.ndarray, impl: str, out: Path, *, controller=None, reset: str = "task",
+                     episode=None, progress=print, workers: int = 1) -> dict:
+    """The controller (default: the expert) on the same seeds on the CPU reference and on MJX:
+    success rates with intervals, per-seed agreement, and final-pose differences against the CPU's
+    own sensitivity (the same CPU run from float32-rounded starts, the rounding MJX starts from)."""
+    from mjx_pusht.controllers import Expert, describe
+    from mjx_pusht.episode import Episode
+    from mjx_pusht.evaluate import summarize_episodes
+    from mjx_pusht.reset import start_poses
+
+    controller = controller or Expert()
+    episode = episode or Episode()
+    seeds = np.asarray(seeds, np.int64)
+    t0 = time.perf_counter()
+    progress(f"[compare] {describe(controller)} on {reset} starts: MJX-{impl} ...")
+    backend = MjxBackend(Scenario(reset=reset, controller=controller, episode=episode), impl)
+    mjx_r = backend.run(seeds, batch=len(seeds))
+    scene = backend.runner.scene
+    sc = Scenario(scene, reset=reset, controller=controller, episode=episode)
+    from mjx_pusht.rollout_cpu import FeedbackPool
+
+    pool = FeedbackPool(workers) if workers > 1 else None
+    cpu = pool.run if pool is not None else run_cpu
+    try:
+        progress("[compare] CPU reference ...")
+        cpu_r = cpu(sc, seeds)
+        progress("[compare] CPU from float32-rounded starts (the CPU's own sensitivity) ...")
+        jit = cpu(sc, seeds, poses=start_poses(seeds, reset=reset).astype(np.float32).astype(np.float64))
+    finally:
+        if pool is not None:
+            pool.close()
+    ok_m, ok_c, ok_j = (np.asarray(r.episode["success"], bool) for r in (mjx_r, cpu_r, jit))
+    steps = lambda r: np.asarray(r.episode["steps_to_success"])  # noqa: E731
+    both = ok_m & ok_c
+    report = {
+        "kind": "closed loop", "impl": f"mjx-{impl}", "device": backend.device, "pusher_shape": scene.pusher,
+        "controller": describe(controller), "reset": reset, "n_seeds": int(len(seeds)),
+        "episode": {"frame_skip": episode.frame_skip, "max_steps": episode.max_steps, "success": episode.success},
+        "versions": versions(),
+        "cpu": summarize_episodes(cpu_r), "mjx": summarize_episodes(mjx_r), "cpu_f32_starts": summarize_episodes(jit),
+        "success_difference_mjx_minus_cpu": _paired_diff(ok_m, ok_c),
+        "success_difference_cpu_f32_minus_cpu": _paired_diff(ok_j, ok_c),
+        "per_seed_success_agreement": {"mjx_vs_cpu": float((ok_m == ok_c).mean()),
+                                       "cpu_f32_vs_cpu": float((ok_j == ok_c).mean())},
+        "steps_to_success_abs_diff_where_both_succeed": {
+            "mjx_vs_cpu": _dist(np.abs(steps(mjx_r) - steps(cpu_r))[both]),
+            "cpu_f32_vs_cpu": _dist(np.abs(steps(jit) - steps(cpu_r))[ok_j & ok_c])},
+        "final_pose_diff": {"mjx_vs_cpu": _final_diff(mjx_r, cpu_r), "cpu_f32_vs_cpu": _final_diff(jit, cpu_r)},
+        "rigid": {"cpu": float(cpu_r.rigid.mean()), "mjx": float(mjx_r.rigid.mean())},
+    }
+    report["wall_seconds"] = round(time.perf_counter() - t0, 1)
+    from mjx_pusht.outputs import atomic_write_bytes, atomic_write_json
+
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(out / "compare_episodes.json", report)
+    atomic_write_bytes(out / "compare_episodes.md", render_episodes_markdown(report).encode())
+    return report
+
+
+def render_episodes_markdown(r: dict) -> str:
+    def rate(s):
+        lo, hi = s["success_rate_ci95"]
+        return f"{s['success_rate']:.2%} ({lo:.2%}-{hi:.2%})"
+
+    d, dj = r["success_difference_mjx_minus_cpu"], r["success_difference_cpu_f32_minus_cpu"]
+    fd = r["final_pose_diff"]
+    st = r["steps_to_success_abs_diff_where_both_succeed"]
+    return "\n".join([
+        f"# Closed loop, CPU vs {r['impl']}: {r['controller']} on {r['n_seeds']} {r['reset']} starts",
+        "",
+        f"Device: {r['device']}; pusher: {r['pusher_shape']}; {r['episode']['max_steps']} control steps x "
+        f"{r['episode']['frame_skip']} physics steps; success at coverage >= {r['episode']['success']}. "
+        f"Versions: {r['versions']}.",
+        "",
+        "| run | success rate (95% interval) | median steps to success |",
+        "| --- | --- | --- |",
+        f"| CPU (MuJoCo C, float64) | {rate(r['cpu'])} | {r['cpu']['median_steps_to_success']} |",
+        f"| {r['impl']} | {rate(r['mjx'])} | {r['mjx']['median_steps_to_success']} |",
+        f"| CPU from float32-rounded starts | {rate(r['cpu_f32_starts'])} | "
+        f"{r['cpu_f32_starts']['median_steps_to_success']} |",
+        "",
+        f"Success rate difference {r['impl']} - CPU: {d['difference']:+.2%} (paired 95% interval "
+        f"{d['ci95'][0]:+.2%} to {d['ci95'][1]:+.2%}; {d['only_mjx']} seeds succeed only on MJX, {d['only_cpu']} only on "
+        f"the CPU). The CPU against itself from float32-rounded starts: {dj['difference']:+.2%} "
+        f"({dj['only_mjx']} / {dj['only_cpu']}).",
+        "",
+        "| per seed | MJX vs CPU | CPU f32 starts vs CPU |",
+        "| --- | --- | --- |",
+        f"| same success verdict | {r['per_seed_success_agreement']['mjx_vs_cpu']:.2%} | "
+        f"{r['per_seed_success_agreement']['cpu_f32_vs_cpu']:.2%} |",
+        f"| steps to success, abs diff (both succeed) | {_fmt(st['mjx_vs_cpu'])} | {_fmt(st['cpu_f32_vs_cpu'])} |",
+        f"| final position diff, median | {fd['mjx_vs_cpu']['median_m']:.2e} m | {fd['cpu_f32_vs_cpu']['median_m']:.2e} m |",
+        f"| final position diff > 1 mm | {fd['mjx_vs_cpu']['frac_over_1mm']:.2%} | {fd['cpu_f32_vs_cpu']['frac_over_1mm']:.2%} |",
+        "",
+    ])

@@ -112,6 +112,36 @@ class _Lockstep:
         return self.qpos, self.qvel, self.sens
 
 
+class FeedbackPool:
+    """Feedback episodes over several processes: MuJoCo C steps one seed's MjData at a time while
+    holding Python's lock, so a batch on one process uses one core. Each worker runs `run_cpu` on
+    a slice of the seeds; the rows are the same bits as one process (every seed is its own MjData).
+
+    Spawned processes re-import the caller's main module, so only command-line entry points and
+    callers with an `if __name__ == "__main__":` guard should make one; the library never does
+    on its own.
+    """
+
+    def __init__(self, workers: int):
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        self.workers = workers
+        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+
+    def run(self, scenario: Scenario, seeds, *, combos=None, poses=None) -> Rollouts:
+        seeds = np.asarray(seeds, np.int64)
+        combos = np.zeros(len(seeds), np.int64) if combos is None else np.asarray(combos, np.int64)
+        poses = start_poses(seeds, reset=scenario.reset) if poses is None else poses
+        parts = np.array_split(np.arange(len(seeds)), min(len(seeds), 4 * self.workers))
+        jobs = [self.pool.submit(run_cpu, scenario, seeds[i], nthread=1, combos=combos[i], poses=poses[i])
+                for i in parts if len(i)]
+        return Rollouts.concat([j.result() for j in jobs])
+
+    def close(self) -> None:
+        self.pool.shutdown(cancel_futures=True)
+
+
 def run_cpu(
     scenario: Scenario,
     seeds: np.ndarray,
