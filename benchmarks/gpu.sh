@@ -31,5 +31,14 @@ case "$stage" in
             --cache-root "$HOME/modes-cache" --log-dir "$OUT/modes" --timeout "${VARIANT_TIMEOUT:-300}" > "$OUT/$stage.log" 2>&1 ;;
   batches) python3 -m benchmarks.harness --tier "$tier-batches" --backends mjx-warp \
             --batches 32768,49152,65536,98304 --repeats 3 --out "$OUT/results" > "$OUT/$stage.log" 2>&1 ;;
+  task-bench) python3 -m benchmarks.harness --tier "$tier-task" --backends mjx-warp --batches 4096,65536 --repeats 2 \
+            --closed-loop 100 --box-box-both --out "$OUT/results" > "$OUT/$stage.log" 2>&1 ;;
+  compare-both) python3 -m mjx_pusht compare --seeds 4096 --backend mjx-warp --no-root-cause \
+            --out "$OUT/compare-mjx-warp" > "$OUT/compare-warp.log" 2>&1
+          python3 -m mjx_pusht compare --seeds 4096 --backend mjx-jax --out "$OUT/compare-mjx-jax" > "$OUT/compare-jax.log" 2>&1 ;;
+  task-study) python3 -m mjx_pusht.studies kv-expert --seeds 4096 --backend mjx-warp --out "$OUT/kv-expert" \
+            > "$OUT/kv-expert.log" 2>&1
+          python3 -m mjx_pusht compare --controller expert --reset task --seeds 4096 --backend mjx-warp \
+            --out "$OUT/compare-task-mjx-warp" > "$OUT/compare-task.log" 2>&1 ;;
   *) echo "unknown stage $stage" >&2; exit 2 ;;
 esac

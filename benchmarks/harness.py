@@ -111,6 +111,9 @@ def main(argv=None) -> int:
     p.add_argument("--closed-loop", type=int, default=0, metavar="STEPS",
                    help="also run each MJX backend with the expert in the scan on task starts for STEPS control steps "
                         "(10 physics steps each, no early exit), beside the open-loop rows of the same run")
+    p.add_argument("--box-box-both", action="store_true",
+                   help="also run mjx-warp with MuJoCo Warp's default GJK/EPA box-box (mjx-warp-gjk-box-box), "
+                        "beside the primitive box_box that matches MuJoCo C")
     p.add_argument("--out", type=Path, default=RESULTS)
     args = p.parse_args(argv)
     mjx_opts = {}
@@ -134,6 +137,9 @@ def main(argv=None) -> int:
             result["backends"][key] = measure_backend(name, scenario, cpu_batches if name == "cpu" else mjx_batches,
                                                       args.repeats, total, devices=k,
                                                       **(mjx_opts if name == "mjx-warp" else {}))
+    if args.box_box_both and "mjx-warp" in args.backends.split(","):
+        result["backends"]["mjx-warp-gjk-box-box"] = measure_backend(
+            "mjx-warp", scenario, mjx_batches, args.repeats, total, **{**mjx_opts, "match_c_colliders": False})
     if args.closed_loop:
         add_closed_loop(result, args, mjx_batches, mjx_opts)
     add_scaling(result)

@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 BEGIN, END = "<!-- bench-table:begin -->", "<!-- bench-table:end -->"
 # Each tier's current results; superseded runs live in results/history/ and benchmarks/NOTES.md.
-TIERS = [("cpu", ["cpu"]), ("h100", ["h100", "h100-jax"]), ("h200", ["h200"]), ("h200-x2", ["h200-x2"])]
+TIERS = [("cpu", ["cpu"]), ("h100", ["h100", "h100-jax", "h100-task"]), ("h200", ["h200"]), ("h200-x2", ["h200-x2"])]
 
 
 def _load(name: str) -> dict | None:
@@ -55,6 +55,10 @@ def render() -> str:
                                  f"(batch {best['batch']:,}), {best['steps_per_second'] / cpu['steps_per_second']:.3g}x "
                                  f"the same run's all-core CPU rollout ({cpu['steps_per_second'] / 1e6:.3g} M, "
                                  f"{r['backends']['cpu'].get('threads', '?')} threads).")
+                if "rate_over_open_loop" in b:
+                    ratio = ", ".join(f"{int(k):,}: {v:.2f}" for k, v in b["rate_over_open_loop"].items())
+                    notes.append(f"{tier} ({f}.json): {name} ({b.get('scenario', 'closed loop')}) runs at this fraction "
+                                 f"of the same run's open-loop rate, per batch: {ratio}.")
                 if "scaling_efficiency" in b:
                     eff = ", ".join(f"{int(k):,}: {v:.2f}" for k, v in b["scaling_efficiency"].items())
                     notes.append(f"{tier}: {name} scaling efficiency (K-device rate / K x one-device rate, same batch): {eff}.")

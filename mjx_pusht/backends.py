@@ -59,6 +59,8 @@ class CpuBackend:
     def device(self) -> str:
         return f"cpu ({self.nthread} threads)"
 
+    collisions = {"box-box": "mjc_BoxBox (primitive)", "box-cylinder": "mjc_Convex (native CCD)"}
+
     def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None,
             poses=None) -> Rollouts:
         from mjx_pusht.rollout_cpu import FeedbackPool, run_cpu
@@ -110,6 +112,16 @@ class MjxBackend:
             return None
         c, r = self.runner.buffers
         return {"contacts_per_world": c, "rows_per_world": r, "growths": self.runner.growths}
+
+    @property
+    def collisions(self) -> dict:
+        """Where this backend's collision functions differ from MuJoCo C's (colliders.py has every pair)."""
+        if self.runner.cfg.impl == "warp":
+            matched = self.runner.cfg.match_c_colliders
+            return {"box-box": "primitive box_box, as MuJoCo C's mjc_BoxBox (mjDSBL_NATIVECCD set on the MJX model)"
+                    if matched else "general convex GJK/EPA (MuJoCo C: primitive mjc_BoxBox)",
+                    "box-cylinder": "general convex GJK/EPA (MuJoCo C: general convex, native CCD)"}
+        return {"box-box": "box_box", "box-capsule": "capsule_convex (the pusher is a capsule here)"}
 
     @property
     def warp_kernels(self) -> dict | None:

@@ -73,6 +73,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
     t.add_argument("--pusher", choices=("cylinder", "capsule"), default="cylinder")
     t.add_argument("--json", action="store_true")
+    t.add_argument("--colliders", action="store_true",
+                   help="for every collidable geom pair: the collision function MuJoCo C, MJX-Warp and MJX-JAX call")
 
     w = sub.add_parser("sweep", help="many seeds at once on a backend; per_seed.parquet + summary.json")
     w.add_argument("--seeds", default="4096", help="N (0..N-1), A:B, or a,b,c (default 4096)")
@@ -169,6 +171,15 @@ def cmd_tree(args) -> int:
     from mjx_pusht.scene import SceneSpec, build_model
     from mjx_pusht.tree import read_tree, tree_json
 
+    if args.colliders:
+        import dataclasses
+        import json
+
+        from mjx_pusht.colliders import collider_table, describe
+
+        rows = collider_table(args.break_it)
+        print(json.dumps([dataclasses.asdict(r) for r in rows], indent=2) if args.json else describe(rows))
+        return 0
     tree = read_tree(build_model(SceneSpec(args.break_it, args.pusher)))
     print(tree_json(tree) if args.json else tree.describe() + f"\npusher shape: {args.pusher}")
     return 0
@@ -328,7 +339,7 @@ def cmd_eval(args) -> int:
 
     summary = {"config": config, "backend": backend.name, "device": backend.device, "versions": versions(),
                "pusher_shape": backend.pusher, "controller": describe(controller),
-               "success_coverage": episode.success, **summarize_episodes(r),
+               "collision_functions": getattr(backend, "collisions", None), "success_coverage": episode.success, **summarize_episodes(r),
                "compile_seconds": round(run.compile_seconds, 3), "run_seconds": round(run.run_seconds, 3)}
     finish(out, run, name="per_episode.parquet", episodes=True)
     atomic_write_json(out / "summary.json", summary)

@@ -167,12 +167,13 @@ def compare(seeds: np.ndarray, impl: str, out: Path, *, root_cause: bool = True,
             entry["pre_contact_max_abs_err"] = float(np.abs(a - b)[pre].max()) if pre.any() else 0.0
             entry["pre_contact_pusher_max_abs_err"] = float(
                 np.abs(mjx_r.trace.qpos[..., -2:] - cpu_r.trace.qpos[..., -2:])[pre].max()) if pre.any() else 0.0
-        per_break[break_it] = (entry, mjx_r, cpu_r, model)
+        entry["collision_functions"] = mjx_backend.collisions
+        per_break[break_it] = (entry, mjx_r, cpu_r, model, mjx_backend)
         if break_it == "none":
             first_contacts = contact
         report[break_it] = entry
 
-    entry, mjx_r, cpu_r, model = per_break["none"]
+    entry, mjx_r, cpu_r, model, welded_backend = per_break["none"]
     scene = SceneSpec("none", per_break["none"][0]["structure"]["pusher_shape"])
     div = divergence_steps(_tee_traj(model, mjx_r), _tee_traj(model, cpu_r))
     contact = first_contacts
@@ -208,6 +209,8 @@ def compare(seeds: np.ndarray, impl: str, out: Path, *, root_cause: bool = True,
         "fraction": float((off & ~sensitive).mean()),
         "seeds": [int(s) for s in seeds[off & ~sensitive][:20]],
     }
+    if impl == "warp":
+        report["warp_parts"] = _warp_parts(seeds, welded_backend, mjx_r, cpu_r, ref, mjx_options, progress)
     if root_cause:
         report["root_cause"] = _root_cause(seeds, impl, scene, cpu_r, ref, progress)
     report["wall_seconds"] = round(time.perf_counter() - t0, 1)
@@ -218,6 +221,24 @@ def compare(seeds: np.ndarray, impl: str, out: Path, *, root_cause: bool = True,
     atomic_write_json(out / "compare.json", report)
     atomic_write_bytes(out / "compare.md", render_markdown(report).encode())
     return report
+
+
+def _warp_parts(seeds, backend, mjx_r, cpu_r, ref, mjx_options, progress) -> dict:
+    """How far MJX-Warp is from itself (a rerun: atomics reorder contacts) and what the collider choice
+    costs (MuJoCo Warp's default GJK/EPA for box-box instead of the primitive MuJoCo C uses)."""
+    progress("[compare] MJX-Warp again (run to run), and with MuJoCo Warp's default box-box collider ...")
+    rerun = backend.run(seeds)
+    other = not backend.runner.cfg.match_c_colliders
+    alt = MjxBackend(Scenario(SceneSpec("none")), "warp", **{**mjx_options, "match_c_colliders": other}).run(seeds)
+    label = "box_box_primitive" if other else "box_box_gjk_epa_default"
+    return {
+        "rerun_vs_first_run": _final_diff(rerun, mjx_r),
+        "rerun_vs_cpu": _final_diff(rerun, cpu_r),
+        f"{label}_vs_cpu": _final_diff(alt, cpu_r),
+        "energy_distance_m": {"rerun_vs_cpu": energy_distance(pose_vectors(rerun), ref),
+                              f"{label}_vs_cpu": energy_distance(pose_vectors(alt), ref)},
+        "this_report_box_box": "primitive box_box" if not other else "GJK/EPA",
+    }
 
 
 def _root_cause(seeds, impl, scene, cpu_r, ref, progress) -> dict:
@@ -367,6 +388,17 @@ def render_markdown(r: dict) -> str:
             lines += ["", f"Contacts on the CPU's own states ({c['states']} states): CPU finds {_fmt(c['cpu_active_contacts'])} "
                       f"active contacts, MJX {_fmt(c['mjx_active_contacts'])}; the counts differ on "
                       f"{c['states_with_different_count']:.1%} of states."]
+    if "warp_parts" in r:
+        wp_ = r["warp_parts"]
+        lines += ["", "## MJX-Warp: the collider, float32, and run-to-run reordering",
+                  f"This report's MJX-Warp collides box with box through: {wp_['this_report_box_box']}.", "",
+                  "| run | median final diff (m) | seeds > 1 mm | max (m) |", "| --- | --- | --- | --- |"]
+        for key in [k for k in wp_ if k.endswith("_vs_cpu") or k == "rerun_vs_first_run"]:
+            v = wp_[key]
+            lines.append(f"| {key} | {v['median_m']:.2e} | {v['frac_over_1mm']:.1%} | {v['max_m']:.2e} |")
+        lines += ["", "`rerun_vs_first_run` is MJX-Warp against itself on the same seeds: MuJoCo Warp hands out contact "
+                  "slots with atomics, so a rerun sums the constraint forces in another order. The CPU row "
+                  "`cpu_start_jitter_f32` above is the float32 part."]
     lines += ["", "![final poses, modes, divergence](compare.png)", ""]
     return "\n".join(lines)
 

@@ -161,7 +161,7 @@ class Expert(Controller):
     travel_max: float = 0.8
     corridor: float = 0.15  # rad: within this polar angle of a push's start, go straight to it
     near: float = 0.06  # m: beyond this (either axis) the T travels square to the axes, then turns to 0
-    wall_room: float = 0.12  # m: a stem pointing this far out toward a wall leaves no room to push behind it
+    wall_room: float = 0.2  # m: from here (fully at +4 cm) a stem toward the wall leaves no room behind it
 
     def act(self, mode, obs, t, key):
         xp = _xp(obs["state"])
@@ -185,7 +185,8 @@ class Expert(Controller):
         for k in range(4):
             psi_k = k * (math.pi / 2)
             stem_out = math.sin(psi_k) * o[..., 0] - math.cos(psi_k) * o[..., 1]  # stem direction . position
-            cost = xp.abs(wrap_angle(th - psi_k)) + xp.where(stem_out > self.wall_room, 10.0, 0.0)
+            # a ramp, not a step: a turn toward psi_k must not be undone by the few 0.1 mm it shifts the T
+            cost = xp.abs(wrap_angle(th - psi_k)) + 10.0 * xp.clip((stem_out - self.wall_room) / 0.04, 0.0, 1.0)
             better = cost < best if best is not None else xp.ones_like(far)
             psi = xp.where(better, psi_k, psi)
             best = cost if best is None else xp.minimum(best, cost)

@@ -87,6 +87,10 @@ def after_control_step(carry, k, layout, qpos, episode: Episode, xp):
     """Score control step k: reward = coverage after it; the episode's end state is kept while it runs."""
     tee = layout.tee_pose(qpos)
     live = ~carry["ep"]["done"]
+    if not episode.terminate:
+        # A study of a fixed schedule (the sweep) is scored once, from its final pose, on the host:
+        # no coverage per step inside its 160-step scan.
+        return {**carry, "final": tee, "pusher_final": layout.pusher_xy(qpos)}
     ep = episode_update(carry["ep"], coverage(tee), k, episode.success, episode.terminate)
     return {
         **carry,

@@ -111,6 +111,9 @@ class MjxConfig:
     graph_mode: str | None = None
     # MJX-Warp only: compile the scene's kernels on all cores up front (False: lazily, one by one)
     precompile: bool = True
+    # MJX-Warp only: collide box with box through MuJoCo Warp's primitive box_box, as MuJoCo C does
+    # (mjc_BoxBox), by setting mjDSBL_NATIVECCD on the model MJX receives; see colliders.py
+    match_c_colliders: bool = True
 
 
 def simulated_scene(scenario: Scenario, impl: str) -> SceneSpec:
@@ -123,6 +126,10 @@ def _mj_model(scene: SceneSpec, cfg: MjxConfig) -> mujoco.MjModel:
     # MJX never resets a diverged world (NaN simply propagates into the finite
     # flag), and MuJoCo Warp refuses the flag outright, so clear it here.
     model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
+    if cfg.impl == "warp" and cfg.match_c_colliders:
+        # MuJoCo Warp sends box-box to GJK/EPA unless this bit is set; MuJoCo C always uses its
+        # primitive mjc_BoxBox (its contacts are the same with the bit on or off: colliders.py)
+        model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_NATIVECCD)
     if cfg.iterations is not None:
         model.opt.iterations = cfg.iterations
     if cfg.ls_iterations is not None:
@@ -156,7 +163,10 @@ def advance(mx, d, carry, u, k, frame_skip: int, settle_step: int, layout, warp:
             qs = qs.at[t].set(d.qpos)
         return (d, carry, ovf, qs), None
 
-    (d, carry, ovf, qs), _ = jax.lax.scan(physics_step, (d, carry, ovf, qs), jnp.arange(frame_skip))
+    if frame_skip == 1:  # the chapter's schedule acts every physics step: no inner loop
+        (d, carry, ovf, qs), _ = physics_step((d, carry, ovf, qs), 0)
+    else:
+        (d, carry, ovf, qs), _ = jax.lax.scan(physics_step, (d, carry, ovf, qs), jnp.arange(frame_skip))
     return d, carry, ovf, qs
 
 

@@ -188,6 +188,7 @@ def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s
         "pusher_shape": backend.pusher,
         "warp_buffers": getattr(backend, "buffer_info", None),
         "warp_kernels": getattr(backend, "warp_kernels", None),
+        "collision_functions": getattr(backend, "collisions", None),
         "n_seeds": n,
         "steps": schedule.nudge_steps,
         "settle_steps": schedule.settle_steps,

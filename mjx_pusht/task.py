@@ -45,8 +45,26 @@ STATE_DIM = 5
 KEYPOINTS_DIM = 16
 
 
+WORKSPACE_HALF = 0.39  # the walls' inner faces, m
+
+
 def _xp(a):
     return a.__array_namespace__()
+
+
+def to_pixels(xy, size: int = 512):
+    """World (x, y) in metres to pixel (column, row) on a size x size image of the walled workspace,
+    rows downward: gym-pusht's 512-pixel frame when size is 512 (0.78 m / 512 px = 1.52 mm a pixel)."""
+    xp = _xp(xy)
+    scale = size / (2 * WORKSPACE_HALF)
+    return xp.stack([(xy[..., 0] + WORKSPACE_HALF) * scale, (WORKSPACE_HALF - xy[..., 1]) * scale], axis=-1)
+
+
+def from_pixels(px, size: int = 512):
+    """Pixel (column, row) on the size x size workspace image back to world (x, y) in metres."""
+    xp = _xp(px)
+    scale = (2 * WORKSPACE_HALF) / size
+    return xp.stack([px[..., 0] * scale - WORKSPACE_HALF, WORKSPACE_HALF - px[..., 1] * scale], axis=-1)
 
 
 def wrap_angle(a):

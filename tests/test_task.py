@@ -93,6 +93,15 @@ def test_env_shapes_dtypes_and_keypoints():
     assert keypoints(np.zeros(3))[8:10].tolist() == [0.015, -0.105]  # the stem's bottom-right corner
 
 
+def test_pixel_frame_puts_the_walls_on_the_image_edges_and_round_trips():
+    from mjx_pusht.task import from_pixels, to_pixels
+
+    corners = np.array([[-0.39, 0.39], [0.39, -0.39], [0.0, 0.0]])
+    np.testing.assert_allclose(to_pixels(corners), [[0, 0], [512, 512], [256, 256]])
+    xy = np.random.default_rng(0).uniform(-0.39, 0.39, (10, 2))
+    np.testing.assert_allclose(from_pixels(to_pixels(xy, 96), 96), xy, atol=1e-15)
+
+
 def test_reset_is_per_seed_and_task_starts_are_clear():
     a = start_poses(np.array([5, 9, 11]), reset="task")
     b = start_poses(np.array([9]), reset="task")
