@@ -231,13 +231,75 @@ def _warp_parts(seeds, backend, mjx_r, cpu_r, ref, mjx_options, progress) -> dic
     other = not backend.runner.cfg.match_c_colliders
     alt = MjxBackend(Scenario(SceneSpec("none")), "warp", **{**mjx_options, "match_c_colliders": other}).run(seeds)
     label = "box_box_primitive" if other else "box_box_gjk_epa_default"
+    progress("[compare] the pusher-tee contact at first touch: MuJoCo C and MJX-Warp on the CPU's own states ...")
+    first = first_touch_contacts(backend, cpu_r, mjx_r)
     return {
+        "first_touch_pusher_tee": first,
         "rerun_vs_first_run": _final_diff(rerun, mjx_r),
         "rerun_vs_cpu": _final_diff(rerun, cpu_r),
         f"{label}_vs_cpu": _final_diff(alt, cpu_r),
         "energy_distance_m": {"rerun_vs_cpu": energy_distance(pose_vectors(rerun), ref),
                               f"{label}_vs_cpu": energy_distance(pose_vectors(alt), ref)},
         "this_report_box_box": "primitive box_box" if not other else "GJK/EPA",
+    }
+
+
+def first_touch_contacts(backend, cpu_r: Rollouts, mjx_r: Rollouts) -> dict:
+    """At each seed's first pusher-tee contact (a CPU state), the contact MuJoCo C finds and the one
+    MJX-Warp finds for the very same state: how far apart the two GJK/EPA implementations put it, and
+    whether the seeds that end > 1 mm apart are the ones whose first contacts already differ."""
+    import jax
+    import jax.numpy as jnp
+    from mujoco import mjx
+
+    model = build_model(backend.runner.scene)
+    first = first_contact_steps(model, cpu_r.trace.qpos)
+    touched = np.flatnonzero(first < cpu_r.trace.qpos.shape[1])
+    states = cpu_r.trace.qpos[touched, first[touched]]
+    pusher = model.geom("pusher_tip").id
+    tee = {model.geom("tee_bar").id, model.geom("tee_stem").id}
+
+    def pick(geom, pos, dist):
+        """The deepest pusher-tee contact: (x, y, depth)."""
+        best = None
+        for g, p, d in zip(geom, pos, dist):
+            if pusher in (int(g[0]), int(g[1])) and {int(g[0]), int(g[1])} & tee and (best is None or d < best[2]):
+                best = (float(p[0]), float(p[1]), float(d))
+        return best
+
+    data = mujoco.MjData(model)
+    c_side = []
+    for q in states:
+        data.qpos[:] = q
+        mujoco.mj_forward(model, data)
+        c = data.contact[: data.ncon]
+        c_side.append(pick(c.geom, c.pos, c.dist))
+    mw, mx = backend.runner.model, backend.runner._row_model(backend.runner._model_leaves(), 0)
+    per = 16
+    d0 = mjx.make_data(mw, impl="warp", naconmax=len(states) * per, njmax=backend.runner.buffers[1])
+    fwd = jax.jit(jax.vmap(lambda q: mjx.forward(mx, d0.replace(qpos=q))))
+    d = fwd(jnp.asarray(states, jnp.float32))
+    n = int(np.asarray(d._impl.nacon).reshape(-1)[0])
+    geom, pos, dist = (np.asarray(x)[:n] for x in (d._impl.contact__geom, d._impl.contact__pos, d._impl.contact__dist))
+    world = np.asarray(d._impl.contact__worldid)[:n]
+    w_side = [pick(geom[world == i], pos[world == i], dist[world == i]) for i in range(len(states))]
+    both = [i for i in range(len(states)) if c_side[i] and w_side[i]]
+    dpos = np.array([np.hypot(c_side[i][0] - w_side[i][0], c_side[i][1] - w_side[i][1]) for i in both])
+    ddepth = np.array([abs(c_side[i][2] - w_side[i][2]) for i in both])
+    seeds_both = touched[both]
+    parted = np.linalg.norm(mjx_r.final[:, :2] - cpu_r.final[:, :2], axis=1) > 1e-3
+    big = dpos > 1e-4
+    return {
+        "seeds_touched": int(len(touched)),
+        "found_by_both": int(len(both)),
+        "found_by_one_only": int(sum(bool(c_side[i]) != bool(w_side[i]) for i in range(len(states)))),
+        "contact_point_diff_m": _dist(dpos),
+        "depth_diff_m": _dist(ddepth),
+        "first_touch_point_over_0.1mm_apart": float(big.mean()) if len(big) else 0.0,
+        "parted_seeds": int(parted[seeds_both].sum()),
+        "parted_seeds_whose_first_touch_is_over_0.1mm_apart": int((parted[seeds_both] & big).sum()),
+        "parted_fraction_given_first_touch_over_0.1mm": float(parted[seeds_both][big].mean()) if big.any() else None,
+        "parted_fraction_given_first_touch_within_0.1mm": float(parted[seeds_both][~big].mean()) if (~big).any() else None,
     }
 
 
@@ -393,12 +455,21 @@ def render_markdown(r: dict) -> str:
         lines += ["", "## MJX-Warp: the collider, float32, and run-to-run reordering",
                   f"This report's MJX-Warp collides box with box through: {wp_['this_report_box_box']}.", "",
                   "| run | median final diff (m) | seeds > 1 mm | max (m) |", "| --- | --- | --- | --- |"]
-        for key in [k for k in wp_ if k.endswith("_vs_cpu") or k == "rerun_vs_first_run"]:
+        for key in [k for k in wp_ if (k.endswith("_vs_cpu") or k == "rerun_vs_first_run") and k != "energy_distance_m"]:
             v = wp_[key]
             lines.append(f"| {key} | {v['median_m']:.2e} | {v['frac_over_1mm']:.1%} | {v['max_m']:.2e} |")
         lines += ["", "`rerun_vs_first_run` is MJX-Warp against itself on the same seeds: MuJoCo Warp hands out contact "
                   "slots with atomics, so a rerun sums the constraint forces in another order. The CPU row "
                   "`cpu_start_jitter_f32` above is the float32 part."]
+        f = wp_.get("first_touch_pusher_tee")
+        if f:
+            lines += ["", f"At each seed's first pusher-tee contact (a CPU state, {f['found_by_both']} of {f['seeds_touched']} "
+                      f"seeds found by both), MuJoCo C's and MJX-Warp's GJK/EPA put the deepest contact "
+                      f"{_fmt(f['contact_point_diff_m'])} m apart, depths {_fmt(f['depth_diff_m'])} m apart; "
+                      f"{f['first_touch_point_over_0.1mm_apart']:.1%} of first touches are more than 0.1 mm apart. "
+                      f"Of the {f['parted_seeds']} seeds that end > 1 mm apart, {f['parted_seeds_whose_first_touch_is_over_0.1mm_apart']} "
+                      f"had first touches > 0.1 mm apart (parting rate {f['parted_fraction_given_first_touch_over_0.1mm']} given "
+                      f"such a first touch, {f['parted_fraction_given_first_touch_within_0.1mm']} otherwise)."]
     lines += ["", "![final poses, modes, divergence](compare.png)", ""]
     return "\n".join(lines)
 
