@@ -57,6 +57,22 @@ def _seed(text: str) -> int:
     return v
 
 
+def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str) -> None:
+    """The options every batch command shares: seeds, backend, scene, output, chunks, recording, parameters."""
+    p.add_argument("--seeds", default=seeds, help=f"N (0..N-1), A:B, or a,b,c (default {seeds})")
+    p.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
+    p.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
+    p.add_argument("--out", type=Path, default=Path(f"outputs/{name}"))
+    p.add_argument("--chunk", type=_positive, default=None, help=f"{rows} per batch (default: by backend)")
+    p.add_argument("--resume", action="store_true", help=f"finish an interrupted {name} in --out")
+    p.add_argument("--record", type=_nonneg, default=4, help=f"{rows} to show side by side in {name}.rrd (default 4)")
+    p.add_argument("--no-rerun", dest="rerun", action="store_false", help=f"skip {name}.rrd")
+    p.add_argument("--no-progress", dest="progress", action="store_false")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
+                   help="sweep a physical parameter as a grid: kv, tee_damping, tee_frictionloss, tee_mass; "
+                        "VALUES is a,b,c, lo:hi:n (evenly spaced) or ~lo:hi:n (n random draws) (repeatable)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="mjx-pusht", description="PushT in MuJoCo at scale: CPU reference and MJX batch.")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -77,39 +93,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="for every collidable geom pair: the collision function MuJoCo C, MJX-Warp and MJX-JAX call")
 
     w = sub.add_parser("sweep", help="many seeds at once on a backend; per_seed.parquet + summary.json")
-    w.add_argument("--seeds", default="4096", help="N (0..N-1), A:B, or a,b,c (default 4096)")
-    w.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
+    _batch_args(w, "sweep", "seeds", seeds="4096")
     w.add_argument("--steps", type=_positive, default=120, help="nudge length in steps (default 120)")
-    w.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
-    w.add_argument("--out", type=Path, default=Path("outputs/sweep"))
-    w.add_argument("--chunk", type=_positive, default=None, help="seeds per batch (default: by backend)")
-    w.add_argument("--resume", action="store_true", help="finish an interrupted sweep in --out")
-    w.add_argument("--record", type=_nonneg, default=4, help="seeds to show side by side in sweep.rrd (default 4)")
-    w.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip sweep.rrd")
-    w.add_argument("--no-progress", dest="progress", action="store_false")
-    w.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
-                   help="sweep a physical parameter as a grid: kv, tee_damping, tee_frictionloss, tee_mass; "
-                        "VALUES is a,b,c, lo:hi:n (evenly spaced) or ~lo:hi:n (n random draws) (repeatable)")
 
     e = sub.add_parser("eval", help="a controller on many start states: per_episode.parquet, success rate + interval")
+    _batch_args(e, "eval", "episodes", seeds="512")
     e.add_argument("--controller", default="expert",
                    help="zero, nudge, random, expert (default), or your own as package.module:function")
     e.add_argument("--action", choices=("velocity", "position"), default=None,
                    help="what your controller's actions mean (default velocity; built-ins command velocities)")
     e.add_argument("--reset", choices=("task", "chapter"), default="task", help="start distribution (default task)")
-    e.add_argument("--seeds", default="512", help="N (0..N-1), A:B, or a,b,c (default 512)")
-    e.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
     e.add_argument("--max-steps", type=_positive, default=300, help="control steps before truncation (default 300)")
     e.add_argument("--frame-skip", type=_positive, default=10, help="physics steps per control step (default 10)")
-    e.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
-    e.add_argument("--out", type=Path, default=Path("outputs/eval"))
-    e.add_argument("--chunk", type=_positive, default=None, help="episodes per batch (default: by backend)")
-    e.add_argument("--resume", action="store_true", help="finish an interrupted evaluation in --out")
-    e.add_argument("--record", type=_nonneg, default=4, help="episodes to show side by side in eval.rrd (default 4)")
-    e.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip eval.rrd")
-    e.add_argument("--no-progress", dest="progress", action="store_false")
-    e.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
-                   help="evaluate under a grid of physical parameters, as in sweep (repeatable)")
 
     c = sub.add_parser("compare", help="CPU vs MJX fidelity report: compare.json, compare.md, compare.png")
     c.add_argument("--seeds", default="64", help="N, A:B or a,b,c (default 64)")
@@ -126,6 +121,29 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--reset", choices=("task", "chapter"), default="task", help="closed loop: start distribution")
     c.add_argument("--max-steps", type=_positive, default=300, help="closed loop: control steps per episode")
     return p
+
+
+class Clock:
+    """Seconds per phase of a command, for summary.json's `timing` block."""
+
+    def __init__(self):
+        import time
+
+        self._now = time.perf_counter
+        self.t = self._now()
+        self.laps: dict[str, float] = {}
+
+    def lap(self, name: str) -> float:
+        t = self._now()
+        self.laps[name] = t - self.t
+        self.t = t
+        return self.laps[name]
+
+    def report(self, sweep: dict) -> dict:
+        """The command's phases, with the sweep's own (start poses, compile, rollout, writing) inside it."""
+        out = {k: round(v, 3) for k, v in self.laps.items()}
+        out.update({f"sweep.{k}": round(v, 3) for k, v in sweep.items() if k != "rollout_and_compile"})
+        return out
 
 
 def cmd_compare(args) -> int:
@@ -223,7 +241,7 @@ def cmd_scene(args) -> int:
 
 def cmd_sweep(args) -> int:
     from mjx_pusht.backends import make_backend, resolve
-    from mjx_pusht.outputs import atomic_write_json, drop_stale, prepare_out_dir
+    from mjx_pusht.outputs import atomic_write_json, prepare_out_dir
     from mjx_pusht.params import parse_param
     from mjx_pusht.scenario import Scenario
     from mjx_pusht.schedule import Schedule
@@ -246,7 +264,9 @@ def cmd_sweep(args) -> int:
     check_resumable(out, row_seeds, config, args.resume)
     banner = Banner("sweep")
     print(f"backend: {name} ({why})")
-    backend = make_backend(name, scenario)
+    clock = Clock()
+    backend = make_backend(name, scenario)  # compiles the scene and checks its tree
+    clock.lap("backend_setup_and_tree_check")
     print(read_tree(backend.model).describe())
     print(f"pusher shape simulated: {backend.pusher}" + (" (substituted: MJX's JAX backend has no cylinder-box collision)"
                                                           if backend.pusher != scenario.scene.pusher else ""))
@@ -259,9 +279,12 @@ def cmd_sweep(args) -> int:
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished chunks are kept in {out}; rerun with --resume to finish", file=sys.stderr)
         return 130
+    clock.lap("sweep")
     summary = summarize(run.rollouts, backend=backend, schedule=schedule, break_it=args.break_it,
                         compile_s=run.compile_seconds, run_s=run.run_seconds)
     finish(out, run)
+    clock.lap("table_writing")
+    summary["timing"] = clock.report(run.timing)
     atomic_write_json(out / "summary.json", summary)
     r = run.rollouts
     print(f"weld check: {summary['n_rigid']} of {len(r)} seeds RIGID ({summary['rigid_fraction']:.1%}), "
@@ -275,17 +298,29 @@ def cmd_sweep(args) -> int:
     print(f"speed: {summary['steps_per_second']:,.0f} steps/s over {summary['run_seconds']:.2f} s "
           f"(+{summary['compile_seconds']:.2f} s compile)")
     print(f"table: {out / 'per_seed.parquet'}\nsummary: {out / 'summary.json'}")
-    if args.rerun and args.record > 0:
-        from mjx_pusht.record import record_sweep, recorded_rows, row_labels
+    from mjx_pusht.record import record_sweep, recorded_rows
 
-        shown = recorded_rows(r, args.record)
-        traced = backend.run(r.seeds[shown], trace=True, combos=combos[shown])
-        record_sweep(out / "sweep.rrd", backend.model, traced, r, row_labels(r, shown))
-        print(f"recording: {out / 'sweep.rrd'} ({len(shown)} seeds side by side) - open it with: rerun {out / 'sweep.rrd'}")
-    else:
-        drop_stale(out / "sweep.rrd")
+    _record(args, out / "sweep.rrd", "seeds", backend, r, combos, lambda: recorded_rows(r, args.record),
+            record_sweep, summary, clock)
     banner.done()
     return 0
+
+
+def _record(args, path: Path, rows: str, backend, r, combos, pick, writer, summary: dict, clock) -> None:
+    """The recording of a batch command: the picked rows rerun with a trace and written by `writer`
+    (or an earlier run's recording removed when this run is not recorded); its time joins the summary."""
+    from mjx_pusht.outputs import atomic_write_json, drop_stale
+    from mjx_pusht.record import row_labels
+
+    if not (args.rerun and args.record > 0):
+        drop_stale(path)
+        return
+    shown = pick()
+    traced = backend.run(r.seeds[shown], trace=True, combos=combos[shown])
+    writer(path, backend.model, traced, r, row_labels(r, shown))
+    summary["timing"]["recording"] = round(clock.lap("recording"), 3)
+    atomic_write_json(path.parent / "summary.json", summary)
+    print(f"recording: {path} ({len(shown)} {rows} side by side) - open it with: rerun {path}")
 
 
 def cmd_eval(args) -> int:
@@ -293,7 +328,7 @@ def cmd_eval(args) -> int:
     from mjx_pusht.controllers import describe, load
     from mjx_pusht.episode import Episode
     from mjx_pusht.evaluate import summarize_episodes
-    from mjx_pusht.outputs import atomic_write_json, drop_stale, prepare_out_dir
+    from mjx_pusht.outputs import atomic_write_json, prepare_out_dir
     from mjx_pusht.params import parse_param
     from mjx_pusht.scenario import Scenario
     from mjx_pusht.scene import SceneSpec
@@ -319,7 +354,9 @@ def cmd_eval(args) -> int:
     print(f"backend: {name} ({why})")
     from mjx_pusht.rollout_cpu import default_threads
 
+    clock = Clock()
     backend = make_backend(name, scenario, workers=default_threads())  # cpu: a process per core
+    clock.lap("backend_setup_and_tree_check")
     print(f"controller: {describe(controller)}; reset: {args.reset}; {len(seeds)} episodes of at most "
           f"{args.max_steps} control steps x {args.frame_skip} physics steps; device: {backend.device}; "
           f"pusher shape: {backend.pusher}")
@@ -334,6 +371,7 @@ def cmd_eval(args) -> int:
     finally:
         if hasattr(backend, "close"):
             backend.close()
+    clock.lap("episodes")
     r = run.rollouts
     from mjx_pusht.backends import versions
 
@@ -342,6 +380,8 @@ def cmd_eval(args) -> int:
                "collision_functions": getattr(backend, "collisions", None), "success_coverage": episode.success, **summarize_episodes(r),
                "compile_seconds": round(run.compile_seconds, 3), "run_seconds": round(run.run_seconds, 3)}
     finish(out, run, name="per_episode.parquet", episodes=True)
+    clock.lap("table_writing")
+    summary["timing"] = clock.report(run.timing)
     atomic_write_json(out / "summary.json", summary)
     lo, hi = summary["success_rate_ci95"]
     print(f"success: {summary['n_success']} of {summary['n_finite']} episodes ({summary['success_rate']:.1%}, "
@@ -355,15 +395,10 @@ def cmd_eval(args) -> int:
     if args.break_it == "none" and summary["n_rigid"] != len(r):
         print(f"WARNING: the welded T came apart in {len(r) - summary['n_rigid']} episodes")
     print(f"table: {out / 'per_episode.parquet'}\nsummary: {out / 'summary.json'}")
-    if args.rerun and args.record > 0:
-        from mjx_pusht.record import record_episodes, row_labels
+    from mjx_pusht.record import record_episodes
 
-        shown = np.arange(min(args.record, len(r)))
-        traced = backend.run(r.seeds[shown], trace=True, combos=combos[shown])
-        record_episodes(out / "eval.rrd", backend.model, traced, r, row_labels(r, shown))
-        print(f"recording: {out / 'eval.rrd'} ({len(shown)} episodes side by side) - open it with: rerun {out / 'eval.rrd'}")
-    else:
-        drop_stale(out / "eval.rrd")
+    _record(args, out / "eval.rrd", "episodes", backend, r, combos, lambda: np.arange(min(args.record, len(r))),
+            record_episodes, summary, clock)
     banner.done()
     return 0
 

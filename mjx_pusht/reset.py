@@ -53,7 +53,7 @@ def task_start(seed: int) -> tuple[float, float, float, float, float]:
     yaw = float(rng.uniform(-np.pi, np.pi))
     tries = rng.uniform(-TASK_PUSHER_HALF, TASK_PUSHER_HALF, size=(PUSHER_TRIES, 2))
     clear = distance_to_tee(tries, np.array([x, y, yaw])[None]) > PUSHER_RADIUS + CLEARANCE
-    px, py = tries[int(np.argmax(clear))]  # the first clear one (argmax finds the first True)
+    px, py = tries[int(np.argmax(clear)) if clear.any() else PUSHER_TRIES - 1]  # the first clear one (the last if none)
     return x, y, yaw, float(px), float(py)
 
 
@@ -66,38 +66,44 @@ def start_state(seed: int, reset: str = "chapter") -> tuple[float, ...]:
     raise ValueError(f"unknown reset {reset!r}; choose from {', '.join(RESETS)}")
 
 
-def _serial_poses(seeds, reset: str = "chapter") -> np.ndarray:
-    if reset == "chapter":
-        return np.array([start_pose(int(s)) for s in seeds], dtype=np.float64).reshape(-1, 3)
-    return np.array([start_state(int(s), reset) for s in seeds], dtype=np.float64).reshape(-1, 5)
+_BLOCK = 1 << 16  # seeds per block: the uint64 temporaries stay in cache
 
 
-_POOL_MIN = 50_000  # below this a process pool costs more than it saves (~20 us a seed serially)
-
-
-def start_poses(seeds: Sequence[int] | np.ndarray, *, workers: int | None = None, reset: str = "chapter") -> np.ndarray:
+def start_poses(seeds: Sequence[int] | np.ndarray, *, reset: str = "chapter") -> np.ndarray:
     """(N, 3) float64 tee start poses for `chapter` ((N, 5) with the pusher's (x, y) for `task`),
-    row i from seed i's own generator.
+    row i exactly what seed i's own `default_rng` draws (`start_pose`, `task_start`).
 
-    Seeding a PCG64 generator per seed costs ~20 us, 20 s for a million seeds, so
-    large sweeps split the seeds over processes; every row is still drawn by
-    `start_pose`, so the values are the same either way.
+    The generators are computed for all seeds at once (pcg64.Streams, well under 1 us a seed),
+    not constructed one by one (~20 us a seed).
     """
-    import multiprocessing
-    import os
-    from concurrent.futures import ProcessPoolExecutor
-
-    seeds = np.asarray(seeds, dtype=np.int64).reshape(-1)
-    if workers is None:
-        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     if reset not in RESETS:
         raise ValueError(f"unknown reset {reset!r}; choose from {', '.join(RESETS)}")
-    if len(seeds) < _POOL_MIN or workers < 2:
-        return _serial_poses(seeds, reset)
-    parts = np.array_split(seeds, 4 * workers)
-    # spawn, not fork: the caller may already run JAX/XLA threads, which fork would copy mid-flight
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-        return np.concatenate(list(pool.map(_serial_poses, parts, [reset] * len(parts))))
+    seeds = np.asarray(seeds, dtype=np.int64).reshape(-1)
+    out = np.empty((len(seeds), 3 if reset == "chapter" else 5))
+    for lo in range(0, len(seeds), _BLOCK):
+        out[lo : lo + _BLOCK] = _draw(seeds[lo : lo + _BLOCK], reset)
+    return out
+
+
+def _draw(seeds: np.ndarray, reset: str) -> np.ndarray:
+    from mjx_pusht.pcg64 import Streams
+
+    st = Streams(seeds)
+    if reset == "chapter":
+        return np.stack([st.uniform(*TEE_X_RANGE), st.uniform(*TEE_Y_RANGE), st.uniform(*TEE_YAW_RANGE)], axis=-1)
+    tee = np.stack([st.uniform(-TASK_TEE_HALF, TASK_TEE_HALF), st.uniform(-TASK_TEE_HALF, TASK_TEE_HALF),
+                    st.uniform(-np.pi, np.pi)], axis=-1)
+    pusher = np.empty((len(seeds), 2))
+    todo = np.arange(len(seeds))
+    for k in range(PUSHER_TRIES):  # try k for the rows whose earlier tries all landed on the T
+        xy = np.stack([st.uniform(-TASK_PUSHER_HALF, TASK_PUSHER_HALF), st.uniform(-TASK_PUSHER_HALF, TASK_PUSHER_HALF)], -1)
+        clear = (distance_to_tee(xy, tee[todo]) > PUSHER_RADIUS + CLEARANCE) | (k == PUSHER_TRIES - 1)
+        pusher[todo[clear]] = xy[clear]
+        todo = todo[~clear]
+        if not len(todo):
+            break
+        st = st.subset(~clear)
+    return np.concatenate([tee, pusher], axis=-1)
 
 
 @dataclasses.dataclass(frozen=True)

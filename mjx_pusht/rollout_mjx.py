@@ -284,7 +284,6 @@ class MjxRunner:
         """
         import jax
         import jax.numpy as jnp
-        from mujoco import mjx
 
         model, layout = self.model, self.layout
         controller, episode = self.scenario.driver()

@@ -33,6 +33,7 @@ class SweepRun:
     summary: dict
     compile_seconds: float
     run_seconds: float
+    timing: dict = dataclasses.field(default_factory=dict)  # seconds per phase of run_sweep
 
 
 def rows_for(seeds: np.ndarray, n_combos: int) -> tuple[np.ndarray, np.ndarray]:
@@ -106,8 +107,10 @@ def run_sweep(
 
     scenario = getattr(backend, "scenario", None)
     reset = scenario.reset if scenario is not None else "chapter"
+    t_poses = time.perf_counter()
     poses = np.zeros((len(seeds), 3 if reset == "chapter" else 5))
-    poses[todo] = start_poses(seeds[todo], reset=reset)  # once for the whole sweep (a process pool when large)
+    poses[todo] = start_poses(seeds[todo], reset=reset)  # once for the whole sweep, vectorised over seeds
+    timing = {"start_poses": time.perf_counter() - t_poses, "rollout_and_compile": 0.0, "scoring_and_chunk_writing": 0.0}
     t0 = time.perf_counter()
     compile0 = backend.compile_seconds
     bar = tqdm(total=len(seeds), initial=int(done.sum()), unit="seed", disable=not progress, file=sys.stderr,
@@ -118,6 +121,7 @@ def run_sweep(
         hi = lo + 1  # a contiguous run of undone seeds, at most `chunk` long
         while hi < len(seeds) and hi - lo < chunk and not done[hi]:
             hi += 1
+        t_run = time.perf_counter()
         try:
             rows = backend.run(seeds[lo:hi], batch=chunk, combos=combos[lo:hi], poses=poses[lo:hi])
         except Exception as e:  # noqa: BLE001 - only memory errors are retried
@@ -126,7 +130,10 @@ def run_sweep(
             chunk //= 2
             bar.write(f"out of memory at chunk {chunk * 2}; retrying with --chunk {chunk}")
             continue
+        t_write = time.perf_counter()
+        timing["rollout_and_compile"] += t_write - t_run
         atomic_write_table(parts / f"seeds-{lo:012d}-{hi:012d}.parquet", rows.columns(episodes=episodes))
+        timing["scoring_and_chunk_writing"] += time.perf_counter() - t_write
         done[lo:hi] = True
         i += hi - lo
         bar.update(hi - lo)
@@ -137,7 +144,9 @@ def run_sweep(
     rollouts = Rollouts.concat([Rollouts.from_columns(t) for t in tables])
     if not np.array_equal(rollouts.seeds, seeds) or len(rollouts) != len(seeds):
         raise RuntimeError(f"chunk files in {parts} do not cover the sweep's seeds; remove the folder and rerun")
-    return SweepRun(rollouts, {}, compile_s, max(wall - compile_s, 1e-9))
+    timing["compile"] = compile_s
+    timing["rollout"] = max(timing["rollout_and_compile"] - compile_s, 0.0)
+    return SweepRun(rollouts, {}, compile_s, max(wall - compile_s, 1e-9), timing)
 
 
 def finish(out: Path, run: SweepRun, *, name: str = "per_seed.parquet", episodes: bool = False) -> None:

@@ -15,6 +15,13 @@ from mjx_pusht.scene import SceneSpec  # noqa: E402
 SEEDS = np.arange(8)
 
 
+@pytest.fixture(autouse=True)
+def _run_in_a_temporary_directory(tmp_path, monkeypatch):
+    """Every test runs in its own folder: whatever it writes by default (MuJoCo's MUJOCO_LOG.TXT,
+    outputs/...) lands there, never in the checkout."""
+    monkeypatch.chdir(tmp_path)
+
+
 @pytest.fixture(scope="session")
 def cpu_runs():
     """The CPU reference for seeds 0..7, welded and split, cylinder and capsule pusher."""

@@ -40,7 +40,7 @@ def test_harness_measures_a_backend_sharded_over_two_devices_with_its_scaling(tm
     env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu"}
     r = subprocess.run([sys.executable, "-m", "benchmarks.harness", "--tier", "two", "--backends", "mjx-jax",
                         "--batches", "4", "--repeats", "1", "--device-counts", "1,2", "--out", str(tmp_path)],
-                       capture_output=True, text=True, env=env)
+                       capture_output=True, text=True, env=env, cwd=table.ROOT)
     assert r.returncode == 0, r.stderr[-2000:]
     b = json.loads((tmp_path / "two.json").read_text())["backends"]
     assert b["mjx-jax"]["devices"] == 1 and b["mjx-jax-x2"]["devices"] == 2

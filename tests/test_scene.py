@@ -120,10 +120,3 @@ def test_free_tee_grants_six_dofs_and_leaves_the_plane():
     z = r.trace.qpos[:, -1, 2]
     t = 160 * 0.01  # free fall from z=0.0152 for the whole run: nothing holds it on a collision-free table
     np.testing.assert_allclose(z, 0.0152 - 0.5 * 9.81 * t**2, rtol=0.02)
-
-
-def test_start_poses_from_a_process_pool_are_the_serial_ones():
-    import mjx_pusht.reset as reset
-
-    seeds = np.arange(1000, 1000 + 60_000)
-    np.testing.assert_array_equal(reset.start_poses(seeds, workers=2), reset._serial_poses(seeds))

@@ -174,6 +174,9 @@ def test_non_finite_seeds_are_flagged_and_counted_not_averaged(tmp_path):
     s = summarize(rows, backend=backend, schedule=Scenario().schedule, break_it="none", compile_s=0, run_s=1)
     assert s["n_non_finite"] == 2 and s["non_finite_seeds"] == [1, 2] and s["gap_max_dev"]["n"] == 1
     assert s["n_escaped"] == 3
+    # MuJoCo itself noticed, in its log in the working folder (the test's own, conftest): QACC blew up
+    log = (tmp_path / "MUJOCO_LOG.TXT").read_text()
+    assert "Nan, Inf or huge value in QACC" in log
 
 
 @pytest.mark.parametrize(

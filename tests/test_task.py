@@ -102,6 +102,18 @@ def test_pixel_frame_puts_the_walls_on_the_image_edges_and_round_trips():
     np.testing.assert_allclose(from_pixels(to_pixels(xy, 96), 96), xy, atol=1e-15)
 
 
+@pytest.mark.parametrize("reset", ["chapter", "task"])
+def test_start_poses_are_each_seeds_own_generator_bit_for_bit(reset):
+    from mjx_pusht.reset import start_state
+
+    rng = np.random.default_rng(2026)
+    seeds = np.concatenate([[0, 1, 2**32 - 1, 2**32, 2**32 + 1, 2**63 - 1], rng.integers(0, 2**63 - 1, 300),
+                            rng.integers(0, 2**32, 100)])
+    batch = start_poses(seeds, reset=reset)
+    one_by_one = np.array([start_state(int(s), reset) for s in seeds])[:, : batch.shape[1]]
+    np.testing.assert_array_equal(batch, one_by_one)
+
+
 def test_reset_is_per_seed_and_task_starts_are_clear():
     a = start_poses(np.array([5, 9, 11]), reset="task")
     b = start_poses(np.array([9]), reset="task")
@@ -268,6 +280,17 @@ def test_a_users_controller_by_dotted_path_and_bad_controllers_fail_in_one_line(
         assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
 
 
+def test_eval_sweeps_parameters_as_sweep_does(tmp_path):
+    out = tmp_path / "kv"
+    assert main(["eval", "--seeds", "2", "--reset", "chapter", "--backend", "cpu", "--max-steps", "60",
+                 "--param", "kv=10,20", "--out", str(out), "--no-rerun", "--no-progress"]) == 0
+    t = read_table(out / "per_episode.parquet")
+    assert t["param_kv"].tolist() == [10.0, 10.0, 20.0, 20.0] and t["seed"].tolist() == [0, 1, 0, 1]
+    # kv 20 is the authored scene: those rows are the plain evaluation's
+    plain = run_cpu(Scenario(reset="chapter", controller=Expert(), episode=Episode(max_steps=60)), np.arange(2))
+    np.testing.assert_array_equal(t["final_coverage"][2:], plain.episode["coverage"])
+
+
 def test_bad_eval_input_is_one_line(tmp_path, capsys):
     for argv in (["eval", "--max-steps", "0"], ["eval", "--reset", "anywhere"], ["eval", "--frame-skip", "-1"],
                  ["eval", "--controller", "random", "--action", "position"]):
@@ -281,8 +304,13 @@ def test_mjx_jax_runs_the_expert_in_the_scan_and_solves_the_chapter_starts():
     from mjx_pusht.backends import MjxBackend
 
     sc = Scenario(reset="chapter", controller=Expert(), episode=Episode(max_steps=120))
-    r = MjxBackend(sc, "jax").run(np.arange(4))
+    backend = MjxBackend(sc, "jax")
+    r = backend.run(np.arange(4))
     assert r.episode["success"].all() and r.rigid.all()
+    compiled = backend.compile_seconds
+    again = backend.run(np.arange(4, 7), batch=4)  # another chunk of the same batch shape: no second compile
+    assert backend.compile_seconds == compiled and len(backend.runner._fns) == 1
+    assert again.episode["success"].all()
 
 
 @pytest.mark.warp
