@@ -361,7 +361,7 @@ def cmd_eval(args) -> int:
           f"{args.max_steps} control steps x {args.frame_skip} physics steps; device: {backend.device}; "
           f"pusher shape: {backend.pusher}")
     # small chunks on the CPU keep the progress bar (and --resume) fine-grained
-    chunk = args.chunk or (128 * default_threads() if name == "cpu" else backend.default_chunk)
+    chunk = args.chunk or (128 * default_threads() if name == "cpu" else None)
     try:
         run = run_sweep(backend, row_seeds, out, config=config, chunk=chunk, resume=args.resume,
                         progress=args.progress, combos=combos, episodes=True)

@@ -98,6 +98,10 @@ def run_sweep(
         shutil.rmtree(parts)
     parts.mkdir(parents=True, exist_ok=True)
     atomic_write_json(parts / "manifest.json", _fingerprint(seeds, config))
+    if not chunk and len(seeds):
+        # the backend's default, but never a small sweep padded up to it (MJX: a multiple of its devices)
+        n_dev = len(getattr(getattr(backend, "runner", None), "devices", None) or [None])
+        chunk = min(backend.default_chunk, -(-len(seeds) // n_dev) * n_dev)
     chunk = int(chunk or backend.default_chunk)
     done = np.zeros(len(seeds), bool)
     for lo, hi in _done_ranges(parts):
