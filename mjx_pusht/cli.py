@@ -84,6 +84,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, default=Path("outputs/scene"))
     s.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip the .rrd recording")
     s.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
+    s.add_argument("--compare-welded", action="store_true",
+                   help="with --break: also run the welded T and record both side by side in walk.rrd "
+                        "(the chapter's diagnosis walk)")
 
     t = sub.add_parser("tree", help="print the compiled kinematic tree")
     t.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
@@ -214,6 +217,8 @@ def cmd_scene(args) -> int:
     from mjx_pusht.tree import read_tree
 
     schedule = Schedule(nudge_steps=SMOKE_NUDGE_STEPS if args.smoke else args.steps)
+    if args.compare_welded and args.break_it == "none":
+        raise UsageError("--compare-welded compares a broken scene with the welded one: give --break split-tee or free-tee")
     out = prepare_out_dir(args.out)
     banner = Banner("scene")
     scenario = Scenario(SceneSpec(args.break_it), schedule)
@@ -235,6 +240,16 @@ def cmd_scene(args) -> int:
         print(f"recording: {out / 'scene.rrd'} - open it with: rerun {out / 'scene.rrd'}")
     else:
         drop_stale(out / "scene.rrd")
+    if args.compare_welded:
+        from mjx_pusht.record import record_walk
+
+        welded = CpuBackend(Scenario(SceneSpec("none"), schedule), nthread=1)
+        w = welded.run(np.array([args.seed]), trace=True)
+        if not args.rerun:
+            run = backend.run(np.array([args.seed]), trace=True)
+        record_walk(out / "walk.rrd", [("welded", welded.model, w), (args.break_it.replace("-", "_"), backend.model, run)])
+        print(f"walk: welded gap settled at {w.gap_settled[0]:.4f} m, {args.break_it} at {run.gap_settled[0]:.4f} m; "
+              f"recording: {out / 'walk.rrd'} - scrub sim_time to 0.40 s, the first settled frame")
     banner.done()
     return 0
 

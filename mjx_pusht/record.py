@@ -42,6 +42,75 @@ def replay(model: mujoco.MjModel, qpos: np.ndarray) -> dict[str, np.ndarray]:
     return out
 
 
+GAP_RANGE = (0.05, 0.10)  # shows the welded 0.06 m and a split T's ~0.09 m on one fixed axis
+DEVIATION_FLOOR = 1e-18  # log10 of an exact 0 (a welded T's deviation) is drawn at -18
+RIGID_LOG10 = -4.0  # metrics.RIGID_TOL: a rigid T's peak |gap - 0.06| stays below 1e-4 m
+
+
+def _world_view(n_worlds: int):
+    """The workspace(s) from above: eye over the middle of the row of side-by-side workspaces."""
+    import rerun.blueprint as rrb
+
+    cx = (n_worlds - 1) * SEED_SPACING / 2
+    height = 1.1 + 0.55 * max(n_worlds - 1, 0)
+    return rrb.Spatial3DView(origin="world", name="Workspace from above (target green, tee blue, pusher red)",
+                             eye_controls=rrb.EyeControls3D(position=[cx, -0.05, height], look_target=[cx, 0.0, 0.0],
+                                                            eye_up=[0.0, 1.0, 0.0]))
+
+
+def _gap_views():
+    import rerun.blueprint as rrb
+
+    return [rrb.TimeSeriesView(origin="plots/weld_gap", name="Weld gap: authored 0.06 m and measured (m)",
+                               axis_y=rrb.ScalarAxis(range=GAP_RANGE)),
+            rrb.TimeSeriesView(origin="plots/weld_deviation",
+                               name="log10 |gap - 0.06 m| (0 drawn at -18); rigid below -4",
+                               axis_y=rrb.ScalarAxis(range=(-19.0, 0.0)))]
+
+
+def blueprint(kind: str, n_worlds: int = 1):  # noqa: C901 - one layout per recording kind
+    """The layout a recording opens with: the workspace large, the evidence beside it, every view titled."""
+    import rerun.blueprint as rrb
+
+    world = _world_view(n_worlds)
+    if kind == "eval":
+        side = [rrb.TimeSeriesView(origin="plots/coverage", name="Coverage of the target T (success at 0.95)",
+                                   axis_y=rrb.ScalarAxis(range=(0.0, 1.05))),
+                rrb.TimeSeriesView(origin="plots/reward", name="Reward at each control step (= coverage)",
+                                   axis_y=rrb.ScalarAxis(range=(0.0, 1.05))),
+                *_gap_views()]
+    else:
+        side = _gap_views()
+    top = rrb.Horizontal(world, rrb.Vertical(*side), column_shares=[3, 2])
+    if kind == "scene":
+        return rrb.Blueprint(top, collapse_panels=False)
+    if kind == "walk":
+        # paused on sim_time: scrub to the first settled frame (0.40 s) and compare the two Ts
+        return rrb.Blueprint(top, rrb.TimePanel(timeline="sim_time", play_state="paused", state="expanded"))
+    outcomes = [rrb.Spatial2DView(origin="outcomes/final_xy", name="Final tee (x, y) of every seed, by outcome; "
+                                  "target T outlined (m)")]
+    for name, title in _HISTOGRAMS.items():
+        outcomes.append(rrb.BarChartView(origin=f"outcomes/{name}", name=title))
+    return rrb.Blueprint(rrb.Vertical(top, rrb.Horizontal(*outcomes), row_shares=[3, 2]))
+
+
+def _log_deviation(rr, label: str, gap: np.ndarray, times: np.ndarray) -> None:
+    tl = rr.TimeColumn("sim_time", duration=times)
+    dev = np.log10(np.maximum(np.abs(gap - 0.06), DEVIATION_FLOOR))
+    rr.send_columns(f"plots/weld_deviation/{label}", indexes=[tl], columns=rr.Scalars.columns(scalars=dev))
+
+
+def _log_reference_lines(rr, t_end: float) -> None:
+    """The authored 0.06 m gap and the rigidity limit as lines over the whole run."""
+    tl = rr.TimeColumn("sim_time", duration=[0.0, t_end])
+    rr.log("plots/weld_gap/authored", rr.SeriesLines(colors=[[120, 120, 120]], names=["authored 0.06 m"]), static=True)
+    rr.send_columns("plots/weld_gap/authored", indexes=[tl], columns=rr.Scalars.columns(scalars=[0.06, 0.06]))
+    rr.log("plots/weld_deviation/rigid_limit", rr.SeriesLines(colors=[[200, 60, 60]], names=["1e-4 m: rigid below"]),
+           static=True)
+    rr.send_columns("plots/weld_deviation/rigid_limit", indexes=[tl],
+                    columns=rr.Scalars.columns(scalars=[RIGID_LOG10, RIGID_LOG10]))
+
+
 def _xyzw(wxyz: np.ndarray) -> np.ndarray:
     return wxyz[..., [1, 2, 3, 0]]
 
@@ -82,6 +151,7 @@ def _log_frames(rr, root: str, model: mujoco.MjModel, qpos: np.ndarray, dt: floa
         rr.send_columns(f"{root}/{path}", indexes=[tl], columns=rr.Transform3D.columns(
             translation=poses[f"{body}_pos"], quaternion=_xyzw(poses[f"{body}_quat"])))
     rr.send_columns(plot, indexes=[tl], columns=rr.Scalars.columns(scalars=poses["gap"]))
+    _log_deviation(rr, plot.rsplit("/", 1)[-1], poses["gap"], times)
 
 
 def record_run(path: Path, model: mujoco.MjModel, rollouts: Rollouts, *, app: str = "mjx_pusht_scene") -> Path:
@@ -91,24 +161,73 @@ def record_run(path: Path, model: mujoco.MjModel, rollouts: Rollouts, *, app: st
     assert rollouts.trace is not None, "record_run needs a traced rollout"
     rec = rr.RecordingStream(app)
     with rec:
-        rec.save(str(path))
+        rec.save(str(path), default_blueprint=blueprint("scene"))
         _log_static_scene(rr, "world", model)
-        rr.log("plots/weld_gap/authored", rr.SeriesLines(colors=[[120, 120, 120]], names=["0.06 m weld"]), static=True)
         _log_frames(rr, "world", model, rollouts.trace.qpos[0], rollouts.trace.dt, "plots/weld_gap/measured")
-        tl = rr.TimeColumn("sim_time", duration=np.arange(rollouts.trace.qpos.shape[1]) * rollouts.trace.dt)
-        rr.send_columns("plots/weld_gap/authored", indexes=[tl],
-                        columns=rr.Scalars.columns(scalars=np.full(rollouts.trace.qpos.shape[1], 0.06)))
+        _log_reference_lines(rr, (rollouts.trace.qpos.shape[1] - 1) * rollouts.trace.dt)
     rec.flush()
     rec.disconnect()
     return path
 
 
-def _histogram(values: np.ndarray, bins: int = 40) -> np.ndarray:
+def record_walk(path: Path, runs: list[tuple[str, mujoco.MjModel, Rollouts]]) -> Path:
+    """The chapter's diagnosis walk: the welded and the split T side by side (world/<label>/...),
+    both weld gaps on one plot, ready to scrub to the first settled frame."""
+    import rerun as rr
+
+    rec = rr.RecordingStream("mjx_pusht_walk")
+    with rec:
+        rec.save(str(path), default_blueprint=blueprint("walk", len(runs)))
+        for k, (label, model, r) in enumerate(runs):
+            root = f"world/{label}"
+            rr.log(root, rr.Transform3D(translation=[k * SEED_SPACING, 0, 0]), static=True)
+            _log_static_scene(rr, root, model)
+            _log_frames(rr, root, model, r.trace.qpos[0], r.trace.dt, f"plots/weld_gap/{label}")
+        r = runs[0][2]
+        _log_reference_lines(rr, (r.trace.qpos.shape[1] - 1) * r.trace.dt)
+    rec.flush()
+    rec.disconnect()
+    return path
+
+
+def _histogram(values: np.ndarray, bins: int = 40) -> tuple[np.ndarray, np.ndarray]:
+    """Counts and bin centres (in the values' own units) of the finite values."""
     finite = values[np.isfinite(values)]
     if finite.size == 0:
-        return np.zeros(bins)
-    counts, _ = np.histogram(finite, bins=bins)
-    return counts
+        return np.zeros(bins), np.arange(bins, dtype=float)
+    counts, edges = np.histogram(finite, bins=bins)
+    return counts, 0.5 * (edges[:-1] + edges[1:])
+
+
+# outcome histograms: entity name under outcomes/ -> the view's title (physical units on the x axis)
+_HISTOGRAMS = {
+    "final_y_histogram": "Final tee y (m), all seeds",
+    "final_yaw_histogram": "Final tee yaw (rad), all seeds",
+    "log10_gap_max_dev_histogram": "log10 peak |gap - 0.06 m| per seed (0 drawn at -18)",
+}
+MODE_COLORS = {"straight": [60, 160, 90], "spun_ccw": [70, 110, 230], "spun_cw": [230, 150, 40], "split": [220, 60, 60]}
+
+
+def _log_outcomes(rr, everyone: Rollouts) -> None:
+    """Outcome distributions over every seed, in metres and radians: the final (x, y) coloured by
+    outcome mode with the target T outlined, and histograms over bin centres."""
+    from mjx_pusht.compare import SPIN_RAD
+    from mjx_pusht.task import T_OUTLINE
+
+    yaw = everyone.final[:, 2]
+    mode = np.where(yaw >= SPIN_RAD, "spun_ccw", np.where(yaw <= -SPIN_RAD, "spun_cw", "straight"))
+    mode = np.where(everyone.rigid, mode, "split")
+    for name, color in MODE_COLORS.items():
+        m = mode == name
+        if m.any():
+            rr.log(f"outcomes/final_xy/{name}", rr.Points2D(everyone.final[m, :2], colors=[color], radii=0.002,
+                                                            labels=None), static=True)
+    outline = np.array(T_OUTLINE + (T_OUTLINE[0],))
+    rr.log("outcomes/final_xy/target", rr.LineStrips2D([outline], colors=[[90, 204, 102]]), static=True)
+    for name, values in (("final_y_histogram", everyone.final[:, 1]), ("final_yaw_histogram", yaw),
+                         ("log10_gap_max_dev_histogram", np.log10(np.maximum(everyone.gap_max_dev, DEVIATION_FLOOR)))):
+        counts, centres = _histogram(values)
+        rr.log(f"outcomes/{name}", rr.BarChart(counts, abscissa=centres), static=True)
 
 
 def record_sweep(path: Path, model: mujoco.MjModel, traced: Rollouts, everyone: Rollouts,
@@ -119,20 +238,15 @@ def record_sweep(path: Path, model: mujoco.MjModel, traced: Rollouts, everyone: 
     assert traced.trace is not None
     rec = rr.RecordingStream("mjx_pusht_sweep")
     with rec:
-        rec.save(str(path))
         labels = labels or [f"seed_{int(s)}" for s in traced.seeds]
+        rec.save(str(path), default_blueprint=blueprint("sweep", len(labels)))
         for k, label in enumerate(labels):
             root = f"world/{label}"
             rr.log(root, rr.Transform3D(translation=[k * SEED_SPACING, 0, 0]), static=True)
             _log_static_scene(rr, root, model)
             _log_frames(rr, root, model, traced.trace.qpos[k], traced.trace.dt, f"plots/weld_gap/{label}")
-        rigid = everyone.rigid
-        colors = np.where(rigid[:, None], [[60, 160, 90]], [[220, 60, 60]])
-        rr.log("outcomes/final_xy", rr.Points2D(everyone.final[:, :2], colors=colors, radii=0.002), static=True)
-        rr.log("outcomes/final_y_histogram", rr.BarChart(_histogram(everyone.final[:, 1])), static=True)
-        rr.log("outcomes/final_yaw_histogram", rr.BarChart(_histogram(everyone.final[:, 2])), static=True)
-        rr.log("outcomes/log10_gap_max_dev_histogram",
-               rr.BarChart(_histogram(np.log10(np.maximum(everyone.gap_max_dev, 1e-12)))), static=True)
+        _log_reference_lines(rr, (traced.trace.qpos.shape[1] - 1) * traced.trace.dt)
+        _log_outcomes(rr, everyone)
     rec.flush()
     rec.disconnect()
     return path
@@ -171,8 +285,8 @@ def record_episodes(path: Path, model: mujoco.MjModel, traced: Rollouts, everyon
     fs, dt = traced.trace.frame_skip, traced.trace.dt
     rec = rr.RecordingStream("mjx_pusht_eval")
     with rec:
-        rec.save(str(path))
         labels = labels or [f"seed_{int(s)}" for s in traced.seeds]
+        rec.save(str(path), default_blueprint=blueprint("eval", len(labels)))
         rr.log("plots/coverage/success", rr.SeriesLines(colors=[[120, 120, 120]], names=["success at 0.95"]), static=True)
         for k, label in enumerate(labels):
             root = f"world/{label}"
@@ -189,11 +303,8 @@ def record_episodes(path: Path, model: mujoco.MjModel, traced: Rollouts, everyon
                             columns=rr.Scalars.columns(scalars=cov[steps]))
         tl = rr.TimeColumn("sim_time", duration=[0.0, traced.trace.qpos.shape[1] * dt])
         rr.send_columns("plots/coverage/success", indexes=[tl], columns=rr.Scalars.columns(scalars=[SUCCESS_COVERAGE] * 2))
-        ok = np.asarray(everyone.episode["success"], bool)
-        colors = np.where(ok[:, None], [[60, 160, 90]], [[220, 60, 60]])
-        rr.log("outcomes/final_xy", rr.Points2D(everyone.final[:, :2], colors=colors, radii=0.002), static=True)
-        rr.log("outcomes/final_coverage_histogram", rr.BarChart(_histogram(np.asarray(everyone.episode["coverage"]))),
-               static=True)
+        _log_reference_lines(rr, (traced.trace.qpos.shape[1] - 1) * dt)
+        _log_outcomes(rr, everyone)
     rec.flush()
     rec.disconnect()
     return path

@@ -248,8 +248,10 @@ def test_eval_writes_episodes_summary_and_recording(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["success_rate"] == 1.0 and summary["success_rate_ci95"][1] == 1.0
     assert summary["success_rate_ci95"][0] == pytest.approx(wilson(4, 4)[0])
-    from test_record import _contents
+    from test_record import _contents, _views
 
+    views = _views(out / "eval.rrd")
+    assert views["/plots/coverage"]["range"] == [0.0, 1.05] and "0.95" in views["/plots/coverage"]["display_name"]
     entities, timelines = _contents(out / "eval.rrd")
     assert {"/plots/coverage/seed_0", "/plots/reward/seed_1", "/world/seed_0/objects/tee"} <= entities
     assert "sim_time" in timelines
