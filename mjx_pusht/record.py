@@ -21,6 +21,7 @@ TARGET_COLOR = [90, 204, 102]
 PUSHER_COLOR = [230, 102, 89]
 WALL_COLOR = [153, 153, 153]
 SEED_SPACING = 0.95  # metres between side-by-side workspaces (each is 0.86 m wide)
+SERIES_COLORS = {"welded": TEE_COLOR, "split_tee": STEM_SPLIT_COLOR, "free_tee": [230, 200, 60], "measured": TEE_COLOR}
 
 
 def replay(model: mujoco.MjModel, qpos: np.ndarray) -> dict[str, np.ndarray]:
@@ -52,7 +53,7 @@ def _world_view(n_worlds: int):
     import rerun.blueprint as rrb
 
     cx = (n_worlds - 1) * SEED_SPACING / 2
-    height = 1.1 + 0.55 * max(n_worlds - 1, 0)
+    height = 0.6 + 1.0 * n_worlds * SEED_SPACING
     return rrb.Spatial3DView(origin="world", name="Workspace from above (target green, tee blue, pusher red)",
                              eye_controls=rrb.EyeControls3D(position=[cx, -0.05, height], look_target=[cx, 0.0, 0.0],
                                                             eye_up=[0.0, 1.0, 0.0]))
@@ -87,8 +88,8 @@ def blueprint(kind: str, n_worlds: int = 1):  # noqa: C901 - one layout per reco
     if kind == "walk":
         # paused on sim_time: scrub to the first settled frame (0.40 s) and compare the two Ts
         return rrb.Blueprint(top, rrb.TimePanel(timeline="sim_time", play_state="paused", state="expanded"))
-    outcomes = [rrb.Spatial2DView(origin="outcomes/final_xy", name="Final tee (x, y) of every seed, by outcome; "
-                                  "target T outlined (m)")]
+    outcomes = [rrb.Spatial2DView(origin="outcomes/final_xy", name="Final tee (x, y) of every seed, north up: straight green, "
+                                  "spun ccw blue, cw orange, split red; target T outlined (m)")]
     for name, title in _HISTOGRAMS.items():
         outcomes.append(rrb.BarChartView(origin=f"outcomes/{name}", name=title))
     return rrb.Blueprint(rrb.Vertical(top, rrb.Horizontal(*outcomes), row_shares=[3, 2]))
@@ -150,8 +151,13 @@ def _log_frames(rr, root: str, model: mujoco.MjModel, qpos: np.ndarray, dt: floa
             continue
         rr.send_columns(f"{root}/{path}", indexes=[tl], columns=rr.Transform3D.columns(
             translation=poses[f"{body}_pos"], quaternion=_xyzw(poses[f"{body}_quat"])))
+    label = plot.rsplit("/", 1)[-1]
+    color = SERIES_COLORS.get(label)
+    if color is not None:  # the walk's two Ts in their own colours; seeds take the viewer's palette
+        rr.log(plot, rr.SeriesLines(colors=[color], names=[label]), static=True)
+        rr.log(f"plots/weld_deviation/{label}", rr.SeriesLines(colors=[color], names=[label]), static=True)
     rr.send_columns(plot, indexes=[tl], columns=rr.Scalars.columns(scalars=poses["gap"]))
-    _log_deviation(rr, plot.rsplit("/", 1)[-1], poses["gap"], times)
+    _log_deviation(rr, label, poses["gap"], times)
 
 
 def record_run(path: Path, model: mujoco.MjModel, rollouts: Rollouts, *, app: str = "mjx_pusht_scene") -> Path:
@@ -190,19 +196,19 @@ def record_walk(path: Path, runs: list[tuple[str, mujoco.MjModel, Rollouts]]) ->
     return path
 
 
-def _histogram(values: np.ndarray, bins: int = 40) -> tuple[np.ndarray, np.ndarray]:
-    """Counts and bin centres (in the values' own units) of the finite values."""
+def _histogram(values: np.ndarray, bins: int = 40) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Counts, bin centres and bin widths (in the values' own units) of the finite values."""
     finite = values[np.isfinite(values)]
     if finite.size == 0:
-        return np.zeros(bins), np.arange(bins, dtype=float)
+        return np.zeros(bins), np.arange(bins, dtype=float), np.ones(bins)
     counts, edges = np.histogram(finite, bins=bins)
-    return counts, 0.5 * (edges[:-1] + edges[1:])
+    return counts, 0.5 * (edges[:-1] + edges[1:]), np.diff(edges)
 
 
 # outcome histograms: entity name under outcomes/ -> the view's title (physical units on the x axis)
 _HISTOGRAMS = {
     "final_y_histogram": "Final tee y (m), all seeds",
-    "final_yaw_histogram": "Final tee yaw (rad), all seeds",
+    "final_yaw_histogram": "Final tee yaw, wrapped to (-pi, pi] (rad), all seeds",
     "log10_gap_max_dev_histogram": "log10 peak |gap - 0.06 m| per seed (0 drawn at -18)",
 }
 MODE_COLORS = {"straight": [60, 160, 90], "spun_ccw": [70, 110, 230], "spun_cw": [230, 150, 40], "split": [220, 60, 60]}
@@ -212,22 +218,23 @@ def _log_outcomes(rr, everyone: Rollouts) -> None:
     """Outcome distributions over every seed, in metres and radians: the final (x, y) coloured by
     outcome mode with the target T outlined, and histograms over bin centres."""
     from mjx_pusht.compare import SPIN_RAD
-    from mjx_pusht.task import T_OUTLINE
+    from mjx_pusht.task import T_OUTLINE, wrap_angle
 
-    yaw = everyone.final[:, 2]
+    yaw = wrap_angle(everyone.final[:, 2])  # a turn is a turn, whichever way round the hinge counted it
     mode = np.where(yaw >= SPIN_RAD, "spun_ccw", np.where(yaw <= -SPIN_RAD, "spun_cw", "straight"))
     mode = np.where(everyone.rigid, mode, "split")
+    north_up = np.array([1.0, -1.0])  # 2D views draw +y downward, as images do: flip so north is up
     for name, color in MODE_COLORS.items():
         m = mode == name
         if m.any():
-            rr.log(f"outcomes/final_xy/{name}", rr.Points2D(everyone.final[m, :2], colors=[color], radii=0.002,
-                                                            labels=None), static=True)
-    outline = np.array(T_OUTLINE + (T_OUTLINE[0],))
+            rr.log(f"outcomes/final_xy/{name}", rr.Points2D(everyone.final[m, :2] * north_up, colors=[color], radii=0.002),
+                   static=True)
+    outline = np.array(T_OUTLINE + (T_OUTLINE[0],)) * north_up
     rr.log("outcomes/final_xy/target", rr.LineStrips2D([outline], colors=[[90, 204, 102]]), static=True)
     for name, values in (("final_y_histogram", everyone.final[:, 1]), ("final_yaw_histogram", yaw),
                          ("log10_gap_max_dev_histogram", np.log10(np.maximum(everyone.gap_max_dev, DEVIATION_FLOOR)))):
-        counts, centres = _histogram(values)
-        rr.log(f"outcomes/{name}", rr.BarChart(counts, abscissa=centres), static=True)
+        counts, centres, widths = _histogram(values)
+        rr.log(f"outcomes/{name}", rr.BarChart(counts, abscissa=centres, widths=widths), static=True)
 
 
 def record_sweep(path: Path, model: mujoco.MjModel, traced: Rollouts, everyone: Rollouts,

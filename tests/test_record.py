@@ -76,8 +76,9 @@ def _scalars(path, entity):
     for chunk in RrdReader(str(path)).stream():
         if str(chunk.entity_path) == entity:
             rb = chunk.to_record_batch()
-            col = [f.name for f in rb.schema if f.name.endswith("scalars")][0]
-            out += [v[0] for v in rb.column(col).to_pylist()]
+            cols = [f.name for f in rb.schema if f.name.endswith("scalars")]  # (a SeriesLines chunk has none)
+            if cols:
+                out += [v[0] for v in rb.column(cols[0]).to_pylist()]
     return np.array(out)
 
 
