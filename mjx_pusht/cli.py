@@ -50,6 +50,17 @@ def _positive_float(text: str) -> float:
     return v
 
 
+def _fraction(text: str) -> float:
+    """An argparse type: a number from 0 to 1."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0.0 <= v <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be a fraction from 0 to 1, got {text}")
+    return v
+
+
 def _seed(text: str) -> int:
     v = _nonneg(text)
     if v > 2**63 - 1:
@@ -98,6 +109,9 @@ def build_parser() -> argparse.ArgumentParser:
     w = sub.add_parser("sweep", help="many seeds at once on a backend; per_seed.parquet + summary.json")
     _batch_args(w, "sweep", "seeds", seeds="4096")
     w.add_argument("--steps", type=_positive, default=120, help="nudge length in steps (default 120)")
+    w.add_argument("--audit", type=_fraction, default=0.01, metavar="FRACTION",
+                   help="MJX backends: re-run this fraction of the rows (at least 64, at most 16,384) plus every "
+                        "flagged row on the CPU reference and record whether they agree (default 0.01; 0 skips)")
 
     e = sub.add_parser("eval", help="a controller on many start states: per_episode.parquet, success rate + interval")
     _batch_args(e, "eval", "episodes", seeds="512")
@@ -300,7 +314,16 @@ def cmd_sweep(args) -> int:
     finish(out, run)
     clock.lap("table_writing")
     summary["timing"] = clock.report(run.timing)
+    if name != "cpu" and args.audit > 0:
+        from mjx_pusht.audit import announce, audit
+
+        summary["audit"] = audit(backend, run.rollouts, combos, args.audit, welded=args.break_it == "none", out=out)
+        summary["timing"]["audit"] = round(clock.lap("audit"), 3)
+    elif name != "cpu":
+        summary["audit"] = {"skipped": "--audit 0"}
     atomic_write_json(out / "summary.json", summary)
+    if "agrees" in summary.get("audit", {}):
+        announce(summary["audit"])
     r = run.rollouts
     print(f"weld check: {summary['n_rigid']} of {len(r)} seeds RIGID ({summary['rigid_fraction']:.1%}), "
           f"{len(r) - summary['n_rigid']} SPLIT; non-finite: {summary['n_non_finite']}")
