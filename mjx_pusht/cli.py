@@ -269,15 +269,14 @@ def cmd_scene(args) -> int:
 
 
 def cmd_sweep(args) -> int:
-    from mjx_pusht.backends import make_backend, resolve
-    from mjx_pusht.outputs import atomic_write_json, prepare_out_dir
+    from mjx_pusht.backends import resolve
+    from mjx_pusht.outputs import atomic_write_json
     from mjx_pusht.params import parse_param
     from mjx_pusht.scenario import Scenario
     from mjx_pusht.schedule import Schedule
     from mjx_pusht.scene import SceneSpec
     from mjx_pusht.seeds import parse_seeds
-    from mjx_pusht.sweep import check_resumable, finish, rows_for, run_sweep, summarize
-    from mjx_pusht.tier import Banner
+    from mjx_pusht.sweep import finish, run_sweep, summarize
     from mjx_pusht.tree import read_tree
 
     seeds = parse_seeds(args.seeds)
@@ -288,14 +287,7 @@ def cmd_sweep(args) -> int:
     schedule = Schedule(nudge_steps=args.steps)
     config = {"backend": name, "break_it": args.break_it, "steps": args.steps, "params": [[n, list(v)] for n, v in params]}
     scenario = Scenario(SceneSpec(args.break_it), schedule, params)
-    row_seeds, combos = rows_for(seeds, len(scenario.grid()))
-    out = prepare_out_dir(args.out)
-    check_resumable(out, row_seeds, config, args.resume)
-    banner = Banner("sweep")
-    print(f"backend: {name} ({why})")
-    clock = Clock()
-    backend = make_backend(name, scenario)  # compiles the scene and checks its tree
-    clock.lap("backend_setup_and_tree_check")
+    row_seeds, combos, out, banner, clock, backend = _start_batch("sweep", args, seeds, name, why, config, scenario)
     print(read_tree(backend.model).describe())
     print(f"pusher shape simulated: {backend.pusher}" + (" (substituted: MJX's JAX backend has no cylinder-box collision)"
                                                           if backend.pusher != scenario.scene.pusher else ""))
@@ -344,6 +336,27 @@ def cmd_sweep(args) -> int:
     return 0
 
 
+def _start_batch(command: str, args, seeds, name: str, why: str, config: dict, scenario):
+    """What every batch command does before its first row: the rows, a writable --out that holds no
+    other unfinished run, the banner, and the backend (which compiles the scene and checks its tree)."""
+    from mjx_pusht.backends import make_backend
+    from mjx_pusht.outputs import prepare_out_dir
+    from mjx_pusht.rollout_cpu import default_threads
+    from mjx_pusht.sweep import check_resumable, rows_for
+    from mjx_pusht.tier import Banner
+
+    row_seeds, combos = rows_for(seeds, len(scenario.grid()))
+    out = prepare_out_dir(args.out)
+    check_resumable(out, row_seeds, config, args.resume)
+    banner = Banner(command)
+    print(f"backend: {name} ({why})")
+    clock = Clock()
+    # cpu: feedback episodes take a process per core (the sweep's open-loop rollout threads itself)
+    backend = make_backend(name, scenario, workers=default_threads() if command == "eval" else 1)
+    clock.lap("backend_setup_and_tree_check")
+    return row_seeds, combos, out, banner, clock, backend
+
+
 def _record(args, path: Path, rows: str, backend, r, combos, pick, writer, summary: dict, clock) -> None:
     """The recording of a batch command: the picked rows rerun with a trace and written by `writer`
     (or an earlier run's recording removed when this run is not recorded); its time joins the summary."""
@@ -362,17 +375,16 @@ def _record(args, path: Path, rows: str, backend, r, combos, pick, writer, summa
 
 
 def cmd_eval(args) -> int:
-    from mjx_pusht.backends import make_backend, resolve
+    from mjx_pusht.backends import resolve
     from mjx_pusht.controllers import describe, load
     from mjx_pusht.episode import Episode
     from mjx_pusht.evaluate import summarize_episodes
-    from mjx_pusht.outputs import atomic_write_json, prepare_out_dir
+    from mjx_pusht.outputs import atomic_write_json
     from mjx_pusht.params import parse_param
     from mjx_pusht.scenario import Scenario
     from mjx_pusht.scene import SceneSpec
     from mjx_pusht.seeds import parse_seeds
-    from mjx_pusht.sweep import check_resumable, finish, rows_for, run_sweep
-    from mjx_pusht.tier import Banner
+    from mjx_pusht.sweep import finish, run_sweep
 
     seeds = parse_seeds(args.seeds)
     params = tuple((n, tuple(v)) for n, v in (parse_param(t) for t in args.param))
@@ -385,16 +397,9 @@ def cmd_eval(args) -> int:
               "reset": args.reset, "break_it": args.break_it, "max_steps": args.max_steps,
               "frame_skip": args.frame_skip, "params": [[n, list(v)] for n, v in params]}
     scenario = Scenario(SceneSpec(args.break_it), params=params, reset=args.reset, controller=controller, episode=episode)
-    row_seeds, combos = rows_for(seeds, len(scenario.grid()))
-    out = prepare_out_dir(args.out)
-    check_resumable(out, row_seeds, config, args.resume)
-    banner = Banner("eval")
-    print(f"backend: {name} ({why})")
+    row_seeds, combos, out, banner, clock, backend = _start_batch("eval", args, seeds, name, why, config, scenario)
     from mjx_pusht.rollout_cpu import default_threads
 
-    clock = Clock()
-    backend = make_backend(name, scenario, workers=default_threads())  # cpu: a process per core
-    clock.lap("backend_setup_and_tree_check")
     print(f"controller: {describe(controller)}; reset: {args.reset}; {len(seeds)} episodes of at most "
           f"{args.max_steps} control steps x {args.frame_skip} physics steps; device: {backend.device}; "
           f"pusher shape: {backend.pusher}")
