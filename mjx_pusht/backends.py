@@ -171,5 +171,6 @@ def make_backend(name: str, scenario: Scenario, **kwargs):
         return CpuBackend(scenario, nthread=kwargs.get("nthread"), workers=kwargs.get("workers", 1))
     if name in ("mjx-jax", "mjx-warp"):
         kwargs.pop("nthread", None)
+        kwargs.pop("workers", None)  # CPU processes: the MJX backends batch on their device instead
         return MjxBackend(scenario, name.split("-")[1], **kwargs)
     raise BackendError(f"unknown backend {name!r}; choose from {', '.join(BACKENDS)}")
