@@ -34,6 +34,7 @@ class SweepRun:
     compile_seconds: float
     run_seconds: float
     timing: dict = dataclasses.field(default_factory=dict)  # seconds per phase of run_sweep
+    table: dict | None = None  # the chunk files' columns, concatenated: the table as written, scored once
 
 
 def rows_for(seeds: np.ndarray, n_combos: int) -> tuple[np.ndarray, np.ndarray]:
@@ -145,17 +146,19 @@ def run_sweep(
     wall = time.perf_counter() - t0
     compile_s = backend.compile_seconds - compile0
     tables = [read_table(parts / f"seeds-{lo:012d}-{hi:012d}.parquet") for lo, hi in _done_ranges(parts)]
-    rollouts = Rollouts.concat([Rollouts.from_columns(t) for t in tables])
+    table = {k: np.concatenate([t[k] for t in tables]) for k in tables[0]} if tables else {}
+    rollouts = Rollouts.from_columns(table) if tables else Rollouts.empty()
     if not np.array_equal(rollouts.seeds, seeds) or len(rollouts) != len(seeds):
         raise RuntimeError(f"chunk files in {parts} do not cover the sweep's seeds; remove the folder and rerun")
     timing["compile"] = compile_s
     timing["rollout"] = max(timing["rollout_and_compile"] - compile_s, 0.0)
-    return SweepRun(rollouts, {}, compile_s, max(wall - compile_s, 1e-9), timing)
+    return SweepRun(rollouts, {}, compile_s, max(wall - compile_s, 1e-9), timing, table)
 
 
 def finish(out: Path, run: SweepRun, *, name: str = "per_seed.parquet", episodes: bool = False) -> None:
-    """Write the table, then drop the chunk files (the table now holds them)."""
-    atomic_write_table(out / name, run.rollouts.columns(episodes=episodes))
+    """Write the table, then drop the chunk files (the table now holds them). The chunks were scored
+    as they were written, so the table is their columns, not a second scoring of every row."""
+    atomic_write_table(out / name, run.table if run.table else run.rollouts.columns(episodes=episodes))
     shutil.rmtree(out / PARTS, ignore_errors=True)
 
 

@@ -159,9 +159,9 @@ def _clip(pts, n, a, b):
     # candidates in order: vertex i (if kept), then edge i's crossing (if any)
     cand = xp.reshape(xp.stack([pts, cut], axis=-2), pts.shape[:-2] + (2 * _SLOTS, 2))
     emit = xp.reshape(xp.stack([keep, crosses], axis=-1), keep.shape[:-1] + (2 * _SLOTS,))
-    slot = xp.cumulative_sum(xp.astype(emit, xp.int32), axis=-1) - 1
-    pick = (slot[..., None, :] == xp.arange(_SLOTS)[:, None]) & emit[..., None, :]  # (..., 8, 16)
-    out = xp.sum(xp.where(pick[..., None], cand[..., None, :, :], 0.0), axis=-2)
+    # compact the emitted candidates to the front, in order: a stable sort of "not emitted"
+    src = xp.argsort(xp.astype(~emit, xp.int32), axis=-1, stable=True)[..., :_SLOTS]
+    out = _take(cand, src, xp)
     return out, xp.sum(xp.astype(emit, xp.int32), axis=-1)
 
 
