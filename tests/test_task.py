@@ -327,3 +327,18 @@ def test_mjx_warp_runs_the_expert_in_the_scan_and_agrees_with_the_cpu():
     c = run_cpu(sc, np.arange(2))
     assert r.episode["success"].tolist() == c.episode["success"].tolist() == [True, True]
     assert np.abs(r.episode["steps_to_success"] - c.episode["steps_to_success"]).max() <= 3
+
+
+@pytest.mark.warp
+def test_eval_on_mjx_warp_through_the_cli_matches_the_cpu_verdicts(tmp_path):
+    from mjx_pusht.rollout_mjx import warp_available
+
+    if not warp_available():
+        pytest.skip("warp-lang is not installed")
+    common = ["--seeds", "2", "--reset", "chapter", "--max-steps", "80", "--no-rerun", "--no-progress"]
+    assert main(["eval", *common, "--backend", "mjx-warp", "--out", str(tmp_path / "w")]) == 0
+    assert main(["eval", *common, "--backend", "cpu", "--out", str(tmp_path / "c")]) == 0
+    w, c = read_table(tmp_path / "w" / "per_episode.parquet"), read_table(tmp_path / "c" / "per_episode.parquet")
+    assert w["success"].tolist() == c["success"].tolist() == [True, True]
+    summary = json.loads((tmp_path / "w" / "summary.json").read_text())
+    assert summary["backend"] == "mjx-warp" and "primitive box_box" in summary["collision_functions"]["box-box"]
