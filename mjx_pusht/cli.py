@@ -173,16 +173,20 @@ def cmd_compare(args) -> int:
     seeds = parse_seeds(args.seeds)
     if args.backend not in ("mjx-jax", "mjx-warp"):
         raise BackendError(f"compare takes --backend mjx-jax or mjx-warp, not {args.backend!r}")
+    controller = None
+    if args.controller:  # a controller that cannot load is a one-line error before anything is written
+        from mjx_pusht.controllers import load
+
+        controller = load(args.controller)
     out = prepare_out_dir(args.out)
     banner = Banner("compare")
-    if args.controller:
+    if controller is not None:
         from mjx_pusht.compare import compare_episodes
-        from mjx_pusht.controllers import load
         from mjx_pusht.episode import Episode
 
         from mjx_pusht.rollout_cpu import default_threads
 
-        r = compare_episodes(seeds, args.backend.split("-")[1], out, controller=load(args.controller),
+        r = compare_episodes(seeds, args.backend.split("-")[1], out, controller=controller,
                              reset=args.reset, episode=Episode(max_steps=args.max_steps), workers=default_threads())
         d = r["success_difference_mjx_minus_cpu"]
         print(f"success: cpu {r['cpu']['success_rate']:.2%}, {r['impl']} {r['mjx']['success_rate']:.2%} "
