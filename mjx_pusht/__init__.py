@@ -6,6 +6,15 @@ The library API: build a `Scenario`, pick a backend, run seeds, read `Rollouts`.
     rows = make_backend("cpu", Scenario()).run(range(8))
 """
 
+import importlib.util as _util
+import os as _os
+import sys as _sys
+
+# Headless by default: MuJoCo picks its OpenGL when it is first imported, and on a machine with
+# no screen GLFW cannot open one. EGL renders without a display (MUJOCO_GL=osmesa for OSMesa).
+if _sys.platform.startswith("linux") and not _os.environ.get("DISPLAY"):
+    _os.environ.setdefault("MUJOCO_GL", "egl")
+
 from mjx_pusht.backends import make_backend, resolve
 from mjx_pusht.metrics import gap_deviation, stayed_rigid, weld_gap
 from mjx_pusht.reset import start_pose, start_poses
@@ -21,3 +30,8 @@ __all__ = [
     "start_pose", "start_poses", "stayed_rigid", "weld_gap",
 ]
 __version__ = "0.1.0"
+
+if _util.find_spec("gymnasium") is not None:  # gym.make("mjx_pusht/PushT-v0") after `import mjx_pusht`
+    from mjx_pusht.gym_env import register as _register
+
+    _register()

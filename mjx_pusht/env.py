@@ -15,6 +15,10 @@ On MJX `step_one(state, action)` is the pure single-world function: `step` is
 same call takes NumPy arrays and steps MuJoCo C (the state holds its own copies of the MjData,
 so an old state stays valid). `reset` draws start poses on the host from each seed's own
 generator (reset.py), the same on every backend.
+
+`pixels=96` adds obs["pixels"], (N, 96, 96, 3) uint8 from the top camera (pixels.py): rendered
+inside the jitted step on MJX-Warp, by MuJoCo C's renderer on cpu. `reset_where` starts new
+episodes in some rows and leaves the rest running (a vector env's autoreset).
 """
 
 from __future__ import annotations
@@ -64,6 +68,10 @@ class PushTEnv:
     action_type: str = "velocity"
     episode: Episode = Episode()
     scene: SceneSpec = SceneSpec()
+    pixels: int = 0  # image size for obs["pixels"]; 0: no images
+    threads: int = 1  # cpu: worlds stepped on this many threads at once (same bits as one)
+    # cpu: False steps the MjData in place (an old state is then stale): what a stateful vector env wants
+    keep_states: bool = True
 
     def __post_init__(self) -> None:
         from mjx_pusht.backends import BackendError
@@ -81,8 +89,11 @@ class PushTEnv:
 
             self.model = _model(self.scenario)
             self._xp = np
+            if self.pixels:
+                from mjx_pusht.pixels import CpuRenderer
+
+                self.renderer = CpuRenderer(self.model, self.pixels)
         else:
-            import jax
             import jax.numpy as jnp
 
             from mjx_pusht.rollout_mjx import (MjxConfig, MjxRunner, constraints_per_world, contacts_per_world,
@@ -99,7 +110,12 @@ class PushTEnv:
             self.model = self.runner.model
             self._xp = jnp
             self._mx = self.runner._row_model(self.runner._model_leaves(), 0)
-            self.step = jax.jit(jax.vmap(self.step_one))
+            if self.pixels and impl != "warp":
+                from mjx_pusht.pixels import PixelsError
+
+                raise PixelsError("pixel observations on MJX need MJX-Warp's renderer: use backend mjx-warp (or cpu)")
+            self._renderers, self._jitted = {}, {}
+            self.step = self._step_mjx
         self.layout = QposLayout.of(self.model)
 
     # -- reset ------------------------------------------------------------------------------------
@@ -119,25 +135,32 @@ class PushTEnv:
         if self.backend == "cpu":
             from mjx_pusht.rollout_cpu import _Lockstep
 
-            data = _Lockstep(self.model, self.model, qpos0, self.episode.frame_skip)
+            data = _Lockstep(self.model, self.model, qpos0, self.episode.frame_skip, self.threads)
             return self._state(data, begin(self.layout, qpos0, key, self._ctrl, self.episode, np), qpos0, key, 0)
         return self._reset_mjx(qpos0, key)
 
     def _reset_mjx(self, qpos0, key) -> State:
+        import jax.numpy as jnp
+
+        n = len(qpos0)
+        d0 = self.runner._initial_data(self.runner.devices[0], n)
+        q = jnp.asarray(qpos0, self.runner.dtype)
+        return self._batch_fns(n)[1](d0, q, jnp.asarray(key))
+
+    def _reset_batch(self, d0, q, k) -> State:
         import jax
         import jax.numpy as jnp
 
-        d0 = self.runner._initial_data(self.runner.devices[0], len(qpos0))
-        q = jnp.asarray(qpos0, self.runner.dtype)
-        data = jax.vmap(lambda qp: d0.replace(qpos=qp))(q)
-        k = jnp.asarray(key)
-        carry = jax.vmap(lambda qp, kk: begin(self.layout, qp, kk, self._ctrl, self.episode, jnp))(q, k)
-        return self._state(data, carry, q, k, jnp.zeros(len(qpos0), jnp.int32))
+        def one(qp, kk):
+            carry = begin(self.layout, qp, kk, self._ctrl, self.episode, jnp)
+            return self._state(d0.replace(qpos=qp), carry, qp, kk, jnp.zeros((), jnp.int32))
+
+        return jax.vmap(one)(q, k)
 
     def _state(self, data, carry, qpos, key, step) -> State:
         xp = self._xp
         ep = carry["ep"]
-        obs = observe(self.layout.pusher_xy(qpos), self.layout.tee_pose(qpos))
+        obs = self._observe(qpos, data)
         n = qpos.shape[:-1]
         # an episode that starts covered is terminated at reset, before any step
         return State(data, carry, obs, xp.zeros(n, dtype=qpos.dtype), ep["done"] & ep["success"],
@@ -170,15 +193,23 @@ class PushTEnv:
         terminated = ep["done"] & ep["success"]
         truncated = ~terminated & (step >= self.episode.max_steps)
         carry = {**carry, "ep": {**ep, "done": ep["done"] | truncated}}
+        return State(data, carry, self._observe(qpos, data), reward, terminated, truncated, step, state.key)
+
+    def _observe(self, qpos, data):
         obs = observe(self.layout.pusher_xy(qpos), self.layout.tee_pose(qpos))
-        return State(data, carry, obs, reward, terminated, truncated, step, state.key)
+        if self.pixels:
+            if self.backend == "cpu":
+                obs["pixels"] = self.renderer(qpos)
+            else:  # under vmap: this world's image, from the renderer made for this batch size
+                obs["pixels"] = self._renderer(data)
+        return obs
 
     def _step_cpu(self, state: State, action) -> State:
         """The batch's control step on MuJoCo C: the same episode.py functions on NumPy arrays."""
         action = np.asarray(action, np.float64)
         if action.shape != (len(state.step), 2):
             raise ValueError(f"actions must have shape ({len(state.step)}, 2), got {action.shape}")
-        worlds = state.data.copy()
+        worlds = state.data.copy() if self.keep_states else state.data
         u = to_ctrl(action, state.obs["state"][:, 0:2], self.action_type)
         live = ~state.carry["ep"]["done"]
         u = np.where(live[:, None], u, 0.0)
@@ -191,5 +222,70 @@ class PushTEnv:
         new = self._after(state, qs[-1].copy(), carry, np)
         return new._replace(data=worlds)
 
-    def step(self, state: State, action) -> State:  # replaced by jit(vmap(step_one)) on MJX
+    def step(self, state: State, action) -> State:  # replaced by _step_mjx on MJX
         return self._step_cpu(state, action)
+
+    # -- MJX: one compiled step per batch size (the renderer's buffers are sized to the batch) --------
+    def _batch_fns(self, n: int):
+        import jax
+
+        if n not in self._jitted:
+            if self.pixels:
+                from mjx_pusht.pixels import WarpRenderer
+
+                self._renderers[n] = WarpRenderer(self.model, n, self.pixels)
+            self._renderer = self._renderers.get(n)
+            self._jitted[n] = (jax.jit(jax.vmap(self.step_one)), jax.jit(self._reset_batch))
+        self._renderer = self._renderers.get(n)
+        return self._jitted[n]
+
+    def _step_mjx(self, state: State, action) -> State:
+        return self._batch_fns(len(state.step))[0](state, action)
+
+    # -- partial reset ----------------------------------------------------------------------------
+    def reset_where(self, state: State, mask, seeds=None, starts=None) -> State:
+        """`state` with the rows where `mask` holds started afresh (from `seeds`' start poses, or `starts`),
+        every other row untouched: how a vector env resets the episodes that ended."""
+        mask = np.asarray(mask, bool).reshape(-1)
+        rows = np.flatnonzero(mask)
+        if not len(rows):
+            return state
+        if starts is None:
+            seeds = np.asarray(seeds, np.int64).reshape(-1)
+            starts = start_poses(seeds, reset=self.reset_kind)
+            starts_seeds = seeds
+        else:
+            starts = np.atleast_2d(np.asarray(starts, np.float64))
+            starts_seeds = np.zeros(len(starts), np.int64) if seeds is None else np.asarray(seeds, np.int64)
+        if len(starts) != len(rows):
+            raise ValueError(f"{len(rows)} rows to reset but {len(starts)} start states")
+        if self.backend == "cpu":
+            fresh = self.reset_to(starts, starts_seeds)
+
+            def put(old, new):
+                out = np.array(old, copy=True)
+                out[rows] = new
+                return out
+
+            import jax
+
+            merged = jax.tree.map(put, state._replace(data=None), fresh._replace(data=None))
+            return merged._replace(data=state.data.splice(rows, fresh.data, inplace=not self.keep_states))
+        import jax
+        import jax.numpy as jnp
+
+        n = len(state.step)
+        full = np.zeros((n, starts.shape[1]))
+        full[rows] = starts
+        full_seeds = np.zeros(n, np.int64)
+        full_seeds[rows] = starts_seeds
+        fresh = self.reset_to(full, full_seeds)
+        m = jnp.asarray(mask)
+
+        def pick(old, new):
+            if new.ndim == 0 or new.shape[0] != n:
+                return old  # not a per-world array (MJX-Warp's shared contact buffers, recomputed every step)
+            c = m.reshape(m.shape + (1,) * (new.ndim - 1))
+            return jnp.where(c, new, old)
+
+        return jax.tree.map(pick, state, fresh)

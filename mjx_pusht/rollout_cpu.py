@@ -74,16 +74,21 @@ class _Replay:
 
 
 class _Lockstep:
-    """A feedback batch: one MjData per seed, stepped `frame_skip` times per control step."""
+    """A feedback batch: one MjData per seed, stepped `frame_skip` times per control step.
 
-    def __init__(self, models, model, qpos0, frame_skip):
+    With `threads` > 1 the worlds are stepped in that many slices at once: mj_step lets go of
+    Python's lock while it runs, and each world is still its own MjData, so the bits are the
+    same as one thread's (test).
+    """
+
+    def __init__(self, models, model, qpos0, frame_skip, threads: int = 1):
         self.models = models if isinstance(models, list) else [model] * len(qpos0)
         self.datas = []
         for m, q in zip(self.models, qpos0):
             d = mujoco.MjData(m)
             d.qpos[:] = q
             self.datas.append(d)
-        self.fs = frame_skip
+        self.fs, self.threads = frame_skip, threads
         n = len(qpos0)
         self.qpos = np.repeat(np.asarray(qpos0, np.float64)[None], frame_skip, axis=0)  # rows never stepped stay put
         self.qvel = np.zeros((frame_skip, n, model.nv))
@@ -92,16 +97,24 @@ class _Lockstep:
     def copy(self) -> "_Lockstep":
         """An independent copy (each MjData copied), so an earlier state can be stepped again."""
         new = object.__new__(_Lockstep)
-        new.models, new.fs = self.models, self.fs
+        new.models, new.fs, new.threads = self.models, self.fs, self.threads
         new.datas = [mujoco.MjData(m) for m in self.models]
         for m, src, dst in zip(self.models, self.datas, new.datas):
             mujoco.mj_copyData(dst, m, src)
         new.qpos, new.qvel, new.sens = self.qpos.copy(), self.qvel.copy(), self.sens.copy()
         return new
 
-    def advance(self, u, live):
+    def splice(self, rows, other: "_Lockstep", inplace: bool = False) -> "_Lockstep":
+        """This batch with `rows` taken from `other` (a batch of len(rows) worlds): a partial reset."""
+        new = self if inplace else self.copy()
+        for j, i in enumerate(np.asarray(rows)):
+            mujoco.mj_copyData(new.datas[i], other.models[j], other.datas[j])
+            new.qpos[:, i], new.qvel[:, i], new.sens[:, i] = other.qpos[:, j], other.qvel[:, j], other.sens[:, j]
+        return new
+
+    def _step_rows(self, u, rows):
         step = mujoco.mj_step
-        for i in np.flatnonzero(live):  # an ended episode is not stepped: nothing it does is kept
+        for i in rows:
             m, d = self.models[i], self.datas[i]
             d.ctrl[:] = u[i]
             for j in range(self.fs):
@@ -109,7 +122,21 @@ class _Lockstep:
                 self.qpos[j, i] = d.qpos
                 self.qvel[j, i] = d.qvel
                 self.sens[j, i] = d.sensordata
+
+    def advance(self, u, live):
+        rows = np.flatnonzero(live)  # an ended episode is not stepped: nothing it does is kept
+        if self.threads > 1 and len(rows) >= 2 * self.threads:
+            list(_thread_pool(self.threads).map(lambda r: self._step_rows(u, r), np.array_split(rows, self.threads)))
+        else:
+            self._step_rows(u, rows)
         return self.qpos, self.qvel, self.sens
+
+
+@functools.lru_cache(maxsize=4)
+def _thread_pool(threads: int):
+    from concurrent.futures import ThreadPoolExecutor
+
+    return ThreadPoolExecutor(max_workers=threads, thread_name_prefix="mj_step")
 
 
 class FeedbackPool:

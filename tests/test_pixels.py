@@ -1,0 +1,148 @@
+"""Pixel observations show the scene where the camera model puts it, in the same colours on both renderers."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from mjx_pusht.pixels import CAMERA, CpuRenderer, PixelsError, view_model
+from mjx_pusht.reset import QposLayout
+from mjx_pusht.scene import SceneSpec, build_model
+from mjx_pusht.task import T_RECTS, to_pixels
+
+SIZE = 96
+
+
+@pytest.fixture(scope="module")
+def model():
+    return build_model(SceneSpec())
+
+
+@pytest.fixture(scope="module")
+def renderer(model):
+    r = CpuRenderer(model, SIZE)
+    yield r
+    r.close()
+
+
+def _project(model, points, size):
+    """World points -> pixel (column, row) from MuJoCo's own camera pose and an orthographic lens of
+    height cam_fovy metres: independent of task.to_pixels."""
+    view = view_model(model, size)
+    d = mujoco.MjData(view)
+    mujoco.mj_forward(view, d)
+    cam = view.camera(CAMERA).id
+    assert view.cam_projection[cam] == mujoco.mjtProjection.mjPROJ_ORTHOGRAPHIC
+    pos, axes = d.cam_xpos[cam], d.cam_xmat[cam].reshape(3, 3)  # columns: camera x (right), y (up), z (back)
+    half = view.cam_fovy[cam] / 2
+    rel = np.c_[points, np.zeros(len(points))] - pos
+    u, v = rel @ axes[:, 0], rel @ axes[:, 1]
+    return np.c_[(u / half + 1) * size / 2, (1 - v / half) * size / 2]
+
+
+def _inside_rects(points, pose, margin):
+    """Which points lie inside the T at `pose` by more than `margin`, and which outside it by more than `margin`."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    dx, dy = points[:, 0] - pose[0], points[:, 1] - pose[1]
+    lx, ly = c * dx + s * dy, -s * dx + c * dy
+    inside = np.zeros(len(points), bool)
+    outside = np.ones(len(points), bool)
+    for cx, cy, hx, hy in T_RECTS:
+        inside |= (abs(lx - cx) < hx - margin) & (abs(ly - cy) < hy - margin)
+        outside &= (abs(lx - cx) > hx + margin) | (abs(ly - cy) > hy + margin)
+    return inside, outside
+
+
+def _pixel_centres(model, size):
+    """The world point at each pixel centre, by inverting the independent projection on a grid."""
+    # the projection is affine: solve it from three points
+    probe = np.array([[0.0, 0.0], [0.1, 0.0], [0.0, 0.1]])
+    px = _project(model, probe, size)
+    origin, du, dv = px[0], (px[1] - px[0]) / 0.1, (px[2] - px[0]) / 0.1
+    jac = np.c_[du, dv]
+    cols, rows = np.meshgrid(np.arange(size) + 0.5, np.arange(size) + 0.5)
+    pix = np.c_[cols.ravel(), rows.ravel()]
+    return np.linalg.solve(jac, (pix - origin).T).T
+
+
+def _colour(model, geom, size):
+    return np.round(view_model(model, size).geom_rgba[model.geom(geom).id, :3] * 255).astype(int)
+
+
+def test_the_target_t_is_where_the_camera_model_puts_it(model, renderer):
+    layout = QposLayout.of(model)
+    # the block and the pusher parked in a far corner, away from the target
+    img = renderer(layout.initial_qpos(model, np.array([[0.27, 0.27, 0.0, -0.3, -0.3]])))[0]
+    world = _pixel_centres(model, SIZE)
+    pixel = 0.78 / SIZE
+    inside, outside = _inside_rects(world, (0.0, 0.0, 0.0), margin=0.1 * pixel)
+    near_origin = np.hypot(world[:, 0], world[:, 1]) < 0.2  # keep the block and pusher out of the check
+    flat = img.reshape(-1, 3).astype(int)
+    target, table = _colour(model, "target_bar", SIZE), _colour(model, "table", SIZE)
+    assert inside.sum() > 80  # the T covers about 110 pixels at 96 x 96
+    assert (abs(flat[inside] - target) <= 1).all()
+    assert (abs(flat[outside & near_origin] - table) <= 1).all()
+    # and the projection agrees with the documented pixel frame (task.to_pixels) to a hundredth of a pixel
+    pts = np.array([[0.06, 0.015], [-0.015, -0.105], [0.3, -0.2]])
+    np.testing.assert_allclose(_project(model, pts, SIZE), to_pixels(pts, SIZE), atol=1e-2)
+
+
+def test_the_translucent_target_is_drawn_in_the_colour_it_shows_over_the_table(model):
+    authored = model.geom_rgba[model.geom("target_bar").id]
+    table = model.geom_rgba[model.geom("table").id, :3]
+    assert authored[3] == 0.5  # the chapter's translucent green T
+    blended = np.round((authored[3] * authored[:3] + (1 - authored[3]) * table) * 255)
+    np.testing.assert_array_equal(_colour(model, "target_bar", SIZE), blended)
+    assert model.cam_projection[model.camera(CAMERA).id] == mujoco.mjtProjection.mjPROJ_PERSPECTIVE  # untouched
+
+
+def test_a_rotated_block_covers_exactly_its_own_pixels(model, renderer):
+    layout = QposLayout.of(model)
+    pose = (0.12, -0.08, 0.7)
+    img = renderer(layout.initial_qpos(model, np.array([[*pose, -0.3, 0.3]])))[0]
+    world = _pixel_centres(model, SIZE)
+    inside, outside = _inside_rects(world, pose, margin=0.1 * 0.78 / SIZE)
+    flat = img.reshape(-1, 3).astype(int)
+    tee = _colour(model, "tee_bar", SIZE)
+    assert inside.sum() > 80
+    assert (abs(flat[inside] - tee) <= 1).all()
+    assert not (abs(flat[outside] - tee) <= 1).all(axis=1).any()
+
+
+def test_bad_sizes_and_missing_gl_are_one_line(model, monkeypatch):
+    with pytest.raises(ValueError, match="image size"):
+        CpuRenderer(model, 3)
+
+    def broken(*a, **k):
+        raise RuntimeError("eglInitialize failed\nmore")
+
+    monkeypatch.setattr(mujoco, "Renderer", broken)
+    with pytest.raises(PixelsError, match="apt-get install") as e:
+        CpuRenderer(model, SIZE)
+    assert "\n" not in str(e.value)
+
+
+@pytest.mark.warp
+def test_mjx_warp_renders_the_cpus_image_of_the_same_states():
+    """MJX-Warp's ray tracer (through Warp's CPU device here) against MuJoCo C's OpenGL, same states."""
+    from mjx_pusht.env import PushTEnv
+    from mjx_pusht.rollout_mjx import warp_available
+
+    if not warp_available():
+        pytest.skip("warp-lang is not installed")
+    seeds = np.arange(4)
+    cpu, warp = PushTEnv(backend="cpu", pixels=SIZE), PushTEnv(backend="mjx-warp", pixels=SIZE)
+    a, b = cpu.reset(seeds), warp.reset(seeds)
+    act = np.tile([[0.3, 0.4]], (len(seeds), 1))
+    for _ in range(3):
+        a, b = cpu.step(a, act), warp.step(b, act)
+    pa, pb = a.obs["pixels"], np.asarray(b.obs["pixels"])
+    assert pb.dtype == np.uint8 and pb.shape == pa.shape == (4, SIZE, SIZE, 3)
+    differ = (pa != pb).any(axis=-1)
+    # the same colours (exact bytes) and the same geometry, but for a pixel whose centre falls on an edge
+    assert differ.mean() < 1e-3, differ.sum()
+    for i in range(len(seeds)):
+        colours_a, counts_a = np.unique(pa[i].reshape(-1, 3), axis=0, return_counts=True)
+        colours_b, counts_b = np.unique(pb[i].reshape(-1, 3), axis=0, return_counts=True)
+        np.testing.assert_array_equal(colours_a[counts_a > 4], colours_b[counts_b > 4])
