@@ -76,32 +76,78 @@ def compare_rows(mjx: Rollouts, cpu: Rollouts) -> dict:
     }
 
 
-def audit(backend, rows: Rollouts, combos: np.ndarray, fraction: float, *, welded: bool,
-          out: Path | None = None) -> dict:
-    """Re-run the sampled rows of an MJX sweep on the CPU reference and compare (see the module's doc)."""
-    from mjx_pusht.outputs import atomic_write_table
-    from mjx_pusht.reset import start_poses
-    from mjx_pusht.rollout_cpu import run_cpu
+def _cpu_scenario(backend):
     from mjx_pusht.scenario import Scenario
 
-    idx = sample_rows(len(rows), fraction, flagged(rows, welded))
-    scenario = backend.scenario
-    cpu_scenario = Scenario(backend.runner.scene, scenario.schedule, scenario.params, scenario.reset,
-                            scenario.controller, scenario.episode)
-    seeds = rows.seeds[idx]
-    cpu = run_cpu(cpu_scenario, seeds, combos=combos[idx], poses=start_poses(seeds, reset=scenario.reset))
-    picked = Rollouts(**{f: getattr(rows, f)[idx] for f in ("seeds", "start", "settled", "final", "pusher_final",
-                                                              "gap_settled", "gap_max_dev", "finite", "contained")})
-    block = compare_rows(picked, cpu)
-    block["fraction"] = fraction
-    block["n_flagged"] = int(flagged(rows, welded).sum())
-    block["cpu_pusher_shape"] = backend.runner.scene.pusher
-    if out is not None:
-        cols = cpu.columns()
-        cols["row"] = idx
-        atomic_write_table(out / "audit_cpu.parquet", cols)
-        block["cpu_rows"] = "audit_cpu.parquet"
-    return block
+    sc = backend.scenario
+    return Scenario(backend.runner.scene, sc.schedule, sc.params, sc.reset, sc.controller, sc.episode)
+
+
+class Audit:
+    """The audit of one sweep, overlapped with it: `start` puts the seeded sample's CPU rows on a
+    background thread as soon as the start poses exist (the device is busy with the sweep meanwhile);
+    `finish` adds the flagged rows, which only the sweep's results can name, and compares."""
+
+    def __init__(self, backend, seeds: np.ndarray, combos: np.ndarray, fraction: float):
+        self.backend, self.seeds, self.combos, self.fraction = backend, np.asarray(seeds), np.asarray(combos), fraction
+        self.random = sample_rows(len(seeds), fraction, np.zeros(len(seeds), bool))
+        self.future = None
+
+    def start(self, poses=None) -> None:
+        """Start the sample's CPU rows (their start poses drawn here: under several processes the
+        sweep's own `poses` hold only this process's block)."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        from mjx_pusht.reset import start_poses
+        from mjx_pusht.rollout_cpu import run_cpu
+
+        self.reset = self.backend.scenario.reset
+        idx = self.random
+        poses = start_poses(self.seeds[idx], reset=self.reset)
+        pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="audit")
+        self.future = pool.submit(run_cpu, _cpu_scenario(self.backend), self.seeds[idx], combos=self.combos[idx],
+                                  poses=poses)
+        pool.shutdown(wait=False)
+
+    def finish(self, rows: Rollouts, *, welded: bool, out: Path | None = None) -> dict:
+        from mjx_pusht.rollout_cpu import run_cpu
+
+        from mjx_pusht.reset import start_poses
+
+        if self.future is None:
+            self.start()
+        flags = flagged(rows, welded)
+        idx = sample_rows(len(rows), self.fraction, flags)  # the random sample plus every flagged row
+        extra = np.setdiff1d(idx, self.random)
+        parts = [(self.random, self.future.result())]
+        if len(extra):
+            parts.append((extra, run_cpu(_cpu_scenario(self.backend), self.seeds[extra], combos=self.combos[extra],
+                                         poses=start_poses(self.seeds[extra], reset=self.reset))))
+        order = np.argsort(np.concatenate([p[0] for p in parts]), kind="stable")
+        cpu = Rollouts.concat([p[1] for p in parts])
+        cpu = Rollouts(**{f: getattr(cpu, f)[order] for f in ("seeds", "start", "settled", "final", "pusher_final",
+                                                              "gap_settled", "gap_max_dev", "finite", "contained")},
+                       params={k: v[order] for k, v in cpu.params.items()} if cpu.params else None)
+        picked = Rollouts(**{f: getattr(rows, f)[idx] for f in ("seeds", "start", "settled", "final", "pusher_final",
+                                                                  "gap_settled", "gap_max_dev", "finite", "contained")})
+        block = compare_rows(picked, cpu)
+        block["fraction"] = self.fraction
+        block["n_flagged"] = int(flags.sum())
+        block["cpu_pusher_shape"] = self.backend.runner.scene.pusher
+        if out is not None:
+            from mjx_pusht.outputs import atomic_write_table
+
+            cols = cpu.columns()
+            cols["row"] = idx
+            atomic_write_table(out / "audit_cpu.parquet", cols)
+            block["cpu_rows"] = "audit_cpu.parquet"
+        return block
+
+
+def audit(backend, rows: Rollouts, combos: np.ndarray, fraction: float, *, welded: bool,
+          out: Path | None = None) -> dict:
+    """Re-run the sampled rows of a finished MJX sweep on the CPU reference and compare (see the module's doc)."""
+    return Audit(backend, rows.seeds, combos, fraction).finish(rows, welded=welded, out=out)
 
 
 def announce(block: dict) -> None:

@@ -140,6 +140,13 @@ class MjxBackend:
             poses=None) -> Rollouts:
         return self.runner.run(seeds, trace=trace, batch=batch, combos=combos, poses=poses)
 
+    def submit(self, seeds: np.ndarray, *, batch: int | None = None, combos=None, poses=None):
+        """Start a rollout and return at once (the device works while the host does); `collect` finishes it."""
+        return self.runner.submit(seeds, batch=batch, combos=combos, poses=poses)
+
+    def collect(self, pending) -> Rollouts:
+        return self.runner.collect(pending)
+
 
 def has_gpu() -> bool:
     try:

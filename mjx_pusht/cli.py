@@ -112,6 +112,10 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--audit", type=_fraction, default=0.01, metavar="FRACTION",
                    help="MJX backends: re-run this fraction of the rows (at least 64, at most 16,384) plus every "
                         "flagged row on the CPU reference and record whether they agree (default 0.01; 0 skips)")
+    w.add_argument("--num-processes", type=_positive, default=1,
+                   help="processes sharing this sweep through jax.distributed, one a host or GPU (default 1)")
+    w.add_argument("--process-id", type=_nonneg, default=0, help="this process's index, 0 .. N-1 (0 writes the table)")
+    w.add_argument("--coordinator", default=None, metavar="HOST:PORT", help="where process 0 listens")
 
     e = sub.add_parser("eval", help="a controller on many start states: per_episode.parquet, success rate + interval")
     _batch_args(e, "eval", "episodes", seeds="512")
@@ -122,6 +126,10 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--reset", choices=("task", "chapter"), default="task", help="start distribution (default task)")
     e.add_argument("--max-steps", type=_positive, default=300, help="control steps before truncation (default 300)")
     e.add_argument("--frame-skip", type=_positive, default=10, help="physics steps per control step (default 10)")
+    e.add_argument("--video", type=Path, default=None, metavar="FILE.gif|FILE.mp4",
+                   help="the first --video-episodes episodes as a grid of tiles, coverage on each (rendered on the CPU)")
+    e.add_argument("--video-episodes", type=_positive, default=16, help="tiles in --video (default 16)")
+    e.add_argument("--video-size", type=_int_at_least(32), default=128, help="pixels per tile side (default 128)")
 
     c = sub.add_parser("compare", help="CPU vs MJX fidelity report: compare.json, compare.md, compare.png")
     c.add_argument("--seeds", default="64", help="N, A:B or a,b,c (default 64)")
@@ -283,38 +291,57 @@ def cmd_sweep(args) -> int:
     from mjx_pusht.sweep import finish, run_sweep, summarize
     from mjx_pusht.tree import read_tree
 
+    from mjx_pusht.distributed import Processes
+
     seeds = parse_seeds(args.seeds)
     params = tuple((n, tuple(v)) for n, v in (parse_param(t) for t in args.param))
     if len({n for n, _ in params}) != len(params):
         raise UsageError("each --param NAME may be given once")
+    processes = Processes(args.process_id, args.num_processes, args.coordinator)
+    processes.initialize()  # before anything asks JAX for its devices
     name, why = resolve(args.backend)
     schedule = Schedule(nudge_steps=args.steps)
     config = {"backend": name, "break_it": args.break_it, "steps": args.steps, "params": [[n, list(v)] for n, v in params]}
     scenario = Scenario(SceneSpec(args.break_it), schedule, params)
-    row_seeds, combos, out, banner, clock, backend = _start_batch("sweep", args, seeds, name, why, config, scenario)
+    row_seeds, combos, out, banner, clock, backend = _start_batch("sweep", args, seeds, name, why, config, scenario,
+                                                                  check=processes.leader)
     print(read_tree(backend.model).describe())
     print(f"pusher shape simulated: {backend.pusher}" + (" (substituted: MJX's JAX backend has no cylinder-box collision)"
                                                           if backend.pusher != scenario.scene.pusher else ""))
     print(f"device: {backend.device}; {len(seeds)} seeds x {schedule.total_steps} steps "
           f"({schedule.settle_steps} settle + {schedule.nudge_steps} nudge)"
           + (f" x {len(scenario.grid())} parameter combinations ({', '.join(n for n, _ in params)})" if params else ""))
+    auditor = None
+    if name != "cpu" and args.audit > 0 and processes.leader:
+        from mjx_pusht.audit import Audit
+
+        auditor = Audit(backend, row_seeds, combos, args.audit)  # its CPU rows run beside the device's
     try:
         run = run_sweep(backend, row_seeds, out, config=config, chunk=args.chunk, resume=args.resume,
-                        progress=args.progress, combos=combos)
+                        progress=args.progress, combos=combos, on_start=auditor.start if auditor else None,
+                        processes=processes)
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished chunks are kept in {out}; rerun with --resume to finish", file=sys.stderr)
         return 130
+    if processes.many:
+        run = _join_processes(processes, run, out, row_seeds)
+        if not processes.leader:
+            lo, hi = processes.block(len(row_seeds))
+            print(f"process {processes.process_id}: rows {lo}..{hi - 1} written to {out / '.parts'}; "
+                  "process 0 writes the table")
+            banner.done()
+            return 0
     clock.lap("sweep")
     summary = summarize(run.rollouts, backend=backend, schedule=schedule, break_it=args.break_it,
-                        compile_s=run.compile_seconds, run_s=run.run_seconds)
+                        compile_s=run.compile_seconds, run_s=run.run_seconds, table=run.table)
     finish(out, run)
     clock.lap("table_writing")
     summary["timing"] = clock.report(run.timing)
-    if name != "cpu" and args.audit > 0:
-        from mjx_pusht.audit import announce, audit
+    if auditor is not None:
+        from mjx_pusht.audit import announce
 
-        summary["audit"] = audit(backend, run.rollouts, combos, args.audit, welded=args.break_it == "none", out=out)
-        summary["timing"]["audit"] = round(clock.lap("audit"), 3)
+        summary["audit"] = auditor.finish(run.rollouts, welded=args.break_it == "none", out=out)
+        summary["timing"]["audit_wait"] = round(clock.lap("audit_wait"), 3)  # what the overlap did not hide
     elif name != "cpu":
         summary["audit"] = {"skipped": "--audit 0"}
     atomic_write_json(out / "summary.json", summary)
@@ -340,7 +367,24 @@ def cmd_sweep(args) -> int:
     return 0
 
 
-def _start_batch(command: str, args, seeds, name: str, why: str, config: dict, scenario):
+def _join_processes(processes, run, out: Path, row_seeds):
+    """Wait for every process's chunks; process 0 then holds the whole sweep's table, read from them."""
+    import dataclasses
+    import time
+
+    from mjx_pusht.sweep import PARTS, assemble
+
+    t0 = time.perf_counter()
+    processes.barrier("chunks-written")
+    waited = time.perf_counter() - t0
+    if not processes.leader:
+        return run
+    table, rollouts = assemble(out / PARTS, row_seeds, None, 0)
+    timing = {**run.timing, "waiting_for_other_processes": waited}
+    return dataclasses.replace(run, rollouts=rollouts, table=table, run_seconds=run.run_seconds + waited, timing=timing)
+
+
+def _start_batch(command: str, args, seeds, name: str, why: str, config: dict, scenario, check: bool = True):
     """What every batch command does before its first row: the rows, a writable --out that holds no
     other unfinished run, the banner, and the backend (which compiles the scene and checks its tree)."""
     from mjx_pusht.backends import make_backend
@@ -351,7 +395,8 @@ def _start_batch(command: str, args, seeds, name: str, why: str, config: dict, s
 
     row_seeds, combos = rows_for(seeds, len(scenario.grid()))
     out = prepare_out_dir(args.out)
-    check_resumable(out, row_seeds, config, args.resume)
+    if check:  # with several processes, process 0 checks (and clears) the folder for all
+        check_resumable(out, row_seeds, config, args.resume)
     banner = Banner(command)
     print(f"backend: {name} ({why})")
     clock = Clock()
@@ -378,6 +423,26 @@ def _record(args, path: Path, rows: str, backend, r, combos, pick, writer, summa
     print(f"recording: {path} ({len(shown)} {rows} side by side) - open it with: rerun {path}")
 
 
+def _video(args, backend, r, combos, episode, summary: dict, clock) -> None:
+    """The first episodes rerun with a trace and drawn as a grid of tiles (video.py)."""
+    from mjx_pusht.outputs import atomic_write_json
+    from mjx_pusht.reset import QposLayout
+    from mjx_pusht.video import episode_grid, write
+
+    shown = np.arange(min(args.video_episodes, len(r)))
+    traced = backend.run(r.seeds[shown], trace=True, combos=combos[shown])
+    # the video ends a second after the last shown episode does
+    last = min(int(np.max(traced.episode["length"])) + 10, episode.max_steps)
+    frames = episode_grid(backend.model, traced.trace.qpos[:, : last * episode.frame_skip + 1],
+                          QposLayout.of(backend.model), r.seeds[shown], episode.frame_skip, episode.success,
+                          args.video_size)
+    fps = 1 / (episode.frame_skip * traced.trace.dt)
+    write(args.video, frames, fps)
+    summary["timing"]["video"] = round(clock.lap("video"), 3)
+    atomic_write_json(Path(args.out) / "summary.json", summary)
+    print(f"video: {args.video} ({len(shown)} episodes, {len(frames)} frames at {fps:g} per second)")
+
+
 def cmd_eval(args) -> int:
     from mjx_pusht.backends import resolve
     from mjx_pusht.controllers import describe, load
@@ -396,6 +461,10 @@ def cmd_eval(args) -> int:
         raise UsageError("each --param NAME may be given once")
     episode = Episode(frame_skip=args.frame_skip, max_steps=args.max_steps)
     controller = load(args.controller, action_type=args.action, frame_skip=args.frame_skip)
+    if args.video is not None:
+        from mjx_pusht.video import check_path
+
+        check_path(args.video)  # a bad name or a missing encoder fails now, not after the episodes
     name, why = resolve(args.backend)
     config = {"command": "eval", "backend": name, "controller": args.controller, "action": controller.action_type,
               "reset": args.reset, "break_it": args.break_it, "max_steps": args.max_steps,
@@ -446,6 +515,8 @@ def cmd_eval(args) -> int:
 
     _record(args, out / "eval.rrd", "episodes", backend, r, combos, lambda: np.arange(min(args.record, len(r))),
             record_episodes, summary, clock)
+    if args.video is not None:
+        _video(args, backend, r, combos, episode, summary, clock)
     banner.done()
     return 0
 

@@ -187,8 +187,8 @@ class MjxRunner:
         self.scene = simulated_scene(scenario, cfg.impl)
         self.model = _mj_model(self.scene, cfg)
         self.layout = QposLayout.of(self.model)
-        # MJX-Warp runs one program per local GPU; under jax.distributed only local ones are reachable
-        self.devices = list(devices) if devices else (jax.local_devices() if cfg.impl == "warp" else jax.devices())
+        # this process's devices: with several processes (distributed.py) each runs its own block of rows
+        self.devices = list(devices) if devices else jax.local_devices()
         self.compile_seconds = 0.0
         self._fns: dict = {}
         self.buffers = (
@@ -371,7 +371,12 @@ class MjxRunner:
     def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None,
             poses: np.ndarray | None = None) -> Rollouts:
         """Roll out `seeds` (padded up to `batch` so one compiled shape serves every chunk)."""
-        import jax
+        return self.collect(self.submit(seeds, trace=trace, batch=batch, combos=combos, poses=poses))
+
+    def submit(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None,
+               poses: np.ndarray | None = None) -> "Pending":
+        """Start a rollout on the device thread and return at once; `collect` waits for it and scores it.
+        A sweep submits chunk k + 1 before it collects chunk k, so the host's work hides behind the device's."""
         import jax.numpy as jnp
 
         seeds = np.asarray(seeds, dtype=np.int64)
@@ -385,21 +390,30 @@ class MjxRunner:
         launch = self._fns[key]
         poses = start_poses(seeds, reset=self.scenario.reset) if poses is None else poses
         qpos0 = self.layout.initial_qpos(self.model, np.concatenate([poses, np.repeat(poses[-1:], batch - n, 0)]))
-        key = seed_key(np.concatenate([seeds, np.repeat(seeds[-1:], batch - n)]))
-        qpos0 = jnp.asarray(qpos0, self.dtype)
+        rng_key = seed_key(np.concatenate([seeds, np.repeat(seeds[-1:], batch - n)]))
         combos = np.zeros(n, np.int64) if combos is None else np.asarray(combos, np.int64)
-        combo = jnp.asarray(np.concatenate([combos, np.repeat(combos[-1:], batch - n)]), jnp.int32)
-        carry, ovf, qs = launch(qpos0, jnp.asarray(key), combo)
+        combo = np.concatenate([combos, np.repeat(combos[-1:], batch - n)]).astype(np.int32)
+        qpos0 = np.asarray(qpos0, self.dtype)
+        future = _device_thread().submit(lambda: launch(jnp.asarray(qpos0), jnp.asarray(rng_key), jnp.asarray(combo)))
+        return Pending(seeds, poses, combos, qpos0, batch, trace, future)
+
+    def collect(self, p: "Pending") -> Rollouts:
+        """The submitted rollout's rows, checked: dropped contacts grow the buffers and rerun, or fail loudly."""
+        import jax
+
+        seeds, poses, combos, n = p.seeds, p.poses, p.combos, len(p.seeds)
+        carry, ovf, qs = p.future.result()
         ovf = np.asarray(ovf)[:n]
         dropped = (ovf & _DROP_BITS) != 0
         if dropped.any() and self._grow():
-            return self.run(seeds, trace=trace, batch=batch, combos=combos, poses=poses)
+            return self.run(seeds, trace=p.trace, batch=p.batch, combos=combos, poses=poses)
         if dropped.any():
             raise BufferOverflow(
                 f"MJX-Warp buffers overflowed in {int(dropped.sum())} of {n} seeds (bits {int(np.bitwise_or.reduce(ovf)):#x}): "
                 "contacts or constraint rows were dropped, so these results are not physics; "
                 f"the buffers were fixed at {self.buffers} (contacts, rows) per world: raise them"
             )
+        trace, qpos0 = p.trace, p.qpos0
         f64 = lambda a: np.asarray(a, np.float64)[:n]  # noqa: E731
         carry = jax.tree.map(lambda a: np.asarray(a)[:n], carry)
         q0 = np.asarray(qpos0, np.float64)[:n]
@@ -415,6 +429,26 @@ class MjxRunner:
                 raise RuntimeError(f"{self.cfg.impl}: the per-step trace disagrees with the carried final state; "
                                    "the trace is not trustworthy on this device")
         return out
+
+
+@dataclasses.dataclass
+class Pending:
+    """A submitted rollout: its inputs, and the device thread's future for (carry, overflow bits, trace)."""
+
+    seeds: np.ndarray
+    poses: np.ndarray
+    combos: np.ndarray
+    qpos0: np.ndarray
+    batch: int
+    trace: bool
+    future: object
+
+
+@functools.lru_cache(maxsize=1)
+def _device_thread():
+    """One thread launches rollouts, in order: MJX-Warp's program reads its loop predicate on the host, so a
+    launch blocks until the device is done; from this thread it blocks nobody else."""
+    return ThreadPoolExecutor(max_workers=1, thread_name_prefix="mjx-launch")
 
 
 @functools.lru_cache(maxsize=8)

@@ -13,6 +13,7 @@ import json
 import shutil
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -88,23 +89,32 @@ def run_sweep(
     progress: bool = True,
     combos: np.ndarray | None = None,
     episodes: bool = False,
+    on_start=None,
+    processes=None,
 ) -> SweepRun:
     """Run every row (seed, or seed x parameter combination) in chunks, writing each chunk as it lands."""
     from tqdm import tqdm
 
+    from mjx_pusht.distributed import Processes
+
+    processes = processes or Processes()
     combos = np.zeros(len(seeds), np.int64) if combos is None else np.asarray(combos)
     parts = out / PARTS
-    check_resumable(out, seeds, config, resume)
-    if not resume and parts.exists():
-        shutil.rmtree(parts)
-    parts.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(parts / "manifest.json", _fingerprint(seeds, config))
+    if processes.leader:  # one process clears and stamps the folder; the rest wait for it
+        check_resumable(out, seeds, config, resume)
+        if not resume and parts.exists():
+            shutil.rmtree(parts)
+        parts.mkdir(parents=True, exist_ok=True)
+        atomic_write_json(parts / "manifest.json", _fingerprint(seeds, config))
+    processes.barrier("parts-ready")
+    first, last = processes.block(len(seeds))  # this process's rows; all of them for one process
     if not chunk and len(seeds):
         # the backend's default, but never a small sweep padded up to it (MJX: a multiple of its devices)
         n_dev = len(getattr(getattr(backend, "runner", None), "devices", None) or [None])
         chunk = min(backend.default_chunk, -(-len(seeds) // n_dev) * n_dev)
     chunk = int(chunk or backend.default_chunk)
-    done = np.zeros(len(seeds), bool)
+    done = np.ones(len(seeds), bool)
+    done[first:last] = False  # rows outside the block are other processes' work
     for lo, hi in _done_ranges(parts):
         done[lo:hi] = True
     todo = np.flatnonzero(~done)
@@ -116,43 +126,106 @@ def run_sweep(
     poses = np.zeros((len(seeds), 3 if reset == "chapter" else 5))
     poses[todo] = start_poses(seeds[todo], reset=reset)  # once for the whole sweep, vectorised over seeds
     timing = {"start_poses": time.perf_counter() - t_poses, "rollout_and_compile": 0.0, "scoring_and_chunk_writing": 0.0}
+    if on_start is not None:
+        on_start(poses)  # e.g. the audit's CPU rows, run beside the device's
     t0 = time.perf_counter()
     compile0 = backend.compile_seconds
-    bar = tqdm(total=len(seeds), initial=int(done.sum()), unit="seed", disable=not progress, file=sys.stderr,
-               desc=f"sweep [{backend.name}]")
-    i = 0
-    while i < len(todo):
-        lo = int(todo[i])
+    bar = tqdm(total=last - first, initial=int(done[first:last].sum()), unit="seed", disable=not progress,
+               file=sys.stderr, desc=f"sweep [{backend.name}]" + (f" process {processes.process_id}" if processes.many else ""))
+    # Pipelined where the backend can: chunk k + 1 is on the device while the host scores chunk k
+    # and a writer thread puts its file on disk. The chunks still land one file each, in order.
+    pipelined = hasattr(backend, "submit")
+    writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="chunk-writer")
+    written, tables = [], {}
+    pending: list = []  # (lo, hi, submitted) in launch order, at most two
+
+    def next_range(start: int):
+        lo = start
+        while lo < len(seeds) and done[lo]:
+            lo += 1
         hi = lo + 1  # a contiguous run of undone seeds, at most `chunk` long
         while hi < len(seeds) and hi - lo < chunk and not done[hi]:
             hi += 1
+        return (lo, min(hi, len(seeds))) if lo < len(seeds) else None
+
+    def launch(lo, hi):
+        if pipelined:
+            return backend.submit(seeds[lo:hi], batch=chunk, combos=combos[lo:hi], poses=poses[lo:hi])
+        return None
+
+    def land(lo, hi, submitted):
         t_run = time.perf_counter()
-        try:
+        if pipelined:
+            rows = backend.collect(submitted)
+        else:
             rows = backend.run(seeds[lo:hi], batch=chunk, combos=combos[lo:hi], poses=poses[lo:hi])
-        except Exception as e:  # noqa: BLE001 - only memory errors are retried
-            if not _is_out_of_memory(e) or chunk <= 1:
-                raise
-            chunk //= 2
-            bar.write(f"out of memory at chunk {chunk * 2}; retrying with --chunk {chunk}")
-            continue
-        t_write = time.perf_counter()
-        timing["rollout_and_compile"] += t_write - t_run
-        atomic_write_table(parts / f"seeds-{lo:012d}-{hi:012d}.parquet", rows.columns(episodes=episodes))
-        timing["scoring_and_chunk_writing"] += time.perf_counter() - t_write
+        t_score = time.perf_counter()
+        timing["rollout_and_compile"] += t_score - t_run
+        cols = rows.columns(episodes=episodes)
+        tables[lo] = cols
+        written.append(writer.submit(atomic_write_table, parts / f"seeds-{lo:012d}-{hi:012d}.parquet", cols))
+        timing["scoring_and_chunk_writing"] += time.perf_counter() - t_score
         done[lo:hi] = True
-        i += hi - lo
         bar.update(hi - lo)
+
+    cursor = 0
+    try:
+        while True:
+            while len(pending) < (2 if pipelined else 1):
+                r = next_range(cursor)
+                if r is None:
+                    break
+                t_launch = time.perf_counter()
+                pending.append((*r, launch(*r)))
+                timing["rollout_and_compile"] += time.perf_counter() - t_launch
+                cursor = r[1]
+            if not pending:
+                break
+            lo, hi, submitted = pending[0]
+            try:
+                land(lo, hi, submitted)
+            except Exception as e:  # noqa: BLE001 - only memory errors are retried
+                if not _is_out_of_memory(e) or chunk <= 1:
+                    raise
+                for *_, other in pending[1:]:  # let what is in flight finish before the smaller retry
+                    if other is not None:
+                        other.future.exception()
+                pending.clear()
+                cursor = lo
+                chunk //= 2
+                bar.write(f"out of memory at chunk {chunk * 2}; retrying with --chunk {chunk}")
+                continue
+            pending.pop(0)
+        t_wait = time.perf_counter()
+        for f in written:
+            f.result()  # a chunk file that failed to write fails the sweep
+        timing["scoring_and_chunk_writing"] += time.perf_counter() - t_wait
+    finally:
+        for *_, other in pending:  # an error or ^C: nothing left running behind the caller's back
+            if other is not None:
+                other.future.cancel()
+        writer.shutdown(wait=True)
     bar.close()
     wall = time.perf_counter() - t0
     compile_s = backend.compile_seconds - compile0
-    tables = [read_table(parts / f"seeds-{lo:012d}-{hi:012d}.parquet") for lo, hi in _done_ranges(parts)]
-    table = {k: np.concatenate([t[k] for t in tables]) for k in tables[0]} if tables else {}
-    rollouts = Rollouts.from_columns(table) if tables else Rollouts.empty()
-    if not np.array_equal(rollouts.seeds, seeds) or len(rollouts) != len(seeds):
-        raise RuntimeError(f"chunk files in {parts} do not cover the sweep's seeds; remove the folder and rerun")
+    table, rollouts = assemble(parts, seeds[first:last], tables, first)
     timing["compile"] = compile_s
     timing["rollout"] = max(timing["rollout_and_compile"] - compile_s, 0.0)
     return SweepRun(rollouts, {}, compile_s, max(wall - compile_s, 1e-9), timing, table)
+
+
+def assemble(parts: Path, seeds: np.ndarray, in_memory: dict | None = None, first: int = 0):
+    """The table of rows [first, first + len(seeds)) from their chunk files (those just run, from memory),
+    checked to cover exactly those seeds; and its Rollouts."""
+    in_memory = in_memory or {}
+    ranges = [(lo, hi) for lo, hi in _done_ranges(parts) if first <= lo and hi <= first + len(seeds)]
+    cols = [in_memory[lo] if lo in in_memory else read_table(parts / f"seeds-{lo:012d}-{hi:012d}.parquet")
+            for lo, hi in ranges]
+    table = {k: np.concatenate([t[k] for t in cols]) for k in cols[0]} if cols else {}
+    rollouts = Rollouts.from_columns(table) if cols else Rollouts.empty()
+    if len(rollouts) != len(seeds) or not np.array_equal(rollouts.seeds, seeds):
+        raise RuntimeError(f"chunk files in {parts} do not cover the sweep's seeds; remove the folder and rerun")
+    return table, rollouts
 
 
 def finish(out: Path, run: SweepRun, *, name: str = "per_seed.parquet", episodes: bool = False) -> None:
@@ -175,23 +248,28 @@ def _stats(x: np.ndarray) -> dict:
     }
 
 
-def _task_summary(rollouts: Rollouts) -> dict:
-    """The PushT score over finite seeds: success rate at coverage >= 0.95, and the error spreads."""
+def _task_summary(rollouts: Rollouts, table: dict | None = None) -> dict:
+    """The PushT score over finite seeds: success rate at coverage >= 0.95, and the error spreads.
+    A sweep's table already holds every row's score (its chunks were scored as they landed)."""
     from mjx_pusht.score import SUCCESS_COVERAGE, task_score
 
-    s = task_score(rollouts.final[rollouts.finite]) if rollouts.finite.any() else None
-    if s is None:
+    if not rollouts.finite.any():
         return {"n": 0}
+    if table and "task_coverage" in table:
+        s = {k: np.asarray(table[f"task_{k}"])[rollouts.finite] for k in ("pos_err", "yaw_err", "coverage")}
+    else:
+        s = task_score(rollouts.final[rollouts.finite])
     return {
         "success_coverage": SUCCESS_COVERAGE,
-        "success_rate": float(s["success"].mean()),
+        "success_rate": float((s["coverage"] >= SUCCESS_COVERAGE).mean()),
         "coverage": _stats(s["coverage"]),
         "pos_err": _stats(s["pos_err"]),
         "abs_yaw_err": _stats(np.abs(s["yaw_err"])),
     }
 
 
-def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s: float, run_s: float) -> dict:
+def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s: float, run_s: float,
+              table: dict | None = None) -> dict:
     """summary.json: what ran where, the verdicts, and the speed. Non-finite seeds are counted, never averaged in."""
     from mjx_pusht.backends import versions
 
@@ -219,7 +297,7 @@ def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s
         "gap_max_dev": _stats(rollouts.gap_max_dev[finite]),
         "tee_gap_settled": _stats(rollouts.gap_settled[finite]),
         "tee_final_y": _stats(rollouts.final[finite, 1]),
-        "task": _task_summary(rollouts),
+        "task": _task_summary(rollouts, table),
         "compile_seconds": round(compile_s, 3),
         "run_seconds": round(run_s, 3),
         "steps_per_second": round(n * schedule.total_steps / run_s, 1) if run_s > 0 else None,

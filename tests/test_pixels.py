@@ -146,3 +146,35 @@ def test_mjx_warp_renders_the_cpus_image_of_the_same_states():
         colours_a, counts_a = np.unique(pa[i].reshape(-1, 3), axis=0, return_counts=True)
         colours_b, counts_b = np.unique(pb[i].reshape(-1, 3), axis=0, return_counts=True)
         np.testing.assert_array_equal(colours_a[counts_a > 4], colours_b[counts_b > 4])
+
+
+def test_eval_video_draws_each_episode_in_its_tile(tmp_path):
+    from PIL import Image
+
+    from mjx_pusht.cli import main
+
+    gif = tmp_path / "expert.gif"
+    assert main(["eval", "--seeds", "4", "--backend", "cpu", "--reset", "chapter", "--max-steps", "12",
+                 "--no-rerun", "--no-progress", "--out", str(tmp_path / "ev"), "--video", str(gif),
+                 "--video-size", "64"]) == 0
+    im = Image.open(gif)
+    assert im.size == (128, 128)  # 4 episodes: a 2 x 2 grid of 64-pixel tiles
+    assert im.info["duration"] == 100  # 10 control steps a second: real time
+    im.seek(0)
+    first = np.asarray(im.convert("RGB")).astype(int)
+    tee = _colour(build_model(SceneSpec()), "tee_bar", 64)
+    for r in range(2):
+        for c in range(2):
+            tile = first[r * 64 + 12:(r + 1) * 64 - 1, c * 64:(c + 1) * 64 - 1]  # below the label
+            assert (abs(tile - tee) <= 2).all(axis=-1).sum() >= 5, (r, c)  # every tile shows its block
+
+
+def test_bad_video_requests_fail_in_one_line_before_any_episode(tmp_path, capsys):
+    from mjx_pusht.cli import main
+
+    assert main(["eval", "--seeds", "4", "--out", str(tmp_path / "ev"), "--video", str(tmp_path / "v.avi")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and ".gif or .mp4" in err
+    assert not (tmp_path / "ev").exists()
+    assert main(["eval", "--seeds", "4", "--out", str(tmp_path / "ev"), "--video", str(tmp_path / "no" / "v.gif")]) == 1
+    assert "does not exist" in capsys.readouterr().err

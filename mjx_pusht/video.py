@@ -1,0 +1,112 @@
+"""Videos of episodes: a grid of tiles, one episode each, at the control rate, coverage written on every tile.
+
+Frames come from a rollout's trace (qpos every physics step, whatever backend made it) and are
+drawn by the CPU renderer (pixels.py), so a video looks like the pixel observations a policy
+sees. GIFs need only Pillow; MP4 needs imageio with its ffmpeg (`pip install 'mjx-pusht[video]'`).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from mjx_pusht.task import coverage_np
+
+FORMATS = (".gif", ".mp4")
+
+
+class VideoError(RuntimeError):
+    """A video that cannot be written (format, missing encoder, unwritable path): one line."""
+
+
+def check_path(path: Path) -> Path:
+    """Fail before any work if the video could not be written."""
+    path = Path(path)
+    if path.suffix.lower() not in FORMATS:
+        raise VideoError(f"--video must end in .gif or .mp4, got {path.name!r}")
+    if path.suffix.lower() == ".mp4":
+        try:
+            import imageio.v3  # noqa: F401
+            import imageio_ffmpeg  # noqa: F401
+        except ImportError:
+            raise VideoError("MP4 needs imageio and ffmpeg: pip install 'mjx-pusht[video]' (or write a .gif)") from None
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise VideoError(f"cannot write the video: folder {parent} does not exist")
+    return path
+
+
+def _label(tile: np.ndarray, text: str, success: bool) -> np.ndarray:
+    from PIL import Image, ImageDraw
+
+    img = Image.fromarray(tile)
+    draw = ImageDraw.Draw(img)
+    size = max(10, tile.shape[0] // 11)
+    try:
+        from PIL import ImageFont
+
+        font = ImageFont.load_default(size=size)
+    except TypeError:  # Pillow < 10.1 has one bitmap font
+        font = None
+    draw.rectangle([0, 0, tile.shape[1], size + 4], fill=(255, 255, 255))
+    draw.text((3, 1), text, fill=(20, 120, 40) if success else (40, 40, 40), font=font)
+    return np.asarray(img)
+
+
+def episode_grid(model, qpos: np.ndarray, layout, seeds, frame_skip: int, success: float,
+                 size: int = 128) -> np.ndarray:
+    """(frames, H, W, 3) uint8: episode i of the traced qpos (K, 1 + steps, nq) in tile i of a near-square grid,
+    one frame per control step, each tile labelled with its seed and coverage."""
+    from mjx_pusht.pixels import CpuRenderer
+
+    k, t = qpos.shape[0], qpos.shape[1]
+    idx = np.arange(0, t, frame_skip)
+    cols = math.ceil(math.sqrt(k))
+    rows = math.ceil(k / cols)
+    renderer = CpuRenderer(model, size)
+    try:
+        frames = np.full((len(idx), rows * size, cols * size, 3), 255, np.uint8)
+        for i in range(k):
+            q = qpos[i, idx]
+            cov = coverage_np(layout.tee_pose(q))
+            tiles = renderer(q)
+            r, c = divmod(i, cols)
+            for f in range(len(idx)):
+                text = f"seed {seeds[i]}  coverage {cov[f]:.2f}"  # green once the episode has succeeded
+                frames[f, r * size:(r + 1) * size, c * size:(c + 1) * size] = _label(tiles[f], text, cov[f] >= success)
+    finally:
+        renderer.close()
+    # thin white lines between tiles
+    for c in range(1, cols):
+        frames[:, :, c * size - 1] = 255
+    for r in range(1, rows):
+        frames[:, r * size - 1] = 255
+    return frames
+
+
+def write(path: Path, frames: np.ndarray, fps: float) -> None:
+    """GIF through Pillow, MP4 through imageio's ffmpeg; written to a temporary name, then moved into place."""
+    path = check_path(path)
+    tmp = path.with_name(path.name + ".partial" + path.suffix)
+    if path.suffix.lower() == ".gif":
+        from PIL import Image
+
+        imgs = [Image.fromarray(f) for f in frames]
+        imgs[0].save(tmp, save_all=True, append_images=imgs[1:], duration=round(1000 / fps), loop=0, optimize=False)
+    else:
+        import imageio.v3 as iio
+
+        even = frames[:, : frames.shape[1] // 2 * 2, : frames.shape[2] // 2 * 2]  # yuv420p wants even sizes
+        iio.imwrite(tmp, even, fps=fps, codec="libx264", plugin="pyav" if _has_pyav() else None)
+    tmp.replace(path)
+
+
+def _has_pyav() -> bool:
+    try:
+        import av  # noqa: F401
+
+        return True
+    except ImportError:
+        return False
