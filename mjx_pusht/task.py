@@ -191,6 +191,12 @@ def _overlap(subject, clipper):
 
 def coverage(pose, target=TARGET_POSE):
     """Fraction of the target T's area covered by the block T at (..., 3) poses, in [0, 1]."""
+    if isinstance(pose, np.ndarray) and pose.ndim == 2 and pose.dtype == np.float64:
+        return coverage_np(pose, target)  # on the host: skip the poses too far away to overlap (exact)
+    return _coverage(pose, target)
+
+
+def _coverage(pose, target=TARGET_POSE):
     xp = _xp(pose)
     tgt = xp.broadcast_to(xp.asarray(target, dtype=pose.dtype), pose.shape)
     pairs = [(ra, rb) for ra in T_RECTS for rb in T_RECTS]
@@ -211,7 +217,7 @@ def coverage_np(pose, target=TARGET_POSE, block: int = 16384) -> np.ndarray:
     near = np.flatnonzero(np.hypot(pose[:, 0] - tgt[:, 0], pose[:, 1] - tgt[:, 1]) < 2 * T_REACH)
     for lo in range(0, len(near), block):
         idx = near[lo : lo + block]
-        out[idx] = coverage(pose[idx], tgt[idx])
+        out[idx] = _coverage(pose[idx], tgt[idx])
     return out
 
 
