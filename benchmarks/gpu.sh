@@ -40,5 +40,50 @@ case "$stage" in
             > "$OUT/kv-expert.log" 2>&1
           python3 -m mjx_pusht compare --controller expert --reset task --seeds 4096 --backend mjx-warp \
             --out "$OUT/compare-task-mjx-warp" > "$OUT/compare-task.log" 2>&1 ;;
+  render) python3 -m benchmarks.render --backend mjx-warp --tier "$tier" --batches "${BATCHES:-1024,4096,16384,65536}" \
+            --save-pixels "$OUT/pixels-$tier.npz" --out "$OUT/results" > "$OUT/$stage.log" 2>&1
+          python3 -m benchmarks.render --backend mjx-warp --tier "$tier" --vector-env --out "$OUT/results" >> "$OUT/$stage.log" 2>&1 ;;
+  e2e-1m) # the 1 M-seed CLI as a user runs it: one warm-up, then 3 runs with the default audit and 3 with --audit 0
+          python3 -m mjx_pusht sweep --seeds 65536 --backend mjx-warp --no-rerun --no-progress --out "$HOME/warm" \
+            > "$OUT/e2e.log" 2>&1
+          for mode in default audit0; do for i in 1 2 3; do
+            extra=""; [ "$mode" = audit0 ] && extra="--audit 0"
+            t0=$(date +%s%N)
+            python3 -m mjx_pusht sweep --seeds 1000000 --backend mjx-warp --no-rerun --no-progress \
+              --out "$HOME/e2e" $extra >> "$OUT/e2e.log" 2>&1
+            t1=$(date +%s%N)
+            echo "$mode $i $(( (t1 - t0) / 1000000 ))" | tee -a "$OUT/e2e-times.txt"
+            python3 -c "import json,sys; d=json.load(open('$HOME/e2e/summary.json')); print(json.dumps({'mode': '$mode', 'run': $i, 'timing': d['timing'], 'audit': d.get('audit'), 'device': d['device'], 'versions': d['versions']}))" >> "$OUT/e2e-summaries.jsonl"
+          done; done ;;
+  two-process) # 2 GPUs: one process driving both (a thread a GPU) against two processes joined by jax.distributed
+          export NCCL_NVLS_ENABLE=0 TORCH_SYMM_MEM_DISABLE_MULTICAST=1 NVSHMEM_DISABLE_NVLS=1
+          python3 -m mjx_pusht sweep --seeds 131072 --backend mjx-warp --no-rerun --no-progress --audit 0 \
+            --out "$HOME/warm" > "$OUT/two.log" 2>&1
+          for i in 1 2; do
+            t0=$(date +%s%N)
+            python3 -m mjx_pusht sweep --seeds 1000000 --backend mjx-warp --no-rerun --no-progress --audit 0 \
+              --out "$HOME/one" >> "$OUT/two.log" 2>&1
+            t1=$(date +%s%N)
+            echo "one-process-two-threads $i $(( (t1 - t0) / 1000000 ))" | tee -a "$OUT/two-times.txt"
+            cp "$HOME/one/summary.json" "$OUT/one-process-summary.json"
+            port=$(( 23000 + i ))
+            t0=$(date +%s%N)
+            for p in 1 0; do
+              CUDA_VISIBLE_DEVICES=$p python3 -m mjx_pusht sweep --seeds 1000000 --backend mjx-warp --no-rerun \
+                --no-progress --audit 0 --out "$HOME/two" --num-processes 2 --process-id $p \
+                --coordinator 127.0.0.1:$port >> "$OUT/two-p$p.log" 2>&1 &
+            done
+            wait
+            t1=$(date +%s%N)
+            echo "two-processes $i $(( (t1 - t0) / 1000000 ))" | tee -a "$OUT/two-times.txt"
+            cp "$HOME/two/summary.json" "$OUT/two-process-summary.json"
+          done
+          python3 -c "
+import pyarrow.parquet as pq, numpy as np
+a = pq.read_table('$HOME/one/per_seed.parquet').to_pydict(); b = pq.read_table('$HOME/two/per_seed.parquet').to_pydict()
+same = all(np.array_equal(np.asarray(a[k]), np.asarray(b[k])) for k in a)
+rows = np.all([np.asarray(a[k]) == np.asarray(b[k]) for k in a if k.startswith('tee_')], axis=0)
+print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:', a['seed'] == b['seed'],
+      'rigid:', np.mean(a['tee_stayed_rigid']), np.mean(b['tee_stayed_rigid']))" | tee -a "$OUT/two-times.txt" ;;
   *) echo "unknown stage $stage" >&2; exit 2 ;;
 esac

@@ -12,8 +12,14 @@ import sys as _sys
 
 # Headless by default: MuJoCo picks its OpenGL when it is first imported, and on a machine with
 # no screen GLFW cannot open one. EGL renders without a display (MUJOCO_GL=osmesa for OSMesa).
-if _sys.platform.startswith("linux") and not _os.environ.get("DISPLAY"):
-    _os.environ.setdefault("MUJOCO_GL", "egl")
+# Only where the library is there: MuJoCo imports the one it is told to at once, and fails without it.
+if _sys.platform.startswith("linux") and not _os.environ.get("DISPLAY") and "MUJOCO_GL" not in _os.environ:
+    import ctypes.util as _cu
+
+    for _gl, _lib in (("egl", "EGL"), ("osmesa", "OSMesa")):
+        if _cu.find_library(_lib):
+            _os.environ["MUJOCO_GL"] = _gl
+            break
 
 from mjx_pusht.backends import make_backend, resolve
 from mjx_pusht.metrics import gap_deviation, stayed_rigid, weld_gap
