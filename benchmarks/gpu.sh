@@ -59,7 +59,8 @@ case "$stage" in
           export NCCL_NVLS_ENABLE=0 TORCH_SYMM_MEM_DISABLE_MULTICAST=1 NVSHMEM_DISABLE_NVLS=1
           python3 -m mjx_pusht sweep --seeds 131072 --backend mjx-warp --no-rerun --no-progress --audit 0 \
             --out "$HOME/warm" > "$OUT/two.log" 2>&1
-          for i in 1 2; do
+          for i in ${RUNS:-1 2}; do
+            rm -rf "$HOME/one" "$HOME/two"
             t0=$(date +%s%N)
             python3 -m mjx_pusht sweep --seeds 1000000 --backend mjx-warp --no-rerun --no-progress --audit 0 \
               --out "$HOME/one" >> "$OUT/two.log" 2>&1

@@ -196,23 +196,20 @@ class MjxRunner:
             cfg.constraints_per_world or START_ROWS_PER_WORLD,
         )
         self.growths = 0
-        self._kernels = None
+        self.warp_kernels: dict = {}
         if cfg.impl == "warp" and cfg.precompile:
             from mjx_pusht import warp_kernels
 
-            # every kernel the scene needs, compiled (or loaded from Warp's cache) on all cores before the
-            # first (serial, lazy) launch; on a thread of its own, beside the model's upload and XLA's compile
-            self._kernels = ThreadPoolExecutor(1, thread_name_prefix="warp-kernels").submit(
-                warp_kernels.precompile, self.model, self.devices)
+            # every kernel the scene needs, compiled on all cores before the first (serial, lazy) launch.
+            # Not on a thread beside the model's upload: finding them patches wp.launch process-wide, and
+            # a kernel loaded while another thread captures a CUDA graph breaks the capture (measured on
+            # 2 x H200: Warp CUDA error 901)
+            self.warp_kernels = warp_kernels.precompile(self.model, self.devices)
+            self.compile_seconds += self.warp_kernels.get("find_seconds", 0.0) + self.warp_kernels.get("compile_seconds", 0.0)
         self.grid = scenario.grid()
         self._model = self._put_grid()
         # x64 is process-wide in JAX: once on, every later runner computes in float64 too
         self.dtype = np.float64 if jax.config.jax_enable_x64 else np.float32
-
-    @property
-    def warp_kernels(self) -> dict:
-        """The kernel set-up's report (modules, seconds), once it has finished."""
-        return self._kernels.result() if self._kernels is not None else {}
 
     def _grow(self) -> bool:
         """Double the per-world buffers up to the scene's geometric bounds; False when already there."""
@@ -363,7 +360,6 @@ class MjxRunner:
             def launch(qpos0, key, combo):
                 args = (qpos0, key, combo) if sharding is None else jax.device_put((qpos0, key, combo), sharding)
                 return jax.device_get(prog(*args))
-        _ = self.warp_kernels  # the kernels are loaded before the first launch (it would load them one by one)
         self.compile_seconds += time.perf_counter() - t0
         return launch
 

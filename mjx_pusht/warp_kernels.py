@@ -76,6 +76,10 @@ def warp_device(jax_device):
     """The Warp device a JAX device runs MJX-Warp on."""
     import warp as wp
 
+    if jax_device.platform == "gpu":
+        # the CUDA ordinal this process sees: under jax.distributed with one visible GPU a process, the
+        # device's global id (what wp.device_from_jax reads) names a GPU this process does not have
+        return wp.get_cuda_device(jax_device.local_hardware_id)
     return wp.device_from_jax(jax_device)
 
 

@@ -76,7 +76,9 @@ def test_cpu_backend_is_the_chapter_loop_to_the_bit(cpu_runs, break_it):
         ref = chapter_loop(break_it, s)
         np.testing.assert_array_equal(r.settled[s], ref["settled"])
         np.testing.assert_array_equal(r.final[s], ref["final"])
-        assert r.gap_settled[s] == ref["gap_settled"]
+        # the same geom positions (qpos above is equal to the bit); the chapter's np.linalg.norm of one
+        # 3-vector is a dot product, ours a batched sum of squares, and NumPy builds differ in the last bit
+        np.testing.assert_array_max_ulp(r.gap_settled[s], ref["gap_settled"], maxulp=2)
         assert r.gap_max_dev[s] == pytest.approx(ref["peak"], abs=1e-15)
 
 
