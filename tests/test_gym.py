@@ -93,7 +93,8 @@ def test_vector_env_reports_what_the_functional_api_computes():
 
 
 def test_disabled_autoreset_resets_only_the_masked_envs():
-    envs = gym.make_vec(ENV, num_envs=4, backend="cpu", autoreset_mode="Disabled")
+    envs = gym.make_vec(ENV, num_envs=4, backend="cpu", autoreset_mode="Disabled", render_mode="rgb_array",
+                        render_size=64)
     obs0, _ = envs.reset(seed=0)
     for _ in range(3):
         obs, *_ = envs.step(np.full((4, 2), 0.5))
@@ -101,6 +102,9 @@ def test_disabled_autoreset_resets_only_the_masked_envs():
     np.testing.assert_array_equal(obs2[1:3], obs[1:3])
     assert (info["steps"] == [0, 3, 3, 0]).all()
     assert not np.array_equal(obs2[0], obs0[0])  # a new episode: the next seed from env 0's generator
+    frames = envs.render()
+    assert len(frames) == 4 and frames[0].shape == (64, 64, 3) and not np.array_equal(frames[0], frames[1])
+    envs.close()
 
 
 def test_the_expert_solves_chapter_starts_through_the_vector_env():
