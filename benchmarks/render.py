@@ -84,8 +84,14 @@ def measure_vector_env(backend: str, n: int, obs_type: str, steps: int = 20) -> 
     for _ in range(steps):
         obs, *_ = envs.step(act)
     dt = time.perf_counter() - t0
+    row = {"backend": backend, "num_envs": n, "obs_type": obs_type, "control_steps_per_second": n * steps / dt}
+    if backend != "cpu":  # how much of a step is the copy of its outputs to the host
+        from mjx_pusht.gym_env import _host
+
+        row["host_copy_seconds"] = _rate(lambda: _host(envs._state, obs_type), n)["seconds_per_call"]
+        row["step_seconds"] = dt / steps
     envs.close()
-    return {"backend": backend, "num_envs": n, "obs_type": obs_type, "control_steps_per_second": n * steps / dt}
+    return row
 
 
 def measure_cpu() -> dict:
@@ -174,7 +180,7 @@ def main() -> None:
         path = args.out / f"{args.tier or args.backend}-render.json"
         if args.vector_env:
             # its own process: MJX-Warp's render contexts keep their buffers for the process's life
-            doc = json.loads(path.read_text())
+            doc = json.loads(path.read_text()) if path.exists() else doc
             doc["vector_env"] = [measure_vector_env("mjx-warp", n, "pixels") for n in (4096, 16384)]
             for v in doc["vector_env"]:
                 print(v, flush=True)

@@ -86,16 +86,28 @@ def _gym_obs(obs: dict, obs_type: str, dtype):
     return {"pixels": pixels, "agent_pos": np.asarray(obs["state"][..., 0:2], dtype)}
 
 
-def _infos(state) -> dict:
-    """coverage, is_success and the rest, per world."""
+def _host(state, obs_type: str) -> dict:
+    """What a gymnasium step hands out, copied to the host in one transfer (a no-op for NumPy states)."""
+    import jax
+
+    keys = {"state"} | ({"keypoints"} if obs_type == "keypoints" else set()) | (
+        {"pixels"} if obs_type.startswith("pixels") else set())
     m = state.metrics
+    return jax.device_get({"obs": {k: state.obs[k] for k in keys}, "reward": state.reward,
+                           "terminated": state.terminated, "truncated": state.truncated, "step": state.step,
+                           "coverage": m["coverage"], "gap_max_dev": m["gap_max_dev"]})
+
+
+def _infos(h: dict) -> dict:
+    """coverage, is_success and the rest, per world, from a `_host` copy."""
+    s = np.asarray(h["obs"]["state"])
     return {
-        "coverage": np.asarray(m["coverage"], np.float64),
-        "is_success": np.asarray(state.terminated, bool),
-        "steps": np.asarray(state.step, np.int64),
-        "block_pose": np.asarray(state.obs["state"][..., 2:5], np.float64),
-        "pos_agent": np.asarray(state.obs["state"][..., 0:2], np.float64),
-        "weld_gap_max_dev": np.asarray(m["gap_max_dev"], np.float64),
+        "coverage": np.asarray(h["coverage"], np.float64),
+        "is_success": np.asarray(h["terminated"], bool),
+        "steps": np.asarray(h["step"], np.int64),
+        "block_pose": np.asarray(s[..., 2:5], np.float64),
+        "pos_agent": np.asarray(s[..., 0:2], np.float64),
+        "weld_gap_max_dev": np.asarray(h["gap_max_dev"], np.float64),
     }
 
 
@@ -145,7 +157,7 @@ class PushTGymEnv(gym.Env):
         return _gym_obs({k: v[0] for k, v in self._state.obs.items()}, self.obs_type, np.float64)
 
     def _info(self) -> dict:
-        return {k: v[0] for k, v in _infos(self._state).items()}
+        return {k: v[0] for k, v in _infos(_host(self._state, self.obs_type)).items()}
 
     def render(self):
         if self.render_mode != "rgb_array":
@@ -240,6 +252,7 @@ class PushTVectorEnv(VectorEnv):
         else:
             self._state = self._env.reset_where(self._state, mask, episode_seeds, starts)
         self._needs_reset[rows] = False
+        self._fetch()
         return self._obs(), self._info()
 
     def step(self, actions):
@@ -251,9 +264,9 @@ class PushTVectorEnv(VectorEnv):
             # the episodes that ended last step start again now; this step's action is not theirs
             rows = np.flatnonzero(self._needs_reset)
             self._state = self._env.reset_where(self._state, self._needs_reset, self._next_seeds(rows))
-        s = self._state
-        terminated, truncated = np.array(s.terminated, bool), np.array(s.truncated, bool)
-        reward = np.array(s.reward, np.float64)
+        h = self._fetch()
+        terminated, truncated = np.array(h["terminated"], bool), np.array(h["truncated"], bool)
+        reward = np.array(h["reward"], np.float64)
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
             reset_rows = self._needs_reset
             terminated[reset_rows], truncated[reset_rows], reward[reset_rows] = False, False, 0.0
@@ -265,16 +278,21 @@ class PushTVectorEnv(VectorEnv):
             rows = np.flatnonzero(ended)
             final_obs, final_info = obs, info
             self._state = self._env.reset_where(self._state, ended, self._next_seeds(rows))
+            self._fetch()
             obs, info = self._obs(), self._info()
             info = {**info, "final_obs": final_obs, "final_info": final_info, "_final_obs": ended,
                     "_final_info": ended}
         return obs, reward, terminated, truncated, info
 
+    def _fetch(self) -> dict:
+        self._h = _host(self._state, self.obs_type)
+        return self._h
+
     def _obs(self):
-        return _gym_obs(self._state.obs, self.obs_type, self._dtype)
+        return _gym_obs(self._h["obs"], self.obs_type, self._dtype)
 
     def _info(self) -> dict:
-        info = _infos(self._state)
+        info = _infos(self._h)
         every = np.ones(self.num_envs, bool)
         return info | {f"_{k}": every for k in info}
 
