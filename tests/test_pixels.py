@@ -178,3 +178,18 @@ def test_bad_video_requests_fail_in_one_line_before_any_episode(tmp_path, capsys
     assert not (tmp_path / "ev").exists()
     assert main(["eval", "--seeds", "4", "--out", str(tmp_path / "ev"), "--video", str(tmp_path / "no" / "v.gif")]) == 1
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_mp4_holds_the_frames_it_was_given(tmp_path):
+    iio = pytest.importorskip("imageio.v3")
+    pytest.importorskip("imageio_ffmpeg")
+    from mjx_pusht.video import write
+
+    frames = np.zeros((12, 64, 96, 3), np.uint8)
+    frames[:, :, :48] = (200, 40, 40)  # left half red, right half black: survives the codec's rounding
+    write(tmp_path / "v.mp4", frames, fps=10)
+    back = iio.imread(tmp_path / "v.mp4")
+    assert back.shape == (12, 64, 96, 3)
+    assert abs(back[:, :, :40].mean(axis=(0, 1, 2)) - [200, 40, 40]).max() < 12
+    assert back[:, :, 56:].mean() < 12
+    assert not list(tmp_path.glob("*.partial*"))  # written to a temporary name, then moved into place
