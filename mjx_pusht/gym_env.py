@@ -95,7 +95,8 @@ def _host(state, obs_type: str) -> dict:
     m = state.metrics
     return jax.device_get({"obs": {k: state.obs[k] for k in keys}, "reward": state.reward,
                            "terminated": state.terminated, "truncated": state.truncated, "step": state.step,
-                           "coverage": m["coverage"], "gap_max_dev": m["gap_max_dev"]})
+                           "coverage": m["coverage"], "gap_max_dev": m["gap_max_dev"], "finite": m["finite"],
+                           "contained": m["contained"]})
 
 
 def _infos(h: dict) -> dict:
@@ -108,7 +109,20 @@ def _infos(h: dict) -> dict:
         "block_pose": np.asarray(s[..., 2:5], np.float64),
         "pos_agent": np.asarray(s[..., 0:2], np.float64),
         "weld_gap_max_dev": np.asarray(h["gap_max_dev"], np.float64),
+        "finite": np.asarray(h["finite"], bool),  # every state of the episode finite and bounded
+        "contained": np.asarray(h["contained"], bool),  # the block never left the walls (no missed contact)
     }
+
+
+def _warn_broken(info: dict) -> None:
+    """A diverged or escaped world is physics gone wrong: say so, never just hand its numbers on."""
+    bad = ~(info["finite"] & info["contained"])
+    if np.any(bad):
+        import warnings
+
+        warnings.warn(f"mjx_pusht: {int(np.sum(bad))} environment(s) went non-finite or left the walls "
+                      "(info['finite'], info['contained'] are False): their observations are not physics",
+                      RuntimeWarning, stacklevel=3)
 
 
 class PushTGymEnv(gym.Env):
@@ -157,7 +171,9 @@ class PushTGymEnv(gym.Env):
         return _gym_obs({k: v[0] for k, v in self._state.obs.items()}, self.obs_type, np.float64)
 
     def _info(self) -> dict:
-        return {k: v[0] for k, v in _infos(_host(self._state, self.obs_type)).items()}
+        info = {k: v[0] for k, v in _infos(_host(self._state, self.obs_type)).items()}
+        _warn_broken(info)
+        return info
 
     def render(self):
         if self.render_mode != "rgb_array":
@@ -293,6 +309,7 @@ class PushTVectorEnv(VectorEnv):
 
     def _info(self) -> dict:
         info = _infos(self._h)
+        _warn_broken(info)
         every = np.ones(self.num_envs, bool)
         return info | {f"_{k}": every for k in info}
 

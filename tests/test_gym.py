@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import subprocess
+import warnings
 import sys
 
 import numpy as np
@@ -163,3 +164,17 @@ def test_vector_env_on_mjx_warp_renders_pixels_in_the_batch_and_autoresets():
         o1, r1, t1, u1, _ = gpu.step(act)
         o2, r2, t2, u2, _ = cpu.step(act)
         np.testing.assert_array_equal(u1, u2)
+
+
+def test_a_diverged_world_is_flagged_and_warned_about_not_handed_on_quietly():
+    env = gym.make(ENV).unwrapped
+    env.reset(options={"reset_to_state": [float("nan"), 0.0, 0.0, -0.2, 0.25]})
+    with pytest.warns(RuntimeWarning, match="non-finite or left the walls"):
+        obs, r, term, trunc, info = env.step(np.zeros(2))
+    assert not info["finite"]
+    envs = gym.make_vec(ENV, num_envs=2, backend="cpu")
+    envs.reset(seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # healthy worlds: no warning
+        *_, info = envs.step(np.zeros((2, 2)))
+    assert info["finite"].all() and info["contained"].all()
