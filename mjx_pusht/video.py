@@ -98,8 +98,14 @@ def write(path: Path, frames: np.ndarray, fps: float) -> None:
     else:
         import imageio.v3 as iio
 
+        import warnings
+
         even = frames[:, : frames.shape[1] // 2 * 2, : frames.shape[2] // 2 * 2]  # yuv420p wants even sizes
-        iio.imwrite(tmp, even, fps=fps, codec="libx264", plugin="pyav" if _has_pyav() else None)
+        with warnings.catch_warnings():
+            # imageio starts ffmpeg with subprocess, a fork that execs at once: JAX's warning about forking
+            # a multithreaded process is for children that go on running Python, which this one never does
+            warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
+            iio.imwrite(tmp, even, fps=fps, codec="libx264", plugin="pyav" if _has_pyav() else None)
     tmp.replace(path)
 
 
