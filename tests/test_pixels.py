@@ -180,6 +180,8 @@ def test_bad_video_requests_fail_in_one_line_before_any_episode(tmp_path, capsys
     assert "does not exist" in capsys.readouterr().err
 
 
+# reading the file back starts ffmpeg too (a fork that execs at once), which JAX warns about
+@pytest.mark.filterwarnings(r"ignore:os\.fork\(\) was called:RuntimeWarning")
 def test_mp4_holds_the_frames_it_was_given(tmp_path):
     iio = pytest.importorskip("imageio.v3")
     pytest.importorskip("imageio_ffmpeg")
