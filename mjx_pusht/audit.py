@@ -110,9 +110,8 @@ class Audit:
         pool.shutdown(wait=False)
 
     def finish(self, rows: Rollouts, *, welded: bool, out: Path | None = None) -> dict:
-        from mjx_pusht.rollout_cpu import run_cpu
-
         from mjx_pusht.reset import start_poses
+        from mjx_pusht.rollout_cpu import run_cpu
 
         if self.future is None:
             self.start()
@@ -124,12 +123,8 @@ class Audit:
             parts.append((extra, run_cpu(_cpu_scenario(self.backend), self.seeds[extra], combos=self.combos[extra],
                                          poses=start_poses(self.seeds[extra], reset=self.reset))))
         order = np.argsort(np.concatenate([p[0] for p in parts]), kind="stable")
-        cpu = Rollouts.concat([p[1] for p in parts])
-        cpu = Rollouts(**{f: getattr(cpu, f)[order] for f in ("seeds", "start", "settled", "final", "pusher_final",
-                                                              "gap_settled", "gap_max_dev", "finite", "contained")},
-                       params={k: v[order] for k, v in cpu.params.items()} if cpu.params else None)
-        picked = Rollouts(**{f: getattr(rows, f)[idx] for f in ("seeds", "start", "settled", "final", "pusher_final",
-                                                                  "gap_settled", "gap_max_dev", "finite", "contained")})
+        cpu = Rollouts.concat([p[1] for p in parts]).take(order)
+        picked = rows.take(idx)
         block = compare_rows(picked, cpu)
         block["fraction"] = self.fraction
         block["n_flagged"] = int(flags.sum())

@@ -234,7 +234,6 @@ class PushTEnv:
                 from mjx_pusht.pixels import WarpRenderer
 
                 self._renderers[n] = WarpRenderer(self.model, n, self.pixels)
-            self._renderer = self._renderers.get(n)
             self._jitted[n] = (jax.jit(jax.vmap(self.step_one)), jax.jit(self._reset_batch))
         self._renderer = self._renderers.get(n)
         return self._jitted[n]

@@ -86,9 +86,10 @@ class CpuRenderer:
                 "install EGL (Debian: apt-get install libegl1 libgl1-mesa-dri) and set MUJOCO_GL=egl, "
                 "or OSMesa (apt-get install libosmesa6) and MUJOCO_GL=osmesa") from None
         self._camera = self.view.camera(CAMERA).id
-        import atexit
+        import weakref
 
-        atexit.register(self.close)  # before EGL is torn down at exit, or its destructor complains
+        # closed when this renderer goes, or at exit before EGL is torn down (else its destructor complains)
+        weakref.finalize(self, self.renderer.close)
 
     def __call__(self, qpos) -> np.ndarray:
         import mujoco

@@ -129,6 +129,15 @@ class Rollouts:
             out.episode = {k: np.concatenate([p.episode[k] for p in parts]) for k in parts[0].episode}
         return out
 
+    def take(self, idx) -> "Rollouts":
+        """Rows `idx`, in that order (the per-row extras too; the trace is not carried)."""
+        optional = ("trace", "params", "pusher_start", "episode")
+        out = Rollouts(**{f.name: getattr(self, f.name)[idx] for f in dataclasses.fields(self) if f.name not in optional})
+        out.params = {k: v[idx] for k, v in self.params.items()} if self.params else None
+        out.pusher_start = self.pusher_start[idx] if self.pusher_start is not None else None
+        out.episode = {k: v[idx] for k, v in self.episode.items()} if self.episode is not None else None
+        return out
+
     @classmethod
     def empty(cls) -> "Rollouts":
         z = np.zeros((0, 3))
