@@ -7,7 +7,8 @@
 On MJX-Warp every figure is one jitted call over N worlds, timed after a warm-up call until the
 result is on the device (block_until_ready): `physics` is the control step without images (10
 physics steps), `render` is MJX-Warp's ray tracer alone on those worlds (uint8 RGB out), `pixel_env`
-is the control step with the image rendered inside the same program, and `vector_env` is
+is the control step with the image rendered inside the same program, `pixel_env_images_to_host` the
+same with its images copied to a NumPy array each call, and `vector_env` is
 gymnasium's make_vec with pixels, images copied to the host as NumPy. `--save-pixels` keeps the
 images of 64 known states so the CPU renderer's images of the same states can be compared here
 (`--compare`), since the GPU machine has no OpenGL.
@@ -56,9 +57,11 @@ def measure_mjx(batches: list[int], save_pixels: Path | None) -> dict:
         render = jax.jit(jax.vmap(pixel._renderers[n]))
         row["render"] = _rate(lambda: jax.block_until_ready(render(ps.data)), n)
         row["pixel_env"] = _rate(lambda: jax.block_until_ready(pixel.step(ps, act)), n)
+        # what a host-side consumer (gymnasium's vector env) adds: each step's images copied to NumPy
+        row["pixel_env_images_to_host"] = _rate(lambda: np.asarray(pixel.step(ps, act).obs["pixels"]), n)
         out = pixel.step(ps, act)
         assert out.obs["pixels"].shape == (n, SIZE, SIZE, 3) and out.obs["pixels"].dtype == np.uint8
-        for k in ("physics", "render", "pixel_env"):
+        for k in ("physics", "render", "pixel_env", "pixel_env_images_to_host"):
             print(f"N={n:6d} {k:10s} {row[k]['per_second']:>12,.0f} /s", flush=True)
         rows.append(row)
     if save_pixels is not None:
@@ -85,11 +88,7 @@ def measure_vector_env(backend: str, n: int, obs_type: str, steps: int = 20) -> 
         obs, *_ = envs.step(act)
     dt = time.perf_counter() - t0
     row = {"backend": backend, "num_envs": n, "obs_type": obs_type, "control_steps_per_second": n * steps / dt}
-    if backend != "cpu":  # how much of a step is the copy of its outputs to the host
-        from mjx_pusht.gym_env import _host
-
-        row["host_copy_seconds"] = _rate(lambda: _host(envs._state, obs_type), n)["seconds_per_call"]
-        row["step_seconds"] = dt / steps
+    row["step_seconds"] = dt / steps
     envs.close()
     return row
 
