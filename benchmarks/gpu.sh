@@ -36,7 +36,7 @@ case "$stage" in
   compare-both) python3 -m mjx_pusht compare --seeds 4096 --backend mjx-warp --no-root-cause \
             --out "$OUT/compare-mjx-warp" > "$OUT/compare-warp.log" 2>&1
           python3 -m mjx_pusht compare --seeds 4096 --backend mjx-jax --out "$OUT/compare-mjx-jax" > "$OUT/compare-jax.log" 2>&1 ;;
-  task-study) python3 -m mjx_pusht.studies kv-expert --seeds 4096 --backend mjx-warp --out "$OUT/kv-expert" \
+  task-study) python3 -m mjx_pusht.study.studies kv-expert --seeds 4096 --backend mjx-warp --out "$OUT/kv-expert" \
             > "$OUT/kv-expert.log" 2>&1
           python3 -m mjx_pusht compare --controller expert --reset task --seeds 4096 --backend mjx-warp \
             --out "$OUT/compare-task-mjx-warp" > "$OUT/compare-task.log" 2>&1 ;;

@@ -23,17 +23,17 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjx_pusht.backends import make_backend, versions
+from mjx_pusht.backends.base import make_backend, versions
 from mjx_pusht.scenario import Scenario
-from mjx_pusht.tier import tier as tier_name
+from mjx_pusht.cli.banner import tier as tier_name
 
 RESULTS = Path(__file__).parent / "results"
 
 
 def single_thread_mj_step_rate(scenario: Scenario, seconds: float = 2.0) -> float:
     """Steps/s of a bare mj_step loop on one core over the seed-0 schedule, repeated."""
-    from mjx_pusht.reset import QposLayout, start_poses
-    from mjx_pusht.scene import build_model
+    from mjx_pusht.task.reset import QposLayout, start_poses
+    from mjx_pusht.model.scene import build_model
 
     model = build_model(scenario.scene)
     data = mujoco.MjData(model)
@@ -51,7 +51,7 @@ def single_thread_mj_step_rate(scenario: Scenario, seconds: float = 2.0) -> floa
 
 
 def measure(backend, batch: int, repeats: int, total_steps: int) -> dict:
-    from mjx_pusht.reset import start_poses
+    from mjx_pusht.task.reset import start_poses
 
     seeds = np.arange(batch)
     scenario = getattr(backend, "scenario", None)
@@ -79,7 +79,7 @@ def measure(backend, batch: int, repeats: int, total_steps: int) -> dict:
 
 def end_to_end(name: str, scenario: Scenario, n: int, chunk: int | None) -> dict:
     """A whole sweep as a user runs it: start poses, compile, rollout, per_seed.parquet written."""
-    from mjx_pusht.sweep import finish, run_sweep
+    from mjx_pusht.study.sweep import finish, run_sweep
 
     t0 = time.perf_counter()
     backend = make_backend(name, scenario)
@@ -187,8 +187,8 @@ def measure_backend(name: str, scenario: Scenario, batches: list[int], repeats: 
 
 def add_closed_loop(result: dict, args, batches: list[int], mjx_opts: dict) -> None:
     """The expert inside the compiled scan: `<backend>-expert` rows, and their rate over the open-loop rate."""
-    from mjx_pusht.controllers import Expert
-    from mjx_pusht.episode import Episode
+    from mjx_pusht.task.controllers import Expert
+    from mjx_pusht.task.episode import Episode
 
     episode = Episode(max_steps=args.closed_loop)
     closed = Scenario(reset="task", controller=Expert(), episode=episode)
@@ -219,7 +219,7 @@ def add_scaling(result: dict) -> None:
 
 
 def resolve_auto(name: str) -> str:
-    from mjx_pusht.backends import resolve
+    from mjx_pusht.backends.base import resolve
 
     return resolve(name)[0]
 

@@ -41,8 +41,8 @@ def _setup(batch: int, tolerance: float | None, iterations: int | None, buffers=
     import mujoco
     import mujoco.mjx.third_party.mujoco_warp as mjw
 
-    from mjx_pusht.reset import QposLayout, start_poses
-    from mjx_pusht.rollout_mjx import MjxConfig, _mj_model, simulated_scene
+    from mjx_pusht.task.reset import QposLayout, start_poses
+    from mjx_pusht.backends.mjx import MjxConfig, _mj_model, simulated_scene
     from mjx_pusht.scenario import Scenario
 
     scenario = Scenario()
@@ -139,8 +139,8 @@ def graph_rate(batch: int, tolerance: float | None, iterations: int | None, repe
 
 def mjx_rate(batch: int, tolerance: float | None, iterations: int | None, repeats: int = 2) -> dict:
     """Steps/s of this package's MJX-Warp rollout (jitted vmap of lax.scan) at the same settings."""
-    from mjx_pusht.reset import start_poses
-    from mjx_pusht.rollout_mjx import MjxConfig, MjxRunner
+    from mjx_pusht.task.reset import start_poses
+    from mjx_pusht.backends.mjx import MjxConfig, MjxRunner
     from mjx_pusht.scenario import Scenario
 
     runner = MjxRunner(Scenario(), MjxConfig(impl="warp", tolerance=tolerance, iterations=iterations))
@@ -205,7 +205,7 @@ def main(argv=None) -> int:
 
     import warp as wp
 
-    from mjx_pusht.backends import versions
+    from mjx_pusht.backends.base import versions
 
     wp.init()
     out: dict = {"device": str(wp.get_device()), "device_name": wp.get_device().name, "versions": versions(),

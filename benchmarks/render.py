@@ -41,7 +41,7 @@ def _rate(fn, n_items: int, min_seconds: float = 1.0, min_reps: int = 3) -> dict
 def measure_mjx(batches: list[int], save_pixels: Path | None) -> dict:
     import jax
 
-    from mjx_pusht.env import PushTEnv
+    from mjx_pusht.envs.functional import PushTEnv
 
     rows = []
     plain = PushTEnv(backend="mjx-warp")
@@ -97,9 +97,9 @@ def measure_cpu() -> dict:
     import gymnasium as gym
 
     import mjx_pusht  # noqa: F401
-    from mjx_pusht.pixels import CpuRenderer
-    from mjx_pusht.reset import QposLayout, start_poses
-    from mjx_pusht.scene import SceneSpec, build_model
+    from mjx_pusht.envs.pixels import CpuRenderer
+    from mjx_pusht.task.reset import QposLayout, start_poses
+    from mjx_pusht.model.scene import SceneSpec, build_model
 
     model = build_model(SceneSpec())
     layout = QposLayout.of(model)
@@ -127,8 +127,8 @@ def measure_cpu() -> dict:
 
 def compare(npz: Path) -> dict:
     """The CPU renderer's images of the states the GPU rendered: how many pixels differ, and by how much."""
-    from mjx_pusht.pixels import CpuRenderer
-    from mjx_pusht.scene import SceneSpec, build_model
+    from mjx_pusht.envs.pixels import CpuRenderer
+    from mjx_pusht.model.scene import SceneSpec, build_model
 
     data = np.load(npz)
     gpu = data["pixels"]
@@ -163,7 +163,7 @@ def main() -> None:
             doc["gpu_vs_cpu_pixels"] = result
             args.into.write_text(json.dumps(doc, indent=2) + "\n")
         return
-    from mjx_pusht.backends import versions
+    from mjx_pusht.backends.base import versions
 
     doc = {"what": __doc__.split("\n\n")[1].strip(), "date": time.strftime("%Y-%m-%d"), "size": SIZE,
            "versions": versions(), "host": platform.node()}

@@ -31,7 +31,7 @@ COMMAND_BUFFERS = "--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM
 
 
 def _backend(cfg: dict):
-    from mjx_pusht.backends import MjxBackend
+    from mjx_pusht.backends.base import MjxBackend
     from mjx_pusht.scenario import Scenario
 
     cfg = dict(cfg)
@@ -159,8 +159,8 @@ def main(argv=None) -> int:
         a.result.write_text(json.dumps(one(a)))
         return 0
 
-    from mjx_pusht.backends import versions
-    from mjx_pusht.tier import tier
+    from mjx_pusht.backends.base import versions
+    from mjx_pusht.cli.banner import tier
 
     root = a.cache_root or Path(tempfile.mkdtemp(prefix="warp-modes-"))
     out: dict = {"tier": tier(), "versions": versions(), "batch": a.batch, "variants": {}}

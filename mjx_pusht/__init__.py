@@ -21,14 +21,14 @@ if _sys.platform.startswith("linux") and not _os.environ.get("DISPLAY") and "MUJ
             _os.environ["MUJOCO_GL"] = _gl
             break
 
-from mjx_pusht.backends import make_backend, resolve
-from mjx_pusht.metrics import gap_deviation, stayed_rigid, weld_gap
-from mjx_pusht.reset import start_pose, start_poses
-from mjx_pusht.results import Rollouts
+from mjx_pusht.backends.base import make_backend, resolve
+from mjx_pusht.task.invariants import gap_deviation, stayed_rigid, weld_gap
+from mjx_pusht.task.reset import start_pose, start_poses
+from mjx_pusht.backends.results import Rollouts
 from mjx_pusht.scenario import Scenario
-from mjx_pusht.schedule import Schedule
-from mjx_pusht.scene import SceneSpec, build_model, scene_xml
-from mjx_pusht.tree import EXPECTED_TREES, Tree, TreeMismatch, check_tree, read_tree
+from mjx_pusht.task.schedule import Schedule
+from mjx_pusht.model.scene import SceneSpec, build_model, scene_xml
+from mjx_pusht.model.tree import EXPECTED_TREES, Tree, TreeMismatch, check_tree, read_tree
 
 __all__ = [
     "EXPECTED_TREES", "Rollouts", "Scenario", "SceneSpec", "Schedule", "Tree", "TreeMismatch",
@@ -38,6 +38,6 @@ __all__ = [
 __version__ = "0.1.0"
 
 if _util.find_spec("gymnasium") is not None:  # gym.make("mjx_pusht/PushT-v0") after `import mjx_pusht`
-    from mjx_pusht.gym_env import register as _register
+    from mjx_pusht.envs.gym import register as _register
 
     _register()

@@ -1,5 +1,5 @@
 import sys
 
-from mjx_pusht.cli import main
+from mjx_pusht.cli.commands import main
 
 sys.exit(main())

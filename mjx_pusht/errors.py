@@ -2,17 +2,17 @@
 
 from __future__ import annotations
 
-from mjx_pusht.backends import BackendError
-from mjx_pusht.controllers import ControllerError
-from mjx_pusht.distributed import DistributedError
-from mjx_pusht.outputs import OutputError
-from mjx_pusht.params import ParamError
-from mjx_pusht.pixels import PixelsError
-from mjx_pusht.rollout_mjx import BufferOverflow
-from mjx_pusht.seeds import SeedSpecError
-from mjx_pusht.sweep import ResumeError
-from mjx_pusht.tree import TreeMismatch
-from mjx_pusht.video import VideoError
+from mjx_pusht.backends.base import BackendError
+from mjx_pusht.task.controllers import ControllerError
+from mjx_pusht.study.distributed import DistributedError
+from mjx_pusht.io.outputs import OutputError
+from mjx_pusht.model.params import ParamError
+from mjx_pusht.envs.pixels import PixelsError
+from mjx_pusht.backends.mjx import BufferOverflow
+from mjx_pusht.study.seeds import SeedSpecError
+from mjx_pusht.study.sweep import ResumeError
+from mjx_pusht.model.tree import TreeMismatch
+from mjx_pusht.io.video import VideoError
 
 KNOWN_ERRORS: tuple[type[BaseException], ...] = (
     BackendError, ControllerError, DistributedError, OutputError, ParamError, BufferOverflow, SeedSpecError, ResumeError, TreeMismatch, PixelsError, VideoError, ValueError,

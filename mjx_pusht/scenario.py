@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from mjx_pusht.schedule import Schedule
-from mjx_pusht.scene import SceneSpec
+from mjx_pusht.task.schedule import Schedule
+from mjx_pusht.model.scene import SceneSpec
 
 
 @dataclasses.dataclass(frozen=True)
@@ -26,21 +26,21 @@ class Scenario:
     episode: object | None = None  # an episode.Episode; None with a controller: the defaults
 
     def __post_init__(self) -> None:
-        from mjx_pusht.reset import RESETS
+        from mjx_pusht.task.reset import RESETS
 
         if self.reset not in RESETS:
             raise ValueError(f"unknown reset {self.reset!r}; choose from {', '.join(RESETS)}")
 
     def grid(self) -> list[dict[str, float]]:
         """Every parameter combination; a single empty one when nothing is swept."""
-        from mjx_pusht.params import grid
+        from mjx_pusht.model.params import grid
 
         return grid({name: list(values) for name, values in self.params})
 
     def driver(self):
         """(controller, episode) that run this scenario: the chapter's schedule when no controller is given."""
-        from mjx_pusht.controllers import Nudge
-        from mjx_pusht.episode import Episode
+        from mjx_pusht.task.controllers import Nudge
+        from mjx_pusht.task.episode import Episode
 
         if self.controller is None:
             return Nudge(schedule=self.schedule), Episode(frame_skip=1, max_steps=self.schedule.total_steps,

@@ -10,7 +10,7 @@ import pytest
 os.environ.setdefault("MJX_PUSHT_JAX_CACHE", os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
 
 from mjx_pusht.scenario import Scenario  # noqa: E402
-from mjx_pusht.scene import SceneSpec  # noqa: E402
+from mjx_pusht.model.scene import SceneSpec  # noqa: E402
 
 SEEDS = np.arange(8)
 
@@ -25,7 +25,7 @@ def _run_in_a_temporary_directory(tmp_path, monkeypatch):
 @pytest.fixture(scope="session")
 def cpu_runs():
     """The CPU reference for seeds 0..7, welded and split, cylinder and capsule pusher."""
-    from mjx_pusht.rollout_cpu import run_cpu
+    from mjx_pusht.backends.cpu import run_cpu
 
     return {
         (b, p): run_cpu(Scenario(SceneSpec(b, p)), SEEDS)
@@ -36,15 +36,15 @@ def cpu_runs():
 
 @pytest.fixture(scope="session")
 def mjx_jax_runs():
-    from mjx_pusht.backends import MjxBackend
+    from mjx_pusht.backends.base import MjxBackend
 
     return {b: MjxBackend(Scenario(SceneSpec(b)), "jax").run(SEEDS) for b in ("none", "split-tee")}
 
 
 @pytest.fixture(scope="session")
 def mjx_warp_runs():
-    from mjx_pusht.backends import MjxBackend
-    from mjx_pusht.rollout_mjx import warp_available
+    from mjx_pusht.backends.base import MjxBackend
+    from mjx_pusht.backends.mjx import warp_available
 
     if not warp_available():
         pytest.skip("warp-lang is not installed")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from mjx_pusht.cli import main
+from mjx_pusht.cli.commands import main
 
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
 

@@ -10,8 +10,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from mjx_pusht.colliders import contacts_c
-from mjx_pusht.scene import SceneSpec, build_model
+from mjx_pusht.model.colliders import contacts_c
+from mjx_pusht.model.scene import SceneSpec, build_model
 
 
 def test_tree_colliders_lists_every_pair_the_scene_can_collide():
@@ -45,7 +45,7 @@ def _tee_against_north_wall(model, yaw):
 
 @pytest.mark.warp
 def test_mjx_warp_box_box_contacts_match_mujoco_c():
-    from mjx_pusht.rollout_mjx import warp_available
+    from mjx_pusht.backends.mjx import warp_available
 
     if not warp_available():
         pytest.skip("warp-lang is not installed")
@@ -53,7 +53,7 @@ def test_mjx_warp_box_box_contacts_match_mujoco_c():
     import jax.numpy as jnp
     from mujoco import mjx
 
-    from mjx_pusht.rollout_mjx import MjxConfig, _mj_model
+    from mjx_pusht.backends.mjx import MjxConfig, _mj_model
 
     model = build_model(SceneSpec())
     forward = jax.jit(mjx.forward)

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from mjx_pusht.compare import energy_distance, outcome_modes
-from mjx_pusht.results import Rollouts
+from mjx_pusht.study.compare import energy_distance, outcome_modes
+from mjx_pusht.backends.results import Rollouts
 
 
 def test_energy_distance_is_zero_for_identical_samples_and_grows_with_a_shift():
@@ -28,7 +28,7 @@ def test_outcome_modes_split_on_final_yaw():
 
 @pytest.mark.slow
 def test_compare_on_a_few_seeds_agrees_where_it_must(tmp_path):
-    from mjx_pusht.cli import main
+    from mjx_pusht.cli.commands import main
 
     assert main(["compare", "--seeds", "6", "--backend", "mjx-jax", "--out", str(tmp_path), "--no-root-cause"]) == 0
     r = json.loads((tmp_path / "compare.json").read_text())
@@ -43,7 +43,7 @@ def test_compare_on_a_few_seeds_agrees_where_it_must(tmp_path):
 
 # --- the task score -------------------------------------------------------------
 
-from mjx_pusht.score import T_AREA, coverage, task_score, wrap_angle  # noqa: E402
+from mjx_pusht.task.score import T_AREA, coverage, task_score, wrap_angle  # noqa: E402
 
 
 def test_the_target_covers_itself_completely():
@@ -95,7 +95,7 @@ def test_coverage_matches_an_independent_raster_on_random_poses():
 
 
 def test_the_far_away_shortcut_changes_no_coverage():
-    from mjx_pusht.task import coverage as coverage_everywhere
+    from mjx_pusht.task.rules import coverage as coverage_everywhere
 
     rng = np.random.default_rng(3)
     poses = np.column_stack([rng.uniform(-0.25, 0.25, 4000), rng.uniform(-0.25, 0.25, 4000), rng.uniform(-np.pi, np.pi, 4000)])
@@ -108,7 +108,7 @@ def test_coverage_is_the_same_function_under_jax():
     import jax
     import jax.numpy as jnp
 
-    from mjx_pusht.task import coverage as coverage_xp
+    from mjx_pusht.task.rules import coverage as coverage_xp
 
     rng = np.random.default_rng(4)
     poses = np.column_stack([rng.uniform(-0.1, 0.1, 64), rng.uniform(-0.1, 0.1, 64), rng.uniform(-np.pi, np.pi, 64)])

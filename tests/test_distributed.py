@@ -10,8 +10,8 @@ import sys
 import numpy as np
 import pytest
 
-from mjx_pusht.cli import main
-from mjx_pusht.outputs import read_table
+from mjx_pusht.cli.commands import main
+from mjx_pusht.io.outputs import read_table
 
 
 def _free_port() -> int:

@@ -12,9 +12,9 @@ import pytest
 gym = pytest.importorskip("gymnasium")
 
 import mjx_pusht  # noqa: E402,F401  (registers mjx_pusht/PushT-v0)
-from mjx_pusht.env import PushTEnv  # noqa: E402
-from mjx_pusht.episode import Episode  # noqa: E402
-from mjx_pusht.task import wrap_angle  # noqa: E402
+from mjx_pusht.envs.functional import PushTEnv  # noqa: E402
+from mjx_pusht.task.episode import Episode  # noqa: E402
+from mjx_pusht.task.rules import wrap_angle  # noqa: E402
 
 ENV = "mjx_pusht/PushT-v0"
 
@@ -109,7 +109,7 @@ def test_disabled_autoreset_resets_only_the_masked_envs():
 
 
 def test_the_expert_solves_chapter_starts_through_the_vector_env():
-    from mjx_pusht.controllers import Expert
+    from mjx_pusht.task.controllers import Expert
 
     envs = gym.make_vec(ENV, num_envs=4, backend="cpu", reset_kind="chapter")
     obs, _ = envs.reset(seed=0)
@@ -128,7 +128,7 @@ def test_the_expert_solves_chapter_starts_through_the_vector_env():
 
 def test_without_gymnasium_the_import_error_says_what_to_install():
     code = ("import sys; sys.modules['gymnasium'] = None\n"
-            "try:\n    import mjx_pusht.gym_env\nexcept ImportError as e:\n    print(e)\n")
+            "try:\n    import mjx_pusht.envs.gym\nexcept ImportError as e:\n    print(e)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert "pip install 'mjx-pusht[gym]'" in out.stdout, out.stdout + out.stderr
 
@@ -138,7 +138,7 @@ def test_bad_arguments_are_one_line_errors():
         gym.make(ENV, obs_type="rgb")
     with pytest.raises(ValueError, match="num_envs"):
         gym.make_vec(ENV, num_envs=0, backend="cpu")
-    from mjx_pusht.pixels import PixelsError
+    from mjx_pusht.envs.pixels import PixelsError
 
     with pytest.raises(PixelsError, match="mjx-warp"):
         gym.make_vec(ENV, num_envs=2, backend="mjx-jax", obs_type="pixels")
@@ -146,7 +146,7 @@ def test_bad_arguments_are_one_line_errors():
 
 @pytest.mark.warp
 def test_vector_env_on_mjx_warp_renders_pixels_in_the_batch_and_autoresets():
-    from mjx_pusht.rollout_mjx import warp_available
+    from mjx_pusht.backends.mjx import warp_available
 
     if not warp_available():
         pytest.skip("warp-lang is not installed")

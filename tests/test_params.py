@@ -9,13 +9,13 @@ import sys
 import numpy as np
 import pytest
 
-from mjx_pusht.cli import main
-from mjx_pusht.outputs import read_table
-from mjx_pusht.params import ParamError, parse_param
-from mjx_pusht.rollout_cpu import run_cpu
+from mjx_pusht.cli.commands import main
+from mjx_pusht.io.outputs import read_table
+from mjx_pusht.model.params import ParamError, parse_param
+from mjx_pusht.backends.cpu import run_cpu
 from mjx_pusht.scenario import Scenario
-from mjx_pusht.scene import SceneSpec, compile_xml, scene_xml
-from mjx_pusht.sweep import rows_for
+from mjx_pusht.model.scene import SceneSpec, compile_xml, scene_xml
+from mjx_pusht.study.sweep import rows_for
 
 
 def test_param_specs():
@@ -53,9 +53,9 @@ def test_a_soft_servo_pushes_less_far():
 
 MJX_KV = """
 import numpy as np
-from mjx_pusht.backends import MjxBackend
+from mjx_pusht.backends.base import MjxBackend
 from mjx_pusht.scenario import Scenario
-from mjx_pusht.sweep import rows_for
+from mjx_pusht.study.sweep import rows_for
 seeds = np.arange(4)
 rs, combos = rows_for(seeds, 2)
 both = MjxBackend(Scenario(params=(("kv", (5.0, 80.0)),)), "jax", x64=True).run(rs, combos=combos)

@@ -6,10 +6,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from mjx_pusht.pixels import CAMERA, CpuRenderer, PixelsError, view_model
-from mjx_pusht.reset import QposLayout
-from mjx_pusht.scene import SceneSpec, build_model
-from mjx_pusht.task import T_RECTS, to_pixels
+from mjx_pusht.envs.pixels import CAMERA, CpuRenderer, PixelsError, view_model
+from mjx_pusht.task.reset import QposLayout
+from mjx_pusht.model.scene import SceneSpec, build_model
+from mjx_pusht.task.rules import T_RECTS, to_pixels
 
 SIZE = 96
 
@@ -126,8 +126,8 @@ def test_bad_sizes_and_missing_gl_are_one_line(model, monkeypatch):
 @pytest.mark.warp
 def test_mjx_warp_renders_the_cpus_image_of_the_same_states():
     """MJX-Warp's ray tracer (through Warp's CPU device here) against MuJoCo C's OpenGL, same states."""
-    from mjx_pusht.env import PushTEnv
-    from mjx_pusht.rollout_mjx import warp_available
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.backends.mjx import warp_available
 
     if not warp_available():
         pytest.skip("warp-lang is not installed")
@@ -151,7 +151,7 @@ def test_mjx_warp_renders_the_cpus_image_of_the_same_states():
 def test_eval_video_draws_each_episode_in_its_tile(tmp_path):
     from PIL import Image
 
-    from mjx_pusht.cli import main
+    from mjx_pusht.cli.commands import main
 
     gif = tmp_path / "expert.gif"
     assert main(["eval", "--seeds", "4", "--backend", "cpu", "--reset", "chapter", "--max-steps", "12",
@@ -170,7 +170,7 @@ def test_eval_video_draws_each_episode_in_its_tile(tmp_path):
 
 
 def test_bad_video_requests_fail_in_one_line_before_any_episode(tmp_path, capsys):
-    from mjx_pusht.cli import main
+    from mjx_pusht.cli.commands import main
 
     assert main(["eval", "--seeds", "4", "--out", str(tmp_path / "ev"), "--video", str(tmp_path / "v.avi")]) == 1
     err = capsys.readouterr().err
@@ -185,7 +185,7 @@ def test_bad_video_requests_fail_in_one_line_before_any_episode(tmp_path, capsys
 def test_mp4_holds_the_frames_it_was_given(tmp_path):
     iio = pytest.importorskip("imageio.v3")
     pytest.importorskip("imageio_ffmpeg")
-    from mjx_pusht.video import write
+    from mjx_pusht.io.video import write
 
     frames = np.zeros((12, 64, 96, 3), np.uint8)
     frames[:, :, :48] = (200, 40, 40)  # left half red, right half black: survives the codec's rounding

@@ -11,15 +11,15 @@ import types
 import numpy as np
 import pytest
 
-from mjx_pusht.backends import CpuBackend
-from mjx_pusht.cli import main
-from mjx_pusht.outputs import read_table
-from mjx_pusht.results import COLUMNS, Rollouts, scene_metrics
+from mjx_pusht.backends.base import CpuBackend
+from mjx_pusht.cli.commands import main
+from mjx_pusht.io.outputs import read_table
+from mjx_pusht.backends.results import COLUMNS, Rollouts, scene_metrics
 from mjx_pusht.scenario import Scenario
-from mjx_pusht.scene import SceneSpec
-from mjx_pusht.seeds import SeedSpecError, parse_seeds
-from mjx_pusht.sweep import finish, run_sweep
-from mjx_pusht.tree import read_tree
+from mjx_pusht.model.scene import SceneSpec
+from mjx_pusht.study.seeds import SeedSpecError, parse_seeds
+from mjx_pusht.study.sweep import finish, run_sweep
+from mjx_pusht.model.tree import read_tree
 
 
 
@@ -74,7 +74,7 @@ def test_split_tee_is_split_on_every_seed_and_backend(mjx_jax_runs, cpu_runs):
 
 SHARD_SCRIPT = """
 import sys, numpy as np, jax
-from mjx_pusht.backends import MjxBackend
+from mjx_pusht.backends.base import MjxBackend
 from mjx_pusht.scenario import Scenario
 assert len(jax.devices()) == 2, jax.devices()
 impl = sys.argv[1]
@@ -163,7 +163,7 @@ def test_unfinished_sweep_is_not_clobbered_without_resume(tmp_path, capsys):
 
 
 def test_non_finite_seeds_are_flagged_and_counted_not_averaged(tmp_path):
-    from mjx_pusht.sweep import summarize
+    from mjx_pusht.study.sweep import summarize
 
     backend = CpuBackend(Scenario())
     backend.model.dof_damping[:2] = -8.0  # anti-damping: once pushed, the tee's speed grows without bound
@@ -197,7 +197,7 @@ def test_bad_sweep_input_is_one_line(tmp_path, capsys, argv, needle):
 
 
 def test_mjx_warp_without_warp_lang_is_one_line(tmp_path, capsys, monkeypatch):
-    import mjx_pusht.rollout_mjx as rm
+    import mjx_pusht.backends.mjx as rm
 
     monkeypatch.setattr(rm, "warp_available", lambda: False)
     assert main(["sweep", "--seeds", "2", "--backend", "mjx-warp", "--out", str(tmp_path / "o")]) == 1
@@ -220,8 +220,8 @@ def test_sweep_cli_writes_table_summary_and_recording(tmp_path):
 
 @pytest.mark.warp
 def test_warp_buffers_too_small_to_hold_the_contacts_are_an_error_not_a_result():
-    from mjx_pusht.backends import MjxBackend
-    from mjx_pusht.rollout_mjx import BufferOverflow, warp_available
+    from mjx_pusht.backends.base import MjxBackend
+    from mjx_pusht.backends.mjx import BufferOverflow, warp_available
 
     if not warp_available():
         pytest.skip("warp-lang is not installed")
@@ -232,8 +232,8 @@ def test_warp_buffers_too_small_to_hold_the_contacts_are_an_error_not_a_result()
 
 @pytest.mark.warp
 def test_warp_buffers_that_overflow_grow_and_the_chunk_is_rerun(monkeypatch, cpu_runs):
-    import mjx_pusht.rollout_mjx as rm
-    from mjx_pusht.backends import MjxBackend
+    import mjx_pusht.backends.mjx as rm
+    from mjx_pusht.backends.base import MjxBackend
 
     if not rm.warp_available():
         pytest.skip("warp-lang is not installed")
@@ -276,8 +276,8 @@ def test_the_dry_step_finds_every_warp_module_a_real_step_launches(mjx_warp_runs
     import warp as wp
     from mujoco.mjx.third_party import mujoco_warp as mjw
 
-    from mjx_pusht.rollout_mjx import MjxConfig, _mj_model, simulated_scene
-    from mjx_pusht.warp_kernels import scene_modules
+    from mjx_pusht.backends.mjx import MjxConfig, _mj_model, simulated_scene
+    from mjx_pusht.backends.warp_kernels import scene_modules
 
     for break_it in ("none", "split-tee"):
         model = _mj_model(simulated_scene(Scenario(SceneSpec(break_it)), "warp"), MjxConfig(impl="warp"))

@@ -10,17 +10,17 @@ import sys
 import numpy as np
 import pytest
 
-from mjx_pusht.cli import main
-from mjx_pusht.controllers import Expert, FromFunction, Nudge, Random, Zero, seed_key, uniform_hash
-from mjx_pusht.env import PushTEnv
-from mjx_pusht.episode import Episode
-from mjx_pusht.evaluate import wilson
-from mjx_pusht.outputs import read_table
-from mjx_pusht.reset import CLEARANCE, PUSHER_RADIUS, start_poses
-from mjx_pusht.results import COLUMNS
-from mjx_pusht.rollout_cpu import run_cpu
+from mjx_pusht.cli.commands import main
+from mjx_pusht.task.controllers import Expert, FromFunction, Nudge, Random, Zero, seed_key, uniform_hash
+from mjx_pusht.envs.functional import PushTEnv
+from mjx_pusht.task.episode import Episode
+from mjx_pusht.study.stats import wilson
+from mjx_pusht.io.outputs import read_table
+from mjx_pusht.task.reset import CLEARANCE, PUSHER_RADIUS, start_poses
+from mjx_pusht.backends.results import COLUMNS
+from mjx_pusht.backends.cpu import run_cpu
 from mjx_pusht.scenario import Scenario
-from mjx_pusht.task import SUCCESS_COVERAGE, coverage, keypoints
+from mjx_pusht.task.rules import SUCCESS_COVERAGE, coverage, keypoints
 
 EPISODE = Episode()  # 10 Hz control, 300 steps
 
@@ -94,7 +94,7 @@ def test_env_shapes_dtypes_and_keypoints():
 
 
 def test_pixel_frame_puts_the_walls_on_the_image_edges_and_round_trips():
-    from mjx_pusht.task import from_pixels, to_pixels
+    from mjx_pusht.task.rules import from_pixels, to_pixels
 
     corners = np.array([[-0.39, 0.39], [0.39, -0.39], [0.0, 0.0]])
     np.testing.assert_allclose(to_pixels(corners), [[0, 0], [512, 512], [256, 256]])
@@ -104,7 +104,7 @@ def test_pixel_frame_puts_the_walls_on_the_image_edges_and_round_trips():
 
 @pytest.mark.parametrize("reset", ["chapter", "task"])
 def test_start_poses_are_each_seeds_own_generator_bit_for_bit(reset):
-    from mjx_pusht.reset import start_state
+    from mjx_pusht.task.reset import start_state
 
     rng = np.random.default_rng(2026)
     seeds = np.concatenate([[0, 1, 2**32 - 1, 2**32, 2**32 + 1, 2**63 - 1], rng.integers(0, 2**63 - 1, 300),
@@ -303,7 +303,7 @@ def test_bad_eval_input_is_one_line(tmp_path, capsys):
 
 # --- MJX: the controller runs inside the compiled scan -----------------------------------------
 def test_mjx_jax_runs_the_expert_in_the_scan_and_solves_the_chapter_starts():
-    from mjx_pusht.backends import MjxBackend
+    from mjx_pusht.backends.base import MjxBackend
 
     sc = Scenario(reset="chapter", controller=Expert(), episode=Episode(max_steps=120))
     backend = MjxBackend(sc, "jax")
@@ -317,8 +317,8 @@ def test_mjx_jax_runs_the_expert_in_the_scan_and_solves_the_chapter_starts():
 
 @pytest.mark.warp
 def test_mjx_warp_runs_the_expert_in_the_scan_and_agrees_with_the_cpu():
-    from mjx_pusht.backends import MjxBackend
-    from mjx_pusht.rollout_mjx import warp_available
+    from mjx_pusht.backends.base import MjxBackend
+    from mjx_pusht.backends.mjx import warp_available
 
     if not warp_available():
         pytest.skip("warp-lang is not installed")
@@ -331,7 +331,7 @@ def test_mjx_warp_runs_the_expert_in_the_scan_and_agrees_with_the_cpu():
 
 @pytest.mark.warp
 def test_eval_on_mjx_warp_through_the_cli_matches_the_cpu_verdicts(tmp_path):
-    from mjx_pusht.rollout_mjx import warp_available
+    from mjx_pusht.backends.mjx import warp_available
 
     if not warp_available():
         pytest.skip("warp-lang is not installed")

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pusht.results import Rollouts
+from mjx_pusht.backends.results import Rollouts
 
 AUDIT_SEED = 20261123  # the sample is the same for the same sweep
 SETTLE_TOL = 1e-5
@@ -38,8 +38,8 @@ def flagged(r: Rollouts, welded: bool) -> np.ndarray:
 
 
 def _modes(r: Rollouts) -> dict[str, np.ndarray]:
-    from mjx_pusht.compare import SPIN_RAD
-    from mjx_pusht.task import wrap_angle
+    from mjx_pusht.study.compare import SPIN_RAD
+    from mjx_pusht.task.rules import wrap_angle
 
     yaw = wrap_angle(r.final[:, 2])
     return {"straight": np.abs(yaw) < SPIN_RAD, "spun_ccw": yaw >= SPIN_RAD, "spun_cw": yaw <= -SPIN_RAD}
@@ -47,7 +47,7 @@ def _modes(r: Rollouts) -> dict[str, np.ndarray]:
 
 def compare_rows(mjx: Rollouts, cpu: Rollouts) -> dict:
     """The audit block: what was compared, the measured differences, and the verdict against the thresholds."""
-    from mjx_pusht.evaluate import wilson
+    from mjx_pusht.study.stats import wilson
 
     ok = mjx.finite & cpu.finite
     settle = float(np.abs(mjx.settled[ok] - cpu.settled[ok]).max()) if ok.any() else float("nan")
@@ -98,8 +98,8 @@ class Audit:
         sweep's own `poses` hold only this process's block)."""
         from concurrent.futures import ThreadPoolExecutor
 
-        from mjx_pusht.reset import start_poses
-        from mjx_pusht.rollout_cpu import run_cpu
+        from mjx_pusht.task.reset import start_poses
+        from mjx_pusht.backends.cpu import run_cpu
 
         self.reset = self.backend.scenario.reset
         idx = self.random
@@ -110,8 +110,8 @@ class Audit:
         pool.shutdown(wait=False)
 
     def finish(self, rows: Rollouts, *, welded: bool, out: Path | None = None) -> dict:
-        from mjx_pusht.reset import start_poses
-        from mjx_pusht.rollout_cpu import run_cpu
+        from mjx_pusht.task.reset import start_poses
+        from mjx_pusht.backends.cpu import run_cpu
 
         if self.future is None:
             self.start()
@@ -130,7 +130,7 @@ class Audit:
         block["n_flagged"] = int(flags.sum())
         block["cpu_pusher_shape"] = self.backend.runner.scene.pusher
         if out is not None:
-            from mjx_pusht.outputs import atomic_write_table
+            from mjx_pusht.io.outputs import atomic_write_table
 
             cols = cpu.columns()
             cols["row"] = idx

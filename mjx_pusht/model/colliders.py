@@ -37,7 +37,7 @@ class PairColliders:
 
 def _touching_qpos(model: mujoco.MjModel, g1: int, g2: int) -> np.ndarray | None:
     """qpos where geoms g1 and g2 overlap by 2 mm, moving the one on joints toward the other."""
-    from mjx_pusht.reset import QposLayout
+    from mjx_pusht.task.reset import QposLayout
 
     layout = QposLayout.of(model)
     if layout.tee is None:
@@ -120,8 +120,8 @@ def mjx_jax_kind(t1: int, t2: int) -> str:
 
 def collider_table(break_it: str = "none", match_c_colliders: bool = True) -> list[PairColliders]:
     """Every collidable geom pair of the scene and the function each side calls for it."""
-    from mjx_pusht.rollout_mjx import collision_pairs
-    from mjx_pusht.scene import SceneSpec, build_model
+    from mjx_pusht.backends.mjx import collision_pairs
+    from mjx_pusht.model.scene import SceneSpec, build_model
 
     model = build_model(SceneSpec(break_it))
     capsule = build_model(SceneSpec(break_it, "capsule"))

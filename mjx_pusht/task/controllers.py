@@ -20,8 +20,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from mjx_pusht.schedule import Schedule
-from mjx_pusht.task import ACTION_TYPES, CTRL_LIMIT, T_REACH, distance_to_tee, wrap_angle
+from mjx_pusht.task.schedule import Schedule
+from mjx_pusht.task.rules import ACTION_TYPES, CTRL_LIMIT, T_REACH, distance_to_tee, wrap_angle
 
 BUILTIN = ("zero", "nudge", "random", "expert")
 

@@ -21,12 +21,12 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjx_pusht.controllers import seed_key
-from mjx_pusht.episode import after_control_step, after_physics_step, begin, decide
-from mjx_pusht.reset import QposLayout, start_poses
-from mjx_pusht.results import Rollouts, Trace, from_carry
+from mjx_pusht.task.controllers import seed_key
+from mjx_pusht.task.episode import after_control_step, after_physics_step, begin, decide
+from mjx_pusht.task.reset import QposLayout, start_poses
+from mjx_pusht.backends.results import Rollouts, Trace, from_carry
 from mjx_pusht.scenario import Scenario
-from mjx_pusht.scene import SceneSpec, build_model
+from mjx_pusht.model.scene import SceneSpec, build_model
 
 IMPLS = ("jax", "warp")
 PUSHER_FOR_IMPL = {"jax": "capsule", "warp": "cylinder"}
@@ -198,7 +198,7 @@ class MjxRunner:
         self.growths = 0
         self.warp_kernels: dict = {}
         if cfg.impl == "warp" and cfg.precompile:
-            from mjx_pusht import warp_kernels
+            from mjx_pusht.backends import warp_kernels
 
             # every kernel the scene needs, compiled on all cores before the first (serial, lazy) launch.
             # Not on a thread beside the model's upload: finding them patches wp.launch process-wide, and
@@ -236,7 +236,7 @@ class MjxRunner:
         import jax.numpy as jnp
         from mujoco import mjx
 
-        from mjx_pusht.params import apply
+        from mjx_pusht.model.params import apply
 
         models = [apply(self.model, g) for g in self.grid] if self.scenario.params else [self.model]
         kw = {}

@@ -21,12 +21,12 @@ import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
-from mjx_pusht.controllers import seed_key
-from mjx_pusht.episode import after_control_step, after_physics_step, begin, decide
-from mjx_pusht.reset import QposLayout, start_poses
-from mjx_pusht.results import Rollouts, Trace, from_carry
+from mjx_pusht.task.controllers import seed_key
+from mjx_pusht.task.episode import after_control_step, after_physics_step, begin, decide
+from mjx_pusht.task.reset import QposLayout, start_poses
+from mjx_pusht.backends.results import Rollouts, Trace, from_carry
 from mjx_pusht.scenario import Scenario
-from mjx_pusht.scene import build_model
+from mjx_pusht.model.scene import build_model
 
 _STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
 _CHUNK = 4096  # seeds per rollout call: bounds the (chunk, steps, nstate) buffer to ~100 MB
@@ -188,7 +188,7 @@ def run_cpu(
     grid = scenario.grid()
     combos = np.zeros(len(seeds), np.int64) if combos is None else np.asarray(combos, np.int64)
     if scenario.params:
-        from mjx_pusht.params import apply
+        from mjx_pusht.model.params import apply
 
         models = [apply(model, g) for g in grid]
     seeds = np.asarray(seeds, dtype=np.int64)

@@ -6,8 +6,8 @@ import dataclasses
 
 import numpy as np
 
-from mjx_pusht.metrics import stayed_rigid
-from mjx_pusht.score import task_score
+from mjx_pusht.task.invariants import stayed_rigid
+from mjx_pusht.task.score import task_score
 
 # per_seed.parquet's columns, in order
 COLUMNS = (

@@ -12,8 +12,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjx_pusht.metrics import weld_gap
-from mjx_pusht.results import Rollouts
+from mjx_pusht.task.invariants import weld_gap
+from mjx_pusht.backends.results import Rollouts
 
 TEE_COLOR = [115, 128, 242]
 STEM_SPLIT_COLOR = [242, 128, 115]
@@ -217,8 +217,8 @@ MODE_COLORS = {"straight": [60, 160, 90], "spun_ccw": [70, 110, 230], "spun_cw":
 def _log_outcomes(rr, everyone: Rollouts) -> None:
     """Outcome distributions over every seed, in metres and radians: the final (x, y) coloured by
     outcome mode with the target T outlined, and histograms over bin centres."""
-    from mjx_pusht.compare import SPIN_RAD
-    from mjx_pusht.task import T_OUTLINE, wrap_angle
+    from mjx_pusht.study.compare import SPIN_RAD
+    from mjx_pusht.task.rules import T_OUTLINE, wrap_angle
 
     yaw = wrap_angle(everyone.final[:, 2])  # a turn is a turn, whichever way round the hinge counted it
     mode = np.where(yaw >= SPIN_RAD, "spun_ccw", np.where(yaw <= -SPIN_RAD, "spun_cw", "straight"))
@@ -284,8 +284,8 @@ def record_episodes(path: Path, model: mujoco.MjModel, traced: Rollouts, everyon
     (plots/coverage/seed_S, plots/reward/seed_S), and the outcome over every episode (outcomes/...)."""
     import rerun as rr
 
-    from mjx_pusht.reset import QposLayout
-    from mjx_pusht.task import SUCCESS_COVERAGE, coverage_np
+    from mjx_pusht.task.reset import QposLayout
+    from mjx_pusht.task.rules import SUCCESS_COVERAGE, coverage_np
 
     assert traced.trace is not None and traced.episode is not None
     layout = QposLayout.of(model)

@@ -37,10 +37,10 @@ try:
 except ImportError as e:  # the extra is optional: say what to install, in one line
     raise ImportError("the gymnasium environments need gymnasium: pip install 'mjx-pusht[gym]'") from e
 
-from mjx_pusht.env import PushTEnv
-from mjx_pusht.episode import Episode
-from mjx_pusht.pixels import IMAGE_SIZE
-from mjx_pusht.task import ACTION_TYPES, CTRL_LIMIT, WORKSPACE_HALF, wrap_angle
+from mjx_pusht.envs.functional import PushTEnv
+from mjx_pusht.task.episode import Episode
+from mjx_pusht.envs.pixels import IMAGE_SIZE
+from mjx_pusht.task.rules import ACTION_TYPES, CTRL_LIMIT, WORKSPACE_HALF, wrap_angle
 
 OBS_TYPES = ("state", "keypoints", "pixels", "pixels_agent_pos")
 TABLE_HALF = 0.45  # every position in an observation lies on the table (the walls stop the bodies sooner)
@@ -141,7 +141,7 @@ class _Pictures:
 
     def _draw(self, qpos) -> np.ndarray:
         if self._viewer is None:
-            from mjx_pusht.pixels import CpuRenderer
+            from mjx_pusht.envs.pixels import CpuRenderer
 
             self._viewer = CpuRenderer(self._env.model, self.render_size)
         return self._viewer(np.asarray(qpos, np.float64))
@@ -228,8 +228,8 @@ class PushTVectorEnv(_Pictures, VectorEnv):
                  render_size: int = 512, reset_kind: str = "task", max_episode_steps: int = 300,
                  frame_skip: int = 10, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
                  threads: int | None = None):
-        from mjx_pusht.backends import resolve
-        from mjx_pusht.rollout_cpu import default_threads
+        from mjx_pusht.backends.base import resolve
+        from mjx_pusht.backends.cpu import default_threads
 
         _check(obs_type, action_type)
         if int(num_envs) < 1:
@@ -347,5 +347,5 @@ def register() -> None:
     """Register `mjx_pusht/PushT-v0` with gymnasium (done on `import mjx_pusht` when gymnasium is installed)."""
     if ENV_ID in gym.registry:
         return
-    gym.register(id=ENV_ID, entry_point="mjx_pusht.gym_env:PushTGymEnv",
-                 vector_entry_point="mjx_pusht.gym_env:PushTVectorEnv", max_episode_steps=None)
+    gym.register(id=ENV_ID, entry_point="mjx_pusht.envs.gym:PushTGymEnv",
+                 vector_entry_point="mjx_pusht.envs.gym:PushTVectorEnv", max_episode_steps=None)

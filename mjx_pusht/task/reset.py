@@ -18,7 +18,7 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
-from mjx_pusht.task import distance_to_tee
+from mjx_pusht.task.rules import distance_to_tee
 
 TEE_X_RANGE = (-0.03, 0.03)
 TEE_Y_RANGE = (0.02, 0.06)
@@ -86,7 +86,7 @@ def start_poses(seeds: Sequence[int] | np.ndarray, *, reset: str = "chapter") ->
 
 
 def _draw(seeds: np.ndarray, reset: str) -> np.ndarray:
-    from mjx_pusht.pcg64 import Streams
+    from mjx_pusht.task.pcg64 import Streams
 
     st = Streams(seeds)
     if reset == "chapter":

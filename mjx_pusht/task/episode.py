@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from mjx_pusht.metrics import invariants_init, invariants_update
-from mjx_pusht.task import SUCCESS_COVERAGE, coverage, episode_init, episode_update, observe, to_ctrl
+from mjx_pusht.task.invariants import invariants_init, invariants_update
+from mjx_pusht.task.rules import SUCCESS_COVERAGE, coverage, episode_init, episode_update, observe, to_ctrl
 
 
 @dataclasses.dataclass(frozen=True)

@@ -26,7 +26,7 @@ import os
 
 import numpy as np
 
-from mjx_pusht.task import WORKSPACE_HALF
+from mjx_pusht.task.rules import WORKSPACE_HALF
 
 CAMERA = "top"
 IMAGE_SIZE = 96  # Diffusion Policy's and gym-pusht's observation size

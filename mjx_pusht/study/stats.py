@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from mjx_pusht.results import Rollouts
+from mjx_pusht.backends.results import Rollouts
 
 
 def wilson(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:

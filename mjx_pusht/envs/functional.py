@@ -28,11 +28,11 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from mjx_pusht.controllers import Controller, seed_key
-from mjx_pusht.episode import Episode, after_control_step, after_physics_step, begin
-from mjx_pusht.reset import QposLayout, start_poses
-from mjx_pusht.scene import SceneSpec
-from mjx_pusht.task import ACTION_TYPES, observe, to_ctrl
+from mjx_pusht.task.controllers import Controller, seed_key
+from mjx_pusht.task.episode import Episode, after_control_step, after_physics_step, begin
+from mjx_pusht.task.reset import QposLayout, start_poses
+from mjx_pusht.model.scene import SceneSpec
+from mjx_pusht.task.rules import ACTION_TYPES, observe, to_ctrl
 
 
 class State(NamedTuple):
@@ -74,7 +74,7 @@ class PushTEnv:
     keep_states: bool = True
 
     def __post_init__(self) -> None:
-        from mjx_pusht.backends import BackendError
+        from mjx_pusht.backends.base import BackendError
         from mjx_pusht.scenario import Scenario
 
         if self.action_type not in ACTION_TYPES:
@@ -85,20 +85,20 @@ class PushTEnv:
         self.scenario = Scenario(self.scene, reset=self.reset_kind, controller=self._ctrl, episode=self.episode)
         self._settle = self.scenario.schedule.settle_steps - 1
         if self.backend == "cpu":
-            from mjx_pusht.rollout_cpu import _model
+            from mjx_pusht.backends.cpu import _model
 
             self.model = _model(self.scenario)
             self._xp = np
             if self.pixels:
-                from mjx_pusht.pixels import CpuRenderer
+                from mjx_pusht.envs.pixels import CpuRenderer
 
                 self.renderer = CpuRenderer(self.model, self.pixels)
         else:
             import jax.numpy as jnp
 
-            from mjx_pusht.rollout_mjx import (MjxConfig, MjxRunner, constraints_per_world, contacts_per_world,
+            from mjx_pusht.backends.mjx import (MjxConfig, MjxRunner, constraints_per_world, contacts_per_world,
                                                simulated_scene)
-            from mjx_pusht.scene import build_model
+            from mjx_pusht.model.scene import build_model
 
             impl = self.backend.split("-")[1]
             # Buffers at the scene's geometric bound: an environment cannot rerun a step, so it
@@ -111,7 +111,7 @@ class PushTEnv:
             self._xp = jnp
             self._mx = self.runner._row_model(self.runner._model_leaves(), 0)
             if self.pixels and impl != "warp":
-                from mjx_pusht.pixels import PixelsError
+                from mjx_pusht.envs.pixels import PixelsError
 
                 raise PixelsError("pixel observations on MJX need MJX-Warp's renderer: use backend mjx-warp (or cpu)")
             self._renderers, self._jitted = {}, {}
@@ -133,7 +133,7 @@ class PushTEnv:
         qpos0 = self.layout.initial_qpos(self.model, starts)
         key = seed_key(seeds)
         if self.backend == "cpu":
-            from mjx_pusht.rollout_cpu import _Lockstep
+            from mjx_pusht.backends.cpu import _Lockstep
 
             data = _Lockstep(self.model, self.model, qpos0, self.episode.frame_skip, self.threads)
             return self._state(data, begin(self.layout, qpos0, key, self._ctrl, self.episode, np), qpos0, key, 0)
@@ -171,7 +171,7 @@ class PushTEnv:
         """One world's control step (MJX): pure, jit- and vmap-able."""
         import jax.numpy as jnp
 
-        from mjx_pusht.rollout_mjx import advance
+        from mjx_pusht.backends.mjx import advance
 
         return self._after(state, *self._advance_one(state, action, jnp, advance), jnp)
 
@@ -231,7 +231,7 @@ class PushTEnv:
 
         if n not in self._jitted:
             if self.pixels:
-                from mjx_pusht.pixels import WarpRenderer
+                from mjx_pusht.envs.pixels import WarpRenderer
 
                 self._renderers[n] = WarpRenderer(self.model, n, self.pixels)
             self._jitted[n] = (jax.jit(jax.vmap(self.step_one)), jax.jit(self._reset_batch))

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pusht.scene import BREAK_MODES
+from mjx_pusht.model.scene import BREAK_MODES
 
 
 class UsageError(Exception):
@@ -172,27 +172,27 @@ class Clock:
 
 
 def cmd_compare(args) -> int:
-    from mjx_pusht.backends import BackendError
-    from mjx_pusht.compare import compare
-    from mjx_pusht.outputs import prepare_out_dir
-    from mjx_pusht.seeds import parse_seeds
-    from mjx_pusht.tier import Banner
+    from mjx_pusht.backends.base import BackendError
+    from mjx_pusht.study.compare import compare
+    from mjx_pusht.io.outputs import prepare_out_dir
+    from mjx_pusht.study.seeds import parse_seeds
+    from mjx_pusht.cli.banner import Banner
 
     seeds = parse_seeds(args.seeds)
     if args.backend not in ("mjx-jax", "mjx-warp"):
         raise BackendError(f"compare takes --backend mjx-jax or mjx-warp, not {args.backend!r}")
     controller = None
     if args.controller:  # a controller that cannot load is a one-line error before anything is written
-        from mjx_pusht.controllers import load
+        from mjx_pusht.task.controllers import load
 
         controller = load(args.controller)
     out = prepare_out_dir(args.out)
     banner = Banner("compare")
     if controller is not None:
-        from mjx_pusht.compare import compare_episodes
-        from mjx_pusht.episode import Episode
+        from mjx_pusht.study.compare import compare_episodes
+        from mjx_pusht.task.episode import Episode
 
-        from mjx_pusht.rollout_cpu import default_threads
+        from mjx_pusht.backends.cpu import default_threads
 
         r = compare_episodes(seeds, args.backend.split("-")[1], out, controller=controller,
                              reset=args.reset, episode=Episode(max_steps=args.max_steps), workers=default_threads())
@@ -215,14 +215,14 @@ def cmd_compare(args) -> int:
 
 
 def cmd_tree(args) -> int:
-    from mjx_pusht.scene import SceneSpec, build_model
-    from mjx_pusht.tree import read_tree, tree_json
+    from mjx_pusht.model.scene import SceneSpec, build_model
+    from mjx_pusht.model.tree import read_tree, tree_json
 
     if args.colliders:
         import dataclasses
         import json
 
-        from mjx_pusht.colliders import collider_table, describe
+        from mjx_pusht.model.colliders import collider_table, describe
 
         rows = collider_table(args.break_it)
         print(json.dumps([dataclasses.asdict(r) for r in rows], indent=2) if args.json else describe(rows))
@@ -233,14 +233,14 @@ def cmd_tree(args) -> int:
 
 
 def cmd_scene(args) -> int:
-    from mjx_pusht.backends import CpuBackend
-    from mjx_pusht.outputs import atomic_write_json, drop_stale, prepare_out_dir
-    from mjx_pusht.results import scene_metrics
+    from mjx_pusht.backends.base import CpuBackend
+    from mjx_pusht.io.outputs import atomic_write_json, drop_stale, prepare_out_dir
+    from mjx_pusht.backends.results import scene_metrics
     from mjx_pusht.scenario import Scenario
-    from mjx_pusht.schedule import SMOKE_NUDGE_STEPS, Schedule
-    from mjx_pusht.scene import SceneSpec
-    from mjx_pusht.tier import Banner
-    from mjx_pusht.tree import read_tree
+    from mjx_pusht.task.schedule import SMOKE_NUDGE_STEPS, Schedule
+    from mjx_pusht.model.scene import SceneSpec
+    from mjx_pusht.cli.banner import Banner
+    from mjx_pusht.model.tree import read_tree
 
     schedule = Schedule(nudge_steps=SMOKE_NUDGE_STEPS if args.smoke else args.steps)
     if args.compare_welded and args.break_it == "none":
@@ -260,14 +260,14 @@ def cmd_scene(args) -> int:
           f"{run.gap_max_dev[0]:.4f} m from the 0.06 weld ({verdict})")
     print(f"metrics: {out / 'metrics.json'}")
     if args.rerun:
-        from mjx_pusht.record import record_run
+        from mjx_pusht.io.record import record_run
 
         record_run(out / "scene.rrd", backend.model, run)
         print(f"recording: {out / 'scene.rrd'} - open it with: rerun {out / 'scene.rrd'}")
     else:
         drop_stale(out / "scene.rrd")
     if args.compare_welded:
-        from mjx_pusht.record import record_walk
+        from mjx_pusht.io.record import record_walk
 
         welded = CpuBackend(Scenario(SceneSpec("none"), schedule), nthread=1)
         w = welded.run(np.array([args.seed]), trace=True)
@@ -281,17 +281,17 @@ def cmd_scene(args) -> int:
 
 
 def cmd_sweep(args) -> int:
-    from mjx_pusht.backends import resolve
-    from mjx_pusht.outputs import atomic_write_json
-    from mjx_pusht.params import parse_param
+    from mjx_pusht.backends.base import resolve
+    from mjx_pusht.io.outputs import atomic_write_json
+    from mjx_pusht.model.params import parse_param
     from mjx_pusht.scenario import Scenario
-    from mjx_pusht.schedule import Schedule
-    from mjx_pusht.scene import SceneSpec
-    from mjx_pusht.seeds import parse_seeds
-    from mjx_pusht.sweep import finish, run_sweep, summarize
-    from mjx_pusht.tree import read_tree
+    from mjx_pusht.task.schedule import Schedule
+    from mjx_pusht.model.scene import SceneSpec
+    from mjx_pusht.study.seeds import parse_seeds
+    from mjx_pusht.study.sweep import finish, run_sweep, summarize
+    from mjx_pusht.model.tree import read_tree
 
-    from mjx_pusht.distributed import Processes
+    from mjx_pusht.study.distributed import Processes
 
     seeds = parse_seeds(args.seeds)
     params = tuple((n, tuple(v)) for n, v in (parse_param(t) for t in args.param))
@@ -313,7 +313,7 @@ def cmd_sweep(args) -> int:
           + (f" x {len(scenario.grid())} parameter combinations ({', '.join(n for n, _ in params)})" if params else ""))
     auditor = None
     if name != "cpu" and args.audit > 0 and processes.leader:
-        from mjx_pusht.audit import Audit
+        from mjx_pusht.study.audit import Audit
 
         auditor = Audit(backend, row_seeds, combos, args.audit)  # its CPU rows run beside the device's
     try:
@@ -338,7 +338,7 @@ def cmd_sweep(args) -> int:
     clock.lap("table_writing")
     summary["timing"] = clock.report(run.timing)
     if auditor is not None:
-        from mjx_pusht.audit import announce
+        from mjx_pusht.study.audit import announce
 
         summary["audit"] = auditor.finish(run.rollouts, welded=args.break_it == "none", out=out)
         summary["timing"]["audit_wait"] = round(clock.lap("audit_wait"), 3)  # what the overlap did not hide
@@ -359,7 +359,7 @@ def cmd_sweep(args) -> int:
     print(f"speed: {summary['steps_per_second']:,.0f} steps/s over {summary['run_seconds']:.2f} s "
           f"(+{summary['compile_seconds']:.2f} s compile)")
     print(f"table: {out / 'per_seed.parquet'}\nsummary: {out / 'summary.json'}")
-    from mjx_pusht.record import record_sweep, recorded_rows
+    from mjx_pusht.io.record import record_sweep, recorded_rows
 
     _record(args, out / "sweep.rrd", "seeds", backend, r, combos, lambda: recorded_rows(r, args.record),
             record_sweep, summary, clock)
@@ -372,7 +372,7 @@ def _join_processes(processes, run, out: Path, row_seeds):
     import dataclasses
     import time
 
-    from mjx_pusht.sweep import PARTS, assemble
+    from mjx_pusht.study.sweep import PARTS, assemble
 
     t0 = time.perf_counter()
     processes.barrier("chunks-written")
@@ -387,11 +387,11 @@ def _join_processes(processes, run, out: Path, row_seeds):
 def _start_batch(command: str, args, seeds, name: str, why: str, config: dict, scenario, check: bool = True):
     """What every batch command does before its first row: the rows, a writable --out that holds no
     other unfinished run, the banner, and the backend (which compiles the scene and checks its tree)."""
-    from mjx_pusht.backends import make_backend
-    from mjx_pusht.outputs import prepare_out_dir
-    from mjx_pusht.rollout_cpu import default_threads
-    from mjx_pusht.sweep import check_resumable, rows_for
-    from mjx_pusht.tier import Banner
+    from mjx_pusht.backends.base import make_backend
+    from mjx_pusht.io.outputs import prepare_out_dir
+    from mjx_pusht.backends.cpu import default_threads
+    from mjx_pusht.study.sweep import check_resumable, rows_for
+    from mjx_pusht.cli.banner import Banner
 
     row_seeds, combos = rows_for(seeds, len(scenario.grid()))
     out = prepare_out_dir(args.out)
@@ -409,8 +409,8 @@ def _start_batch(command: str, args, seeds, name: str, why: str, config: dict, s
 def _record(args, path: Path, rows: str, backend, r, combos, pick, writer, summary: dict, clock) -> None:
     """The recording of a batch command: the picked rows rerun with a trace and written by `writer`
     (or an earlier run's recording removed when this run is not recorded); its time joins the summary."""
-    from mjx_pusht.outputs import atomic_write_json, drop_stale
-    from mjx_pusht.record import row_labels
+    from mjx_pusht.io.outputs import atomic_write_json, drop_stale
+    from mjx_pusht.io.record import row_labels
 
     if not (args.rerun and args.record > 0):
         drop_stale(path)
@@ -425,9 +425,9 @@ def _record(args, path: Path, rows: str, backend, r, combos, pick, writer, summa
 
 def _video(args, backend, r, combos, episode, summary: dict, clock) -> None:
     """The first episodes rerun with a trace and drawn as a grid of tiles (video.py)."""
-    from mjx_pusht.outputs import atomic_write_json
-    from mjx_pusht.reset import QposLayout
-    from mjx_pusht.video import episode_grid, write
+    from mjx_pusht.io.outputs import atomic_write_json
+    from mjx_pusht.task.reset import QposLayout
+    from mjx_pusht.io.video import episode_grid, write
 
     shown = np.arange(min(args.video_episodes, len(r)))
     traced = backend.run(r.seeds[shown], trace=True, combos=combos[shown])
@@ -444,16 +444,16 @@ def _video(args, backend, r, combos, episode, summary: dict, clock) -> None:
 
 
 def cmd_eval(args) -> int:
-    from mjx_pusht.backends import resolve
-    from mjx_pusht.controllers import describe, load
-    from mjx_pusht.episode import Episode
-    from mjx_pusht.evaluate import summarize_episodes
-    from mjx_pusht.outputs import atomic_write_json
-    from mjx_pusht.params import parse_param
+    from mjx_pusht.backends.base import resolve
+    from mjx_pusht.task.controllers import describe, load
+    from mjx_pusht.task.episode import Episode
+    from mjx_pusht.study.stats import summarize_episodes
+    from mjx_pusht.io.outputs import atomic_write_json
+    from mjx_pusht.model.params import parse_param
     from mjx_pusht.scenario import Scenario
-    from mjx_pusht.scene import SceneSpec
-    from mjx_pusht.seeds import parse_seeds
-    from mjx_pusht.sweep import finish, run_sweep
+    from mjx_pusht.model.scene import SceneSpec
+    from mjx_pusht.study.seeds import parse_seeds
+    from mjx_pusht.study.sweep import finish, run_sweep
 
     seeds = parse_seeds(args.seeds)
     params = tuple((n, tuple(v)) for n, v in (parse_param(t) for t in args.param))
@@ -462,7 +462,7 @@ def cmd_eval(args) -> int:
     episode = Episode(frame_skip=args.frame_skip, max_steps=args.max_steps)
     controller = load(args.controller, action_type=args.action, frame_skip=args.frame_skip)
     if args.video is not None:
-        from mjx_pusht.video import check_path
+        from mjx_pusht.io.video import check_path
 
         check_path(args.video)  # a bad name or a missing encoder fails now, not after the episodes
     name, why = resolve(args.backend)
@@ -471,7 +471,7 @@ def cmd_eval(args) -> int:
               "frame_skip": args.frame_skip, "params": [[n, list(v)] for n, v in params]}
     scenario = Scenario(SceneSpec(args.break_it), params=params, reset=args.reset, controller=controller, episode=episode)
     row_seeds, combos, out, banner, clock, backend = _start_batch("eval", args, seeds, name, why, config, scenario)
-    from mjx_pusht.rollout_cpu import default_threads
+    from mjx_pusht.backends.cpu import default_threads
 
     print(f"controller: {describe(controller)}; reset: {args.reset}; {len(seeds)} episodes of at most "
           f"{args.max_steps} control steps x {args.frame_skip} physics steps; device: {backend.device}; "
@@ -489,7 +489,7 @@ def cmd_eval(args) -> int:
             backend.close()
     clock.lap("episodes")
     r = run.rollouts
-    from mjx_pusht.backends import versions
+    from mjx_pusht.backends.base import versions
 
     summary = {"config": config, "backend": backend.name, "device": backend.device, "versions": versions(),
                "pusher_shape": backend.pusher, "controller": describe(controller),
@@ -511,7 +511,7 @@ def cmd_eval(args) -> int:
     if args.break_it == "none" and summary["n_rigid"] != len(r):
         print(f"WARNING: the welded T came apart in {len(r) - summary['n_rigid']} episodes")
     print(f"table: {out / 'per_episode.parquet'}\nsummary: {out / 'summary.json'}")
-    from mjx_pusht.record import record_episodes
+    from mjx_pusht.io.record import record_episodes
 
     _record(args, out / "eval.rrd", "episodes", backend, r, combos, lambda: np.arange(min(args.record, len(r))),
             record_episodes, summary, clock)

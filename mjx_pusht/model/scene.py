@@ -137,7 +137,7 @@ def compile_xml(xml: str) -> mujoco.MjModel:
 
 def build_model(spec: SceneSpec, *, validate: bool = True) -> mujoco.MjModel:
     """Compile the scene and, by default, check the compiled tree against the authored one."""
-    from mjx_pusht.tree import check_tree  # tree depends on scene's names only
+    from mjx_pusht.model.tree import check_tree  # tree depends on scene's names only
 
     model = compile_xml(scene_xml(spec))
     if validate:

@@ -1,8 +1,8 @@
 """Studies that turn the chapter's exercises into one batch each, with a report and a plot.
 
-    python -m mjx_pusht.studies kv --seeds 4096 --out outputs/reports/kv
-    python -m mjx_pusht.studies breaks --seeds 4096 --out outputs/reports/breaks
-    python -m mjx_pusht.studies kv-expert --seeds 4096 --out outputs/reports/kv-expert
+    python -m mjx_pusht.study.studies kv --seeds 4096 --out outputs/reports/kv
+    python -m mjx_pusht.study.studies breaks --seeds 4096 --out outputs/reports/breaks
+    python -m mjx_pusht.study.studies kv-expert --seeds 4096 --out outputs/reports/kv-expert
 """
 
 from __future__ import annotations
@@ -15,13 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pusht.backends import make_backend, resolve, versions
-from mjx_pusht.outputs import atomic_write_bytes, atomic_write_json, prepare_out_dir
+from mjx_pusht.backends.base import make_backend, resolve, versions
+from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json, prepare_out_dir
 from mjx_pusht.scenario import Scenario
-from mjx_pusht.scene import SceneSpec
-from mjx_pusht.score import task_score
-from mjx_pusht.sweep import rows_for
-from mjx_pusht.tier import tier
+from mjx_pusht.model.scene import SceneSpec
+from mjx_pusht.task.score import task_score
+from mjx_pusht.study.sweep import rows_for
+from mjx_pusht.cli.banner import tier
 
 KV_VALUES = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
 
@@ -56,7 +56,7 @@ def kv_study(seeds: np.ndarray, out: Path, backend: str = "auto", kvs=KV_VALUES)
     _kv_plot(out / "kv.png", per_kv, r, combos, kvs)
     atomic_write_json(out / "kv.json", report)
     lines = [f"# Exercise 3 at scale: the pusher gain kv ({len(seeds)} seeds x {len(kvs)} values, {b.name}, {tier()})",
-             "", "Made by `python -m mjx_pusht.studies kv`; one batch, kv a batched model field "
+             "", "Made by `python -m mjx_pusht.study.studies kv`; one batch, kv a batched model field "
              f"({wall:.1f} s). The push: 40 settle steps, then 120 steps at a commanded 1 m/s north.", "",
              "| kv | final y median (p05, p95) | pusher final y | rigid | spun (abs yaw >= 0.6) | coverage median | success |",
              "| --- | --- | --- | --- | --- | --- | --- |"]
@@ -96,9 +96,9 @@ def _kv_plot(path: Path, per_kv, r, combos, kvs) -> None:
 
 def kv_expert_study(seeds: np.ndarray, out: Path, backend: str = "auto", kvs=KV_VALUES) -> dict:
     """Exercise 3 closed loop: the expert (tuned at the authored kv 20) on task starts, under every kv, one batch."""
-    from mjx_pusht.controllers import Expert
-    from mjx_pusht.episode import Episode
-    from mjx_pusht.evaluate import wilson
+    from mjx_pusht.task.controllers import Expert
+    from mjx_pusht.task.episode import Episode
+    from mjx_pusht.study.stats import wilson
 
     name, _ = resolve(backend)
     episode = Episode()
@@ -142,7 +142,7 @@ def kv_expert_study(seeds: np.ndarray, out: Path, backend: str = "auto", kvs=KV_
     atomic_write_json(out / "kv_expert.json", report)
     lines = [f"# Exercise 3 closed loop: success rate against kv ({len(seeds)} task starts x {len(kvs)} values, "
              f"{b.name}, {b.device})", "",
-             "Made by `python -m mjx_pusht.studies kv-expert`; one batch with kv a batched model field, the expert "
+             "Made by `python -m mjx_pusht.study.studies kv-expert`; one batch with kv a batched model field, the expert "
              f"inside the compiled rollout ({wall:.1f} s for {report['physics_steps']:,} physics steps). The expert "
              "was tuned at the authored kv 20: its push speeds assume the servo's force 20 x (u - v).", "",
              "| kv | success (95% interval) | median steps to success | median final coverage | rigid |",
@@ -157,7 +157,7 @@ def kv_expert_study(seeds: np.ndarray, out: Path, backend: str = "auto", kvs=KV_
 
 def breaks_study(seeds: np.ndarray, out: Path) -> dict:
     """The break modes over the whole reset distribution, on the CPU reference."""
-    from mjx_pusht.rollout_cpu import run_cpu
+    from mjx_pusht.backends.cpu import run_cpu
 
     res = {}
     for mode in ("none", "split-tee", "free-tee"):
@@ -180,13 +180,13 @@ def breaks_study(seeds: np.ndarray, out: Path) -> dict:
                   f"{e['gap_max_dev_min']:.2e} .. {e['gap_max_dev_max']:.2e} m |")
     md += ["", f"free-tee (the wrong DOFs granted: one free joint): the T stays one rigid body, but with the table's "
            f"collision off nothing holds it up; {f['left_plane_fraction']:.0%} of seeds end below the plane, median "
-           f"final z {f['final_z_median']:.2f} m after 1.6 s of free fall. Made by `python -m mjx_pusht.studies breaks`.", ""]
+           f"final z {f['final_z_median']:.2f} m after 1.6 s of free fall. Made by `python -m mjx_pusht.study.studies breaks`.", ""]
     atomic_write_bytes(out / "breaks.md", "\n".join(md).encode())
     return report
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m mjx_pusht.studies")
+    p = argparse.ArgumentParser(prog="python -m mjx_pusht.study.studies")
     p.add_argument("study", choices=("kv", "kv-expert", "breaks"))
     p.add_argument("--seeds", type=int, default=4096)
     p.add_argument("--backend", default="auto")

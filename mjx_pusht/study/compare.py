@@ -16,12 +16,12 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjx_pusht.backends import MjxBackend, versions
-from mjx_pusht.results import Rollouts
-from mjx_pusht.rollout_cpu import run_cpu
+from mjx_pusht.backends.base import MjxBackend, versions
+from mjx_pusht.backends.results import Rollouts
+from mjx_pusht.backends.cpu import run_cpu
 from mjx_pusht.scenario import Scenario
-from mjx_pusht.scene import SceneSpec, build_model
-from mjx_pusht.tree import read_tree
+from mjx_pusht.model.scene import SceneSpec, build_model
+from mjx_pusht.model.tree import read_tree
 
 DIVERGED_M = 1e-4  # a seed's paths have parted once the tee positions differ by this much
 YAW_LENGTH = 0.06  # metres per radian when a pose is one vector: the bar's half-length
@@ -86,7 +86,7 @@ def divergence_steps(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _tee_traj(model, r: Rollouts) -> np.ndarray:
-    from mjx_pusht.reset import QposLayout
+    from mjx_pusht.task.reset import QposLayout
 
     return QposLayout.of(model).tee_pose(r.trace.qpos)
 
@@ -116,7 +116,7 @@ class Experiment:
 
 def _cpu_variant(scene: SceneSpec, seeds, *, jitter32: bool = False, **opt) -> Rollouts:
     """The CPU reference under a small change: start poses rounded to float32, or solver options."""
-    from mjx_pusht.reset import start_poses
+    from mjx_pusht.task.reset import start_poses
 
     model = build_model(scene)
     for k, v in opt.items():
@@ -216,7 +216,7 @@ def compare(seeds: np.ndarray, impl: str, out: Path, *, root_cause: bool = True,
     report["wall_seconds"] = round(time.perf_counter() - t0, 1)
     out.mkdir(parents=True, exist_ok=True)
     _plots(out, mjx_r, cpu_r, div, impl)
-    from mjx_pusht.outputs import atomic_write_bytes, atomic_write_json
+    from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json
 
     atomic_write_json(out / "compare.json", report)
     atomic_write_bytes(out / "compare.md", render_markdown(report).encode())
@@ -496,10 +496,10 @@ def compare_episodes(seeds: np.ndarray, impl: str, out: Path, *, controller=None
     """The controller (default: the expert) on the same seeds on the CPU reference and on MJX:
     success rates with intervals, per-seed agreement, and final-pose differences against the CPU's
     own sensitivity (the same CPU run from float32-rounded starts, the rounding MJX starts from)."""
-    from mjx_pusht.controllers import Expert, describe
-    from mjx_pusht.episode import Episode
-    from mjx_pusht.evaluate import summarize_episodes
-    from mjx_pusht.reset import start_poses
+    from mjx_pusht.task.controllers import Expert, describe
+    from mjx_pusht.task.episode import Episode
+    from mjx_pusht.study.stats import summarize_episodes
+    from mjx_pusht.task.reset import start_poses
 
     controller = controller or Expert()
     episode = episode or Episode()
@@ -510,7 +510,7 @@ def compare_episodes(seeds: np.ndarray, impl: str, out: Path, *, controller=None
     mjx_r = backend.run(seeds, batch=len(seeds))
     scene = backend.runner.scene
     sc = Scenario(scene, reset=reset, controller=controller, episode=episode)
-    from mjx_pusht.rollout_cpu import FeedbackPool
+    from mjx_pusht.backends.cpu import FeedbackPool
 
     pool = FeedbackPool(workers) if workers > 1 else None
     cpu = pool.run if pool is not None else run_cpu
@@ -542,7 +542,7 @@ def compare_episodes(seeds: np.ndarray, impl: str, out: Path, *, controller=None
         "rigid": {"cpu": float(cpu_r.rigid.mean()), "mjx": float(mjx_r.rigid.mean())},
     }
     report["wall_seconds"] = round(time.perf_counter() - t0, 1)
-    from mjx_pusht.outputs import atomic_write_bytes, atomic_write_json
+    from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json
 
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(out / "compare_episodes.json", report)

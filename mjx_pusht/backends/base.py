@@ -12,7 +12,7 @@ import platform
 
 import numpy as np
 
-from mjx_pusht.results import Rollouts
+from mjx_pusht.backends.results import Rollouts
 from mjx_pusht.scenario import Scenario
 
 BACKENDS = ("auto", "cpu", "mjx-jax", "mjx-warp")
@@ -45,7 +45,7 @@ class CpuBackend:
     workers: int = 1
 
     def __post_init__(self) -> None:
-        from mjx_pusht.rollout_cpu import _model, default_threads
+        from mjx_pusht.backends.cpu import _model, default_threads
 
         self.nthread = self.nthread or default_threads()
         self.model = _model(self.scenario)
@@ -63,7 +63,7 @@ class CpuBackend:
 
     def run(self, seeds: np.ndarray, *, trace: bool = False, batch: int | None = None, combos=None,
             poses=None) -> Rollouts:
-        from mjx_pusht.rollout_cpu import FeedbackPool, run_cpu
+        from mjx_pusht.backends.cpu import FeedbackPool, run_cpu
 
         controller, episode = self.scenario.driver()
         feedback = controller.open_loop(episode.max_steps, episode.frame_skip) is None
@@ -84,7 +84,7 @@ class MjxBackend:
     """MJX with impl='jax' (capsule pusher) or impl='warp' (the scene as authored)."""
 
     def __init__(self, scenario: Scenario, impl: str, *, devices=None, **cfg):
-        from mjx_pusht.rollout_mjx import MjxConfig, MjxRunner, warp_available
+        from mjx_pusht.backends.mjx import MjxConfig, MjxRunner, warp_available
 
         if impl == "warp" and not warp_available():
             raise BackendError("backend mjx-warp needs warp-lang, which is not installed: pip install 'mujoco-mjx[warp]'")
@@ -163,7 +163,7 @@ def resolve(name: str) -> tuple[str, str]:
         raise BackendError(f"unknown backend {name!r}; choose from {', '.join(BACKENDS)}")
     if name != "auto":
         return name, "asked for"
-    from mjx_pusht.rollout_mjx import warp_available
+    from mjx_pusht.backends.mjx import warp_available
 
     if has_gpu():
         if warp_available():

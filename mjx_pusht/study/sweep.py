@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pusht.outputs import atomic_write_json, atomic_write_table, read_table
-from mjx_pusht.results import Rollouts
+from mjx_pusht.io.outputs import atomic_write_json, atomic_write_table, read_table
+from mjx_pusht.backends.results import Rollouts
 
 PARTS = ".parts"
 
@@ -95,7 +95,7 @@ def run_sweep(
     """Run every row (seed, or seed x parameter combination) in chunks, writing each chunk as it lands."""
     from tqdm import tqdm
 
-    from mjx_pusht.distributed import Processes
+    from mjx_pusht.study.distributed import Processes
 
     processes = processes or Processes()
     combos = np.zeros(len(seeds), np.int64) if combos is None else np.asarray(combos)
@@ -118,7 +118,7 @@ def run_sweep(
     for lo, hi in _done_ranges(parts):
         done[lo:hi] = True
     todo = np.flatnonzero(~done)
-    from mjx_pusht.reset import start_poses
+    from mjx_pusht.task.reset import start_poses
 
     scenario = getattr(backend, "scenario", None)
     reset = scenario.reset if scenario is not None else "chapter"
@@ -251,7 +251,7 @@ def _stats(x: np.ndarray) -> dict:
 def _task_summary(rollouts: Rollouts, table: dict | None = None) -> dict:
     """The PushT score over finite seeds: success rate at coverage >= 0.95, and the error spreads.
     A sweep's table already holds every row's score (its chunks were scored as they landed)."""
-    from mjx_pusht.score import SUCCESS_COVERAGE, task_score
+    from mjx_pusht.task.score import SUCCESS_COVERAGE, task_score
 
     if not rollouts.finite.any():
         return {"n": 0}
@@ -271,7 +271,7 @@ def _task_summary(rollouts: Rollouts, table: dict | None = None) -> dict:
 def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s: float, run_s: float,
               table: dict | None = None) -> dict:
     """summary.json: what ran where, the verdicts, and the speed. Non-finite seeds are counted, never averaged in."""
-    from mjx_pusht.backends import versions
+    from mjx_pusht.backends.base import versions
 
     finite = rollouts.finite
     n = len(rollouts)
