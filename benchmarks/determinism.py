@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pusht.backends.base import make_backend
-from mjx_pusht.scenario import Scenario
 from mjx_pusht.cli.banner import tier
+from mjx_pusht.scenario import Scenario
 
 
 def rerun_report(name: str, n: int, repeats: int = 3) -> dict:

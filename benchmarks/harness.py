@@ -24,16 +24,17 @@ import mujoco
 import numpy as np
 
 from mjx_pusht.backends.base import make_backend, versions
-from mjx_pusht.scenario import Scenario
 from mjx_pusht.cli.banner import tier as tier_name
+from mjx_pusht.scenario import Scenario
 
 RESULTS = Path(__file__).parent / "results"
 
 
 def single_thread_mj_step_rate(scenario: Scenario, seconds: float = 2.0) -> float:
     """Steps/s of a bare mj_step loop on one core over the seed-0 schedule, repeated."""
-    from mjx_pusht.task.reset import QposLayout, start_poses
+    from mjx_pusht.model.layout import QposLayout
     from mjx_pusht.model.scene import build_model
+    from mjx_pusht.task.reset import start_poses
 
     model = build_model(scenario.scene)
     data = mujoco.MjData(model)

@@ -8,7 +8,7 @@ import numpy as np
 faulthandler.enable()
 import jax  # noqa: E402
 
-from mjx_pusht.backends.base import MjxBackend  # noqa: E402
+from mjx_pusht.backends.mjx import MjxBackend  # noqa: E402
 from mjx_pusht.scenario import Scenario  # noqa: E402
 
 n = int(sys.argv[1]) if len(sys.argv) > 1 else 4096

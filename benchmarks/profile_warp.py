@@ -41,13 +41,14 @@ def _setup(batch: int, tolerance: float | None, iterations: int | None, buffers=
     import mujoco
     import mujoco.mjx.third_party.mujoco_warp as mjw
 
-    from mjx_pusht.task.reset import QposLayout, start_poses
-    from mjx_pusht.backends.mjx import MjxConfig, _mj_model, simulated_scene
+    from mjx_pusht.backends.mjx import MjxConfig, mjx_model, simulated_scene
+    from mjx_pusht.model.layout import QposLayout
     from mjx_pusht.scenario import Scenario
+    from mjx_pusht.task.reset import start_poses
 
     scenario = Scenario()
     # the model exactly as the package's MJX-Warp backend builds it
-    mjm = _mj_model(simulated_scene(scenario, "warp"), MjxConfig(impl="warp", tolerance=tolerance, iterations=iterations))
+    mjm = mjx_model(simulated_scene(scenario, "warp"), MjxConfig(impl="warp", tolerance=tolerance, iterations=iterations))
     qpos0 = QposLayout.of(mjm).initial_qpos(mjm, start_poses(np.arange(batch))).astype(np.float32)
     m = mjw.put_model(mjm)
     d = mjw.put_data(mjm, mujoco.MjData(mjm), nworld=batch, nconmax=buffers[0], njmax=buffers[1])
@@ -139,9 +140,9 @@ def graph_rate(batch: int, tolerance: float | None, iterations: int | None, repe
 
 def mjx_rate(batch: int, tolerance: float | None, iterations: int | None, repeats: int = 2) -> dict:
     """Steps/s of this package's MJX-Warp rollout (jitted vmap of lax.scan) at the same settings."""
-    from mjx_pusht.task.reset import start_poses
     from mjx_pusht.backends.mjx import MjxConfig, MjxRunner
     from mjx_pusht.scenario import Scenario
+    from mjx_pusht.task.reset import start_poses
 
     runner = MjxRunner(Scenario(), MjxConfig(impl="warp", tolerance=tolerance, iterations=iterations))
     seeds = np.arange(batch)

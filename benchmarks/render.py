@@ -98,8 +98,9 @@ def measure_cpu() -> dict:
 
     import mjx_pusht  # noqa: F401
     from mjx_pusht.envs.pixels import CpuRenderer
-    from mjx_pusht.task.reset import QposLayout, start_poses
+    from mjx_pusht.model.layout import QposLayout
     from mjx_pusht.model.scene import SceneSpec, build_model
+    from mjx_pusht.task.reset import start_poses
 
     model = build_model(SceneSpec())
     layout = QposLayout.of(model)

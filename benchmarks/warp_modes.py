@@ -31,7 +31,7 @@ COMMAND_BUFFERS = "--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM
 
 
 def _backend(cfg: dict):
-    from mjx_pusht.backends.base import MjxBackend
+    from mjx_pusht.backends.mjx import MjxBackend
     from mjx_pusht.scenario import Scenario
 
     cfg = dict(cfg)

@@ -22,13 +22,19 @@ if _sys.platform.startswith("linux") and not _os.environ.get("DISPLAY") and "MUJ
             break
 
 from mjx_pusht.backends.base import make_backend, resolve
+from mjx_pusht.backends.results import Rollouts
+from mjx_pusht.model.scene import SceneSpec, build_model, scene_xml
+from mjx_pusht.model.tree import (
+    EXPECTED_TREES,
+    Tree,
+    TreeMismatch,
+    check_tree,
+    read_tree,
+)
+from mjx_pusht.scenario import Scenario
 from mjx_pusht.task.invariants import gap_deviation, stayed_rigid, weld_gap
 from mjx_pusht.task.reset import start_pose, start_poses
-from mjx_pusht.backends.results import Rollouts
-from mjx_pusht.scenario import Scenario
 from mjx_pusht.task.schedule import Schedule
-from mjx_pusht.model.scene import SceneSpec, build_model, scene_xml
-from mjx_pusht.model.tree import EXPECTED_TREES, Tree, TreeMismatch, check_tree, read_tree
 
 __all__ = [
     "EXPECTED_TREES", "Rollouts", "Scenario", "SceneSpec", "Schedule", "Tree", "TreeMismatch",

@@ -1,19 +1,16 @@
-"""The errors a user can cause or meet; the CLI prints each as one line."""
+"""One error base for everything a user can cause or meet (mink's `exceptions.py` pattern).
+
+The CLI prints an `MjxPushtError` as one line and exits non-zero; anything else that escapes a
+command is a bug and keeps its traceback. Each concern subclasses the base where it lives (a
+`ValueError` too where the input's value is the problem, so library callers can catch either).
+"""
 
 from __future__ import annotations
 
-from mjx_pusht.backends.base import BackendError
-from mjx_pusht.task.controllers import ControllerError
-from mjx_pusht.study.distributed import DistributedError
-from mjx_pusht.io.outputs import OutputError
-from mjx_pusht.model.params import ParamError
-from mjx_pusht.envs.pixels import PixelsError
-from mjx_pusht.backends.mjx import BufferOverflow
-from mjx_pusht.study.seeds import SeedSpecError
-from mjx_pusht.study.sweep import ResumeError
-from mjx_pusht.model.tree import TreeMismatch
-from mjx_pusht.io.video import VideoError
 
-KNOWN_ERRORS: tuple[type[BaseException], ...] = (
-    BackendError, ControllerError, DistributedError, OutputError, ParamError, BufferOverflow, SeedSpecError, ResumeError, TreeMismatch, PixelsError, VideoError, ValueError,
-)
+class MjxPushtError(Exception):
+    """Bad input or an unrunnable request: the message says what is wrong, in the library's terms."""
+
+
+class ConfigError(MjxPushtError, ValueError):
+    """A setting's value is out of range or unknown (an obs type, a step count, a shape)."""

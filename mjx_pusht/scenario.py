@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import dataclasses
 
-from mjx_pusht.task.schedule import Schedule
+from mjx_pusht.errors import ConfigError
 from mjx_pusht.model.scene import SceneSpec
+from mjx_pusht.task.schedule import Schedule
 
 
 @dataclasses.dataclass(frozen=True)
@@ -29,7 +30,7 @@ class Scenario:
         from mjx_pusht.task.reset import RESETS
 
         if self.reset not in RESETS:
-            raise ValueError(f"unknown reset {self.reset!r}; choose from {', '.join(RESETS)}")
+            raise ConfigError(f"unknown reset {self.reset!r}; choose from {', '.join(RESETS)}")
 
     def grid(self) -> list[dict[str, float]]:
         """Every parameter combination; a single empty one when nothing is swept."""

@@ -9,10 +9,22 @@ import pytest
 
 os.environ.setdefault("MJX_PUSHT_JAX_CACHE", os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
 
-from mjx_pusht.scenario import Scenario  # noqa: E402
 from mjx_pusht.model.scene import SceneSpec  # noqa: E402
+from mjx_pusht.scenario import Scenario  # noqa: E402
 
 SEEDS = np.arange(8)
+
+
+def pytest_collection_modifyitems(config, items):
+    """`warp` tests skip, saying why, where warp-lang is not installed (they run everywhere it is, CI included)."""
+    from mjx_pusht.backends.warp import warp_available
+
+    if warp_available():
+        return
+    skip = pytest.mark.skip(reason="warp-lang is not installed (pip install 'mjx-pusht[warp]')")
+    for item in items:
+        if "warp" in item.keywords:
+            item.add_marker(skip)
 
 
 @pytest.fixture(autouse=True)
@@ -36,15 +48,15 @@ def cpu_runs():
 
 @pytest.fixture(scope="session")
 def mjx_jax_runs():
-    from mjx_pusht.backends.base import MjxBackend
+    from mjx_pusht.backends.mjx import MjxBackend
 
     return {b: MjxBackend(Scenario(SceneSpec(b)), "jax").run(SEEDS) for b in ("none", "split-tee")}
 
 
 @pytest.fixture(scope="session")
 def mjx_warp_runs():
-    from mjx_pusht.backends.base import MjxBackend
-    from mjx_pusht.backends.mjx import warp_available
+    from mjx_pusht.backends.mjx import MjxBackend
+    from mjx_pusht.backends.warp import warp_available
 
     if not warp_available():
         pytest.skip("warp-lang is not installed")

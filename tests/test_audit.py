@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from mjx_pusht.study.audit import MIN_ROWS, audit, announce, compare_rows, sample_rows
-from mjx_pusht.backends.base import MjxBackend
-from mjx_pusht.cli.commands import main
 from mjx_pusht.backends.cpu import run_cpu
+from mjx_pusht.backends.mjx import MjxBackend
+from mjx_pusht.cli.commands import main
 from mjx_pusht.scenario import Scenario
+from mjx_pusht.study.audit import MIN_ROWS, announce, audit, compare_rows, sample_rows
 
 
 def test_the_sample_is_seeded_bounded_and_takes_every_flagged_row():
@@ -33,7 +33,7 @@ def test_the_cpu_agrees_with_itself():
 
 @pytest.mark.warp
 def test_a_backend_with_another_kv_under_the_hood_fails_the_audit_loudly(capsys, tmp_path):
-    from mjx_pusht.backends.mjx import warp_available
+    from mjx_pusht.backends.warp import warp_available
 
     if not warp_available():
         pytest.skip("warp-lang is not installed")
@@ -57,7 +57,7 @@ def test_a_backend_with_another_kv_under_the_hood_fails_the_audit_loudly(capsys,
 
 @pytest.mark.warp
 def test_an_mjx_sweep_records_its_audit_beside_the_table(tmp_path, capsys):
-    from mjx_pusht.backends.mjx import warp_available
+    from mjx_pusht.backends.warp import warp_available
 
     if not warp_available():
         pytest.skip("warp-lang is not installed")

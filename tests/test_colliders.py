@@ -45,7 +45,7 @@ def _tee_against_north_wall(model, yaw):
 
 @pytest.mark.warp
 def test_mjx_warp_box_box_contacts_match_mujoco_c():
-    from mjx_pusht.backends.mjx import warp_available
+    from mjx_pusht.backends.warp import warp_available
 
     if not warp_available():
         pytest.skip("warp-lang is not installed")
@@ -53,14 +53,14 @@ def test_mjx_warp_box_box_contacts_match_mujoco_c():
     import jax.numpy as jnp
     from mujoco import mjx
 
-    from mjx_pusht.backends.mjx import MjxConfig, _mj_model
+    from mjx_pusht.backends.mjx import MjxConfig, mjx_model
 
     model = build_model(SceneSpec())
     forward = jax.jit(mjx.forward)
 
     def worst(match: bool) -> float:
         """The largest contact position or depth difference from MuJoCo C over a few tee-on-wall states."""
-        mw = _mj_model(SceneSpec(), MjxConfig(impl="warp", match_c_colliders=match))
+        mw = mjx_model(SceneSpec(), MjxConfig(impl="warp", match_c_colliders=match))
         assert bool(mw.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_NATIVECCD) == match
         mx = mjx.put_model(mw, impl="warp")
         err = 0.0

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import subprocess
-import warnings
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -146,7 +146,7 @@ def test_bad_arguments_are_one_line_errors():
 
 @pytest.mark.warp
 def test_vector_env_on_mjx_warp_renders_pixels_in_the_batch_and_autoresets():
-    from mjx_pusht.backends.mjx import warp_available
+    from mjx_pusht.backends.warp import warp_available
 
     if not warp_available():
         pytest.skip("warp-lang is not installed")

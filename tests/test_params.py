@@ -9,12 +9,12 @@ import sys
 import numpy as np
 import pytest
 
+from mjx_pusht.backends.cpu import run_cpu
 from mjx_pusht.cli.commands import main
 from mjx_pusht.io.outputs import read_table
 from mjx_pusht.model.params import ParamError, parse_param
-from mjx_pusht.backends.cpu import run_cpu
-from mjx_pusht.scenario import Scenario
 from mjx_pusht.model.scene import SceneSpec, compile_xml, scene_xml
+from mjx_pusht.scenario import Scenario
 from mjx_pusht.study.sweep import rows_for
 
 
@@ -53,7 +53,7 @@ def test_a_soft_servo_pushes_less_far():
 
 MJX_KV = """
 import numpy as np
-from mjx_pusht.backends.base import MjxBackend
+from mjx_pusht.backends.mjx import MjxBackend
 from mjx_pusht.scenario import Scenario
 from mjx_pusht.study.sweep import rows_for
 seeds = np.arange(4)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mjx_pusht.envs.pixels import CAMERA, CpuRenderer, PixelsError, view_model
-from mjx_pusht.task.reset import QposLayout
+from mjx_pusht.model.layout import QposLayout
 from mjx_pusht.model.scene import SceneSpec, build_model
 from mjx_pusht.task.rules import T_RECTS, to_pixels
 
@@ -126,8 +126,8 @@ def test_bad_sizes_and_missing_gl_are_one_line(model, monkeypatch):
 @pytest.mark.warp
 def test_mjx_warp_renders_the_cpus_image_of_the_same_states():
     """MJX-Warp's ray tracer (through Warp's CPU device here) against MuJoCo C's OpenGL, same states."""
+    from mjx_pusht.backends.warp import warp_available
     from mjx_pusht.envs.functional import PushTEnv
-    from mjx_pusht.backends.mjx import warp_available
 
     if not warp_available():
         pytest.skip("warp-lang is not installed")

@@ -33,10 +33,10 @@ def test_split_recording_shows_the_stem_as_its_own_entity(tmp_path):
 
 
 def test_replayed_gap_is_the_weld_gap():
-    from mjx_pusht.io.record import replay
     from mjx_pusht.backends.cpu import run_cpu
-    from mjx_pusht.scenario import Scenario
+    from mjx_pusht.io.record import replay
     from mjx_pusht.model.scene import SceneSpec, build_model
+    from mjx_pusht.scenario import Scenario
 
     r = run_cpu(Scenario(SceneSpec("split-tee")), np.array([0]), trace=True)
     poses = replay(build_model(SceneSpec("split-tee")), r.trace.qpos[0])

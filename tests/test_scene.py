@@ -6,11 +6,11 @@ import mujoco
 import numpy as np
 import pytest
 
-from mjx_pusht.task.reset import start_pose
 from mjx_pusht.backends.cpu import run_cpu
-from mjx_pusht.scenario import Scenario
 from mjx_pusht.model.scene import SceneSpec, build_model, compile_xml, scene_xml
 from mjx_pusht.model.tree import TreeMismatch, check_tree, read_tree
+from mjx_pusht.scenario import Scenario
+from mjx_pusht.task.reset import start_pose
 
 
 def chapter_loop(break_it: str, seed: int, nudge_steps: int = 120):

@@ -10,17 +10,18 @@ import types
 
 import numpy as np
 import pytest
+from helpers import assert_matches_cpu
 
-from mjx_pusht.backends.base import CpuBackend
+from mjx_pusht.backends.base import Backend
+from mjx_pusht.backends.cpu import CpuBackend
+from mjx_pusht.backends.results import COLUMNS, Rollouts, scene_metrics
 from mjx_pusht.cli.commands import main
 from mjx_pusht.io.outputs import read_table
-from mjx_pusht.backends.results import COLUMNS, Rollouts, scene_metrics
-from mjx_pusht.scenario import Scenario
 from mjx_pusht.model.scene import SceneSpec
+from mjx_pusht.model.tree import read_tree
+from mjx_pusht.scenario import Scenario
 from mjx_pusht.study.seeds import SeedSpecError, parse_seeds
 from mjx_pusht.study.sweep import finish, run_sweep
-from mjx_pusht.model.tree import read_tree
-
 
 
 def test_seed_specs():
@@ -48,23 +49,17 @@ def test_cpu_sweep_rows_equal_scene_runs(tmp_path, break_it):
         assert scene_metrics(rows, s, tree, break_it) == single
 
 
-def _assert_matches_cpu(mjx: Rollouts, cpu: Rollouts):
-    np.testing.assert_array_equal(mjx.start, cpu.start)
-    np.testing.assert_allclose(mjx.settled, cpu.settled, atol=1e-5)  # no contact yet: float32 rounding only
-    np.testing.assert_allclose(mjx.gap_settled, cpu.gap_settled, atol=1e-5)
-    np.testing.assert_array_equal(mjx.rigid, cpu.rigid)
-    assert mjx.finite.all()
 
 
 @pytest.mark.parametrize("break_it", ["none", "split-tee"])
 def test_mjx_jax_agrees_with_cpu_before_contact_and_on_every_verdict(mjx_jax_runs, cpu_runs, break_it):
-    _assert_matches_cpu(mjx_jax_runs[break_it], cpu_runs[(break_it, "capsule")])
+    assert_matches_cpu(mjx_jax_runs[break_it], cpu_runs[(break_it, "capsule")])
 
 
 @pytest.mark.warp
 @pytest.mark.parametrize("break_it", ["none", "split-tee"])
 def test_mjx_warp_agrees_with_cpu_before_contact_and_on_every_verdict(mjx_warp_runs, cpu_runs, break_it):
-    _assert_matches_cpu(mjx_warp_runs[break_it], cpu_runs[(break_it, "cylinder")])
+    assert_matches_cpu(mjx_warp_runs[break_it], cpu_runs[(break_it, "cylinder")])
 
 
 def test_split_tee_is_split_on_every_seed_and_backend(mjx_jax_runs, cpu_runs):
@@ -74,7 +69,7 @@ def test_split_tee_is_split_on_every_seed_and_backend(mjx_jax_runs, cpu_runs):
 
 SHARD_SCRIPT = """
 import sys, numpy as np, jax
-from mjx_pusht.backends.base import MjxBackend
+from mjx_pusht.backends.mjx import MjxBackend
 from mjx_pusht.scenario import Scenario
 assert len(jax.devices()) == 2, jax.devices()
 impl = sys.argv[1]
@@ -92,6 +87,7 @@ for name, a in one.columns().items():
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12, err_msg=name)
 print("SHARDED_OK")
 """
+
 
 TWO_CPU_DEVICES = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu"}
 
@@ -114,12 +110,13 @@ def test_mjx_warp_sharded_over_two_devices_steps_each_shard_alone_and_gives_iden
     assert "SHARDED_OK" in r.stdout, r.stderr[-2000:]
 
 
-class _StopAfter:
+class _StopAfter(Backend):
     """A backend that stops the sweep (like Ctrl-C) after `n` chunks."""
 
     def __init__(self, inner, n):
         self.inner, self.n = inner, n
         self.name, self.default_chunk = inner.name, inner.default_chunk
+        self.scenario, self.simulated_scene, self.model, self.devices = inner.scenario, inner.simulated_scene, inner.model, inner.devices
 
     @property
     def compile_seconds(self):
@@ -218,38 +215,12 @@ def test_sweep_cli_writes_table_summary_and_recording(tmp_path):
     assert "tier:" in r.stdout and "wall-clock" in r.stdout
 
 
-@pytest.mark.warp
-def test_warp_buffers_too_small_to_hold_the_contacts_are_an_error_not_a_result():
-    from mjx_pusht.backends.base import MjxBackend
-    from mjx_pusht.backends.mjx import BufferOverflow, warp_available
-
-    if not warp_available():
-        pytest.skip("warp-lang is not installed")
-    backend = MjxBackend(Scenario(), "warp", contacts_per_world=1, constraints_per_world=4)
-    with pytest.raises(BufferOverflow, match="dropped"):
-        backend.run(np.arange(8))
-
-
-@pytest.mark.warp
-def test_warp_buffers_that_overflow_grow_and_the_chunk_is_rerun(monkeypatch, cpu_runs):
-    import mjx_pusht.backends.mjx as rm
-    from mjx_pusht.backends.base import MjxBackend
-
-    if not rm.warp_available():
-        pytest.skip("warp-lang is not installed")
-    monkeypatch.setattr(rm, "START_CONTACTS_PER_WORLD", 1)
-    monkeypatch.setattr(rm, "START_ROWS_PER_WORLD", 4)
-    backend = MjxBackend(Scenario(), "warp")
-    rows = backend.run(np.arange(8))
-    assert backend.runner.buffers > (1, 4)
-    _assert_matches_cpu(rows, cpu_runs[("none", "cylinder")])
-
-
-class _MemoryBound:
+class _MemoryBound(Backend):
     """A backend whose device "fits" at most `limit` rows: larger batches fail like XLA out of memory."""
 
     def __init__(self, inner, limit):
         self.inner, self.limit = inner, limit
+        self.scenario, self.simulated_scene, self.model, self.devices = inner.scenario, inner.simulated_scene, inner.model, inner.devices
         self.name, self.default_chunk, self.compile_seconds = inner.name, 64, 0.0
         self.batches = []
 
@@ -270,43 +241,17 @@ def test_a_chunk_too_big_for_memory_is_halved_automatically(tmp_path):
     np.testing.assert_array_equal(run.rollouts.final, ref.rollouts.final)
 
 
-def test_the_dry_step_finds_every_warp_module_a_real_step_launches(mjx_warp_runs):
-    """The up-front parallel compile is only complete if the recorded step saw every module the real one uses."""
-    import mujoco
-    import warp as wp
-    from mujoco.mjx.third_party import mujoco_warp as mjw
-
-    from mjx_pusht.backends.mjx import MjxConfig, _mj_model, simulated_scene
-    from mjx_pusht.backends.warp_kernels import scene_modules
-
-    for break_it in ("none", "split-tee"):
-        model = _mj_model(simulated_scene(Scenario(SceneSpec(break_it)), "warp"), MjxConfig(impl="warp"))
-        found = {module for module, _ in scene_modules(model, "cpu")}
-        launched = set()
-        real_launch = wp.launch
-
-        def spy(kernel, *args, **kwargs):
-            launched.add(kernel.module)
-            return real_launch(kernel, *args, **kwargs)
-
-        m, d = mjw.put_model(model), mjw.put_data(model, mujoco.MjData(model), nworld=2, nconmax=16, njmax=48)
-        wp.launch = spy
-        try:
-            for _ in range(3):
-                mjw.step(m, d)
-        finally:
-            wp.launch = real_launch
-        assert launched and launched <= found, sorted(x.name for x in launched - found)
-
-
-class _Pipelined:
+class _Pipelined(Backend):
     """A backend that works like MJX's: `submit` returns at once (the rollout runs on another thread) and
     `collect` waits for it; optionally out of memory above `limit` rows, or interrupted at the k-th collect."""
+
+    pipelined = True
 
     def __init__(self, inner, limit=None, stop_at=None):
         from concurrent.futures import ThreadPoolExecutor
 
         self.inner, self.limit, self.stop_at = inner, limit, stop_at
+        self.scenario, self.simulated_scene, self.model, self.devices = inner.scenario, inner.simulated_scene, inner.model, inner.devices
         self.name, self.default_chunk, self.compile_seconds = inner.name, 64, 0.0
         self.pool = ThreadPoolExecutor(1)
         self.in_flight, self.max_in_flight, self.collected = 0, 0, 0

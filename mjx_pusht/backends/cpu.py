@@ -21,12 +21,14 @@ import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
-from mjx_pusht.task.controllers import seed_key
-from mjx_pusht.task.episode import after_control_step, after_physics_step, begin, decide
-from mjx_pusht.task.reset import QposLayout, start_poses
+from mjx_pusht.backends.base import Backend
 from mjx_pusht.backends.results import Rollouts, Trace, from_carry
-from mjx_pusht.scenario import Scenario
+from mjx_pusht.model.layout import QposLayout
 from mjx_pusht.model.scene import build_model
+from mjx_pusht.scenario import Scenario
+from mjx_pusht.task.controllers import seed_key
+from mjx_pusht.task.episode import act, after_physics_step, begin, control_step
+from mjx_pusht.task.reset import start_poses
 
 _STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
 _CHUNK = 4096  # seeds per rollout call: bounds the (chunk, steps, nstate) buffer to ~100 MB
@@ -37,7 +39,7 @@ def default_threads() -> int:
 
 
 @functools.lru_cache(maxsize=8)
-def _model(scenario: Scenario) -> mujoco.MjModel:
+def cpu_model(scenario: Scenario) -> mujoco.MjModel:
     return build_model(scenario.scene)
 
 
@@ -132,6 +134,21 @@ class _Lockstep:
         return self.qpos, self.qvel, self.sens
 
 
+def cpu_physics(layout, frame_skip: int, settle_step: int):
+    """The CPU side of `task.episode.control_step`: `physics((stepper, _), u, carry, k)` steps every live world
+    `frame_skip` times and folds each physics step into the invariants. `k` may be per world (an env's rows
+    are at different steps). The sim it hands back is (stepper, the (frame_skip, N, nq) qpos of this step)."""
+
+    def physics(sim, u, carry, k):
+        stepper = sim[0]
+        qs, vs, ss = stepper.advance(u, ~carry["ep"]["done"])
+        for j in range(frame_skip):
+            carry = after_physics_step(carry, k * frame_skip + j, settle_step, layout, qs[j], vs[j], ss[j], np)
+        return qs[-1].copy(), carry, (stepper, qs)
+
+    return physics
+
+
 @functools.lru_cache(maxsize=4)
 def _thread_pool(threads: int):
     from concurrent.futures import ThreadPoolExecutor
@@ -184,7 +201,7 @@ def run_cpu(
     `combos[i]` picks row i's parameter combination from `scenario.grid()`; each row runs on
     its own parameterised MjModel.
     """
-    model = model if model is not None else _model(scenario)
+    model = model if model is not None else cpu_model(scenario)
     grid = scenario.grid()
     combos = np.zeros(len(seeds), np.int64) if combos is None else np.asarray(combos, np.int64)
     if scenario.params:
@@ -212,17 +229,14 @@ def run_cpu(
                 stepper = _Lockstep(row_models, model, qpos0, fs)
             key = seed_key(seeds[lo : lo + n])
             carry = begin(layout, qpos0, key, controller, episode, np)
+            physics = cpu_physics(layout, fs, settle_step)
             qpos, frames = qpos0, [qpos0[:, None]]
             for k in range(episode.max_steps):
-                live = ~carry["ep"]["done"]
-                if table is None and not live.any() and not trace:
+                if table is None and carry["ep"]["done"].all() and not trace:
                     break  # every episode has ended: the rest would change nothing
-                u, carry = decide(carry, qpos, k, key, controller, layout, np)
-                qs, vs, ss = stepper.advance(u, live)
-                for j in range(fs):
-                    carry = after_physics_step(carry, k * fs + j, settle_step, layout, qs[j], vs[j], ss[j], np)
-                qpos = qs[-1].copy()
-                carry = after_control_step(carry, k, layout, qpos, episode, np)
+                action, carry = act(carry, qpos, k, key, controller, layout, np)
+                qpos, carry, (_, qs) = control_step((stepper, None), carry, qpos, k, action, controller.action_type,
+                                                    physics, layout, episode, np)
                 if trace:
                     frames.append(qs.swapaxes(0, 1).copy())
             parts.append(from_carry(seeds[lo : lo + n], poses[lo : lo + n], layout.pusher_xy(qpos0), carry))
@@ -234,3 +248,39 @@ def run_cpu(
     if trace:
         out.trace = Trace(np.concatenate(traces), float(model.opt.timestep), fs)
     return out
+
+
+class CpuBackend(Backend):
+    """MuJoCo C, float64, every core: the determinism reference."""
+
+    name = "cpu"
+    collisions = {"box-box": "mjc_BoxBox (primitive)", "box-cylinder": "mjc_Convex (native CCD)"}
+
+    def __init__(self, scenario: Scenario, nthread: int | None = None, workers: int = 1):
+        self.scenario = scenario
+        self.simulated_scene = scenario.scene
+        self.nthread = nthread or default_threads()
+        # processes for feedback controllers (FeedbackPool); 1: this process only
+        self.workers = workers
+        self.model = cpu_model(scenario)
+        self.devices = ["cpu"]
+        self._pool = None
+
+    @property
+    def device(self) -> str:
+        return f"cpu ({self.nthread} threads)"
+
+    def run(self, seeds, *, trace: bool = False, batch: int | None = None, combos=None, poses=None) -> Rollouts:
+        controller, episode = self.scenario.driver()
+        feedback = controller.open_loop(episode.max_steps, episode.frame_skip) is None
+        if feedback and self.workers > 1 and not trace and len(seeds) >= 2 * self.workers:
+            if self._pool is None:
+                self._pool = FeedbackPool(self.workers)
+            return self._pool.run(self.scenario, seeds, combos=combos, poses=poses)
+        return run_cpu(self.scenario, seeds, trace=trace, nthread=self.nthread, model=self.model, combos=combos,
+                       poses=poses)
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.close()
+            self._pool = None

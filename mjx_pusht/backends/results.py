@@ -6,6 +6,7 @@ import dataclasses
 
 import numpy as np
 
+from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.invariants import stayed_rigid
 from mjx_pusht.task.score import task_score
 
@@ -80,7 +81,7 @@ class Rollouts:
             cols[f"task_{k}"] = v
         if episodes:
             if self.episode is None or self.pusher_start is None:
-                raise ValueError("these rollouts ran no episodes")
+                raise ConfigError("these rollouts ran no episodes")
             cols["pusher_start_x"], cols["pusher_start_y"] = self.pusher_start[:, 0], self.pusher_start[:, 1]
             ep = self.episode
             cols["success"] = np.asarray(ep["success"], bool)

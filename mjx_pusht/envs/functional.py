@@ -28,11 +28,17 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from mjx_pusht.task.controllers import Controller, seed_key
-from mjx_pusht.task.episode import Episode, after_control_step, after_physics_step, begin
-from mjx_pusht.task.reset import QposLayout, start_poses
+from mjx_pusht.errors import ConfigError
+from mjx_pusht.model.layout import QposLayout
 from mjx_pusht.model.scene import SceneSpec
-from mjx_pusht.task.rules import ACTION_TYPES, observe, to_ctrl
+from mjx_pusht.task.controllers import Controller, seed_key
+from mjx_pusht.task.episode import (
+    Episode,
+    begin,
+    control_step,
+)
+from mjx_pusht.task.reset import start_poses
+from mjx_pusht.task.rules import ACTION_TYPES, observe
 
 
 class State(NamedTuple):
@@ -78,16 +84,16 @@ class PushTEnv:
         from mjx_pusht.scenario import Scenario
 
         if self.action_type not in ACTION_TYPES:
-            raise ValueError(f"unknown action type {self.action_type!r}; choose from {', '.join(ACTION_TYPES)}")
+            raise ConfigError(f"unknown action type {self.action_type!r}; choose from {', '.join(ACTION_TYPES)}")
         if self.backend not in ("cpu", "mjx-jax", "mjx-warp"):
             raise BackendError(f"the environment runs on cpu, mjx-jax or mjx-warp, not {self.backend!r}")
         self._ctrl = _Stateless(action_type=self.action_type)
         self.scenario = Scenario(self.scene, reset=self.reset_kind, controller=self._ctrl, episode=self.episode)
         self._settle = self.scenario.schedule.settle_steps - 1
         if self.backend == "cpu":
-            from mjx_pusht.backends.cpu import _model
+            from mjx_pusht.backends.cpu import cpu_model
 
-            self.model = _model(self.scenario)
+            self.model = cpu_model(self.scenario)
             self._xp = np
             if self.pixels:
                 from mjx_pusht.envs.pixels import CpuRenderer
@@ -96,8 +102,13 @@ class PushTEnv:
         else:
             import jax.numpy as jnp
 
-            from mjx_pusht.backends.mjx import (MjxConfig, MjxRunner, constraints_per_world, contacts_per_world,
-                                               simulated_scene)
+            from mjx_pusht.backends.mjx import (
+                MjxConfig,
+                MjxRunner,
+                constraints_per_world,
+                contacts_per_world,
+                simulated_scene,
+            )
             from mjx_pusht.model.scene import build_model
 
             impl = self.backend.split("-")[1]
@@ -109,7 +120,7 @@ class PushTEnv:
             self.runner = MjxRunner(self.scenario, cfg)
             self.model = self.runner.model
             self._xp = jnp
-            self._mx = self.runner._row_model(self.runner._model_leaves(), 0)
+            self._mx = self.runner.models.first()
             if self.pixels and impl != "warp":
                 from mjx_pusht.envs.pixels import PixelsError
 
@@ -128,7 +139,7 @@ class PushTEnv:
         """Episodes from given (N, 5) starts: tee x, y, yaw and pusher x, y (seeds key random controllers)."""
         starts = np.atleast_2d(np.asarray(starts, np.float64))
         if starts.ndim != 2 or starts.shape[1] not in (3, 5):
-            raise ValueError(f"starts must be (N, 5) tee x, y, yaw, pusher x, y (or (N, 3) tee only), got {starts.shape}")
+            raise ConfigError(f"starts must be (N, 5) tee x, y, yaw, pusher x, y (or (N, 3) tee only), got {starts.shape}")
         seeds = np.zeros(len(starts), np.int64) if seeds is None else np.asarray(seeds, np.int64).reshape(-1)
         qpos0 = self.layout.initial_qpos(self.model, starts)
         key = seed_key(seeds)
@@ -143,7 +154,7 @@ class PushTEnv:
         import jax.numpy as jnp
 
         n = len(qpos0)
-        d0 = self.runner._initial_data(self.runner.devices[0], n)
+        d0 = self.runner.initial_data(n)
         q = jnp.asarray(qpos0, self.runner.dtype)
         return self._batch_fns(n)[1](d0, q, jnp.asarray(key))
 
@@ -171,22 +182,17 @@ class PushTEnv:
         """One world's control step (MJX): pure, jit- and vmap-able."""
         import jax.numpy as jnp
 
-        from mjx_pusht.backends.mjx import advance
+        from mjx_pusht.backends.mjx import physics_for
 
-        return self._after(state, *self._advance_one(state, action, jnp, advance), jnp)
-
-    def _advance_one(self, state, action, xp, advance):
-        qpos = state.data.qpos
-        u = to_ctrl(xp.astype(xp.asarray(action), qpos.dtype), self.layout.pusher_xy(qpos), self.action_type)
-        u = xp.where(state.carry["ep"]["done"], 0.0, u)
-        d, carry, _, _ = advance(self._mx, state.data, state.carry, u, state.step, self.episode.frame_skip,
-                                 self._settle, self.layout, self.backend == "mjx-warp", xp.zeros((), xp.int32))
-        return d, carry
+        physics = physics_for(self._mx, self.episode.frame_skip, self._settle, self.layout, self.backend == "mjx-warp")
+        sim = (state.data, jnp.zeros((), jnp.int32), None)
+        qpos, carry, (d, _, _) = control_step(sim, state.carry, state.data.qpos, state.step, action, self.action_type,
+                                              physics, self.layout, self.episode, jnp)
+        return self._after(state, d, carry, jnp)
 
     def _after(self, state, data, carry, xp) -> State:
         was_done = state.carry["ep"]["done"]
         qpos = data.qpos if not isinstance(data, np.ndarray) else data
-        carry = after_control_step(carry, state.step, self.layout, qpos, self.episode, xp)
         ep = carry["ep"]
         step = xp.where(was_done, state.step, state.step + 1)
         reward = xp.where(was_done, 0.0, ep["coverage"])
@@ -208,19 +214,15 @@ class PushTEnv:
         """The batch's control step on MuJoCo C: the same episode.py functions on NumPy arrays."""
         action = np.asarray(action, np.float64)
         if action.shape != (len(state.step), 2):
-            raise ValueError(f"actions must have shape ({len(state.step)}, 2), got {action.shape}")
+            raise ConfigError(f"actions must have shape ({len(state.step)}, 2), got {action.shape}")
+        from mjx_pusht.backends.cpu import cpu_physics
+
         worlds = state.data.copy() if self.keep_states else state.data
-        u = to_ctrl(action, state.obs["state"][:, 0:2], self.action_type)
-        live = ~state.carry["ep"]["done"]
-        u = np.where(live[:, None], u, 0.0)
-        qs, vs, ss = worlds.advance(u, live)
-        carry = state.carry
-        fs = self.episode.frame_skip
-        for j in range(fs):
-            t = state.step * fs + j  # per world: episodes may have ended at different steps
-            carry = after_physics_step(carry, t, self._settle, self.layout, qs[j], vs[j], ss[j], np)
-        new = self._after(state, qs[-1].copy(), carry, np)
-        return new._replace(data=worlds)
+        physics = cpu_physics(self.layout, self.episode.frame_skip, self._settle)
+        qpos = state.data.qpos[-1]
+        qpos, carry, _ = control_step((worlds, None), state.carry, qpos, state.step, action, self.action_type, physics,
+                                      self.layout, self.episode, np)
+        return self._after(state, qpos, carry, np)._replace(data=worlds)
 
     def step(self, state: State, action) -> State:  # replaced by _step_mjx on MJX
         return self._step_cpu(state, action)
@@ -257,7 +259,7 @@ class PushTEnv:
             starts = np.atleast_2d(np.asarray(starts, np.float64))
             starts_seeds = np.zeros(len(starts), np.int64) if seeds is None else np.asarray(seeds, np.int64)
         if len(starts) != len(rows):
-            raise ValueError(f"{len(rows)} rows to reset but {len(starts)} start states")
+            raise ConfigError(f"{len(rows)} rows to reset but {len(starts)} start states")
         if self.backend == "cpu":
             fresh = self.reset_to(starts, starts_seeds)
 

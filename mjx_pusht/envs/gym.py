@@ -38,21 +38,22 @@ except ImportError as e:  # the extra is optional: say what to install, in one l
     raise ImportError("the gymnasium environments need gymnasium: pip install 'mjx-pusht[gym]'") from e
 
 from mjx_pusht.envs.functional import PushTEnv
-from mjx_pusht.task.episode import Episode
 from mjx_pusht.envs.pixels import IMAGE_SIZE
+from mjx_pusht.errors import ConfigError
+from mjx_pusht.task.episode import Episode
+from mjx_pusht.task.reset import SEED_MAX
 from mjx_pusht.task.rules import ACTION_TYPES, CTRL_LIMIT, WORKSPACE_HALF, wrap_angle
 
 OBS_TYPES = ("state", "keypoints", "pixels", "pixels_agent_pos")
 TABLE_HALF = 0.45  # every position in an observation lies on the table (the walls stop the bodies sooner)
 ENV_ID = "mjx_pusht/PushT-v0"
-_SEED_BOUND = 2**63 - 1
 
 
 def _check(obs_type: str, action_type: str) -> None:
     if obs_type not in OBS_TYPES:
-        raise ValueError(f"unknown obs_type {obs_type!r}; choose from {', '.join(OBS_TYPES)}")
+        raise ConfigError(f"unknown obs_type {obs_type!r}; choose from {', '.join(OBS_TYPES)}")
     if action_type not in ACTION_TYPES:
-        raise ValueError(f"unknown action_type {action_type!r}; choose from {', '.join(ACTION_TYPES)}")
+        raise ConfigError(f"unknown action_type {action_type!r}; choose from {', '.join(ACTION_TYPES)}")
 
 
 def single_spaces(obs_type: str, action_type: str, size: int, dtype) -> tuple[spaces.Space, spaces.Box]:
@@ -167,7 +168,7 @@ class PushTGymEnv(_Pictures, gym.Env):
                  max_episode_steps: int = 300, frame_skip: int = 10):
         _check(obs_type, action_type)
         if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+            raise ConfigError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.obs_type, self.action_type, self.render_mode = obs_type, action_type, render_mode
         self.render_size = render_size
         self._env = _functional("cpu", obs_type, action_type, observation_size, reset_kind, max_episode_steps,
@@ -185,7 +186,7 @@ class PushTGymEnv(_Pictures, gym.Env):
         else:
             # a given seed is the functional API's seed (same start pose); later resets draw the next
             # seed from the env's own generator, as gymnasium envs do
-            episode_seed = seed if seed is not None else int(self.np_random.integers(_SEED_BOUND))
+            episode_seed = seed if seed is not None else int(self.np_random.integers(SEED_MAX))
             self._state = self._env.reset([episode_seed])
         return self._obs(), self._info()
 
@@ -233,7 +234,7 @@ class PushTVectorEnv(_Pictures, VectorEnv):
 
         _check(obs_type, action_type)
         if int(num_envs) < 1:
-            raise ValueError(f"num_envs must be a positive integer, got {num_envs}")
+            raise ConfigError(f"num_envs must be a positive integer, got {num_envs}")
         self.num_envs = int(num_envs)
         self.backend, _ = resolve(backend)
         self.obs_type, self.action_type, self.render_mode = obs_type, action_type, render_mode
@@ -257,24 +258,24 @@ class PushTVectorEnv(_Pictures, VectorEnv):
     # Each sub-environment draws its next episode seed from its own generator, seeded like
     # gymnasium's SyncVectorEnv seeds its copies (seed + i), so this batch and N single envs agree.
     def _next_seeds(self, rows) -> np.ndarray:
-        return np.array([int(self._rngs[i].integers(_SEED_BOUND)) for i in rows], np.int64)
+        return np.array([int(self._rngs[i].integers(SEED_MAX)) for i in rows], np.int64)
 
     def reset(self, *, seed=None, options: dict | None = None):
         options = options or {}
         if seed is not None:
             seeds = [seed + i for i in range(self.num_envs)] if isinstance(seed, int) else list(seed)
             if len(seeds) != self.num_envs:
-                raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
+                raise ConfigError(f"{len(seeds)} seeds for {self.num_envs} environments")
         else:
             seeds = [None] * self.num_envs
         mask = np.asarray(options.get("reset_mask", np.ones(self.num_envs, bool)), bool)
         if mask.shape != (self.num_envs,):
-            raise ValueError(f"reset_mask must be ({self.num_envs},) booleans, got shape {mask.shape}")
+            raise ConfigError(f"reset_mask must be ({self.num_envs},) booleans, got shape {mask.shape}")
         rows = np.flatnonzero(mask)
         for i in rows:
             if seeds[i] is not None:
                 self._rngs[i] = np.random.default_rng(seeds[i])
-        episode_seeds = np.array([seeds[i] if seeds[i] is not None else int(self._rngs[i].integers(_SEED_BOUND))
+        episode_seeds = np.array([seeds[i] if seeds[i] is not None else int(self._rngs[i].integers(SEED_MAX))
                                   for i in rows], np.int64)
         starts = options.get("reset_to_state")
         if starts is not None:

@@ -26,13 +26,14 @@ import os
 
 import numpy as np
 
+from mjx_pusht.errors import ConfigError, MjxPushtError
 from mjx_pusht.task.rules import WORKSPACE_HALF
 
 CAMERA = "top"
 IMAGE_SIZE = 96  # Diffusion Policy's and gym-pusht's observation size
 
 
-class PixelsError(RuntimeError):
+class PixelsError(MjxPushtError, RuntimeError):
     """A renderer that cannot run here (no GL, no GPU, no Warp): one line that says what to install or set."""
 
 
@@ -64,7 +65,7 @@ def view_model(model, size: int = IMAGE_SIZE):
 
 def _check_size(size: int) -> int:
     if int(size) != size or not 8 <= size <= 2048:
-        raise ValueError(f"image size must be an integer from 8 to 2048 pixels, got {size}")
+        raise ConfigError(f"image size must be an integer from 8 to 2048 pixels, got {size}")
     return int(size)
 
 
@@ -147,9 +148,8 @@ class WarpRenderer:
         self._cam_xpos, self._cam_xmat = host.cam_xpos.copy(), host.cam_xmat.reshape(-1, 3, 3).copy()
 
     def __call__(self, d) -> "jax.Array":  # noqa: F821
-        from mujoco import mjx
-
         import jax.numpy as jnp
+        from mujoco import mjx
 
         d = mjx.kinematics(self.mx, d)  # the geoms where qpos puts them (a stepped Data holds the pose before the step)
         d = d.replace(cam_xpos=jnp.asarray(self._cam_xpos, d.cam_xpos.dtype),

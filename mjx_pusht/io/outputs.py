@@ -7,8 +7,10 @@ import os
 import tempfile
 from pathlib import Path
 
+from mjx_pusht.errors import MjxPushtError
 
-class OutputError(OSError):
+
+class OutputError(MjxPushtError, OSError):
     """--out cannot hold the run's files; the message says why."""
 
 

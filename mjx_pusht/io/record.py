@@ -12,8 +12,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjx_pusht.task.invariants import weld_gap
 from mjx_pusht.backends.results import Rollouts
+from mjx_pusht.task.invariants import weld_gap
 
 TEE_COLOR = [115, 128, 242]
 STEM_SPLIT_COLOR = [242, 128, 115]
@@ -217,11 +217,11 @@ MODE_COLORS = {"straight": [60, 160, 90], "spun_ccw": [70, 110, 230], "spun_cw":
 def _log_outcomes(rr, everyone: Rollouts) -> None:
     """Outcome distributions over every seed, in metres and radians: the final (x, y) coloured by
     outcome mode with the target T outlined, and histograms over bin centres."""
-    from mjx_pusht.study.compare import SPIN_RAD
+    from mjx_pusht.study.outcomes import modes
     from mjx_pusht.task.rules import T_OUTLINE, wrap_angle
 
     yaw = wrap_angle(everyone.final[:, 2])  # a turn is a turn, whichever way round the hinge counted it
-    mode = np.where(yaw >= SPIN_RAD, "spun_ccw", np.where(yaw <= -SPIN_RAD, "spun_cw", "straight"))
+    mode = modes(yaw)
     mode = np.where(everyone.rigid, mode, "split")
     north_up = np.array([1.0, -1.0])  # 2D views draw +y downward, as images do: flip so north is up
     for name, color in MODE_COLORS.items():
@@ -284,7 +284,7 @@ def record_episodes(path: Path, model: mujoco.MjModel, traced: Rollouts, everyon
     (plots/coverage/seed_S, plots/reward/seed_S), and the outcome over every episode (outcomes/...)."""
     import rerun as rr
 
-    from mjx_pusht.task.reset import QposLayout
+    from mjx_pusht.model.layout import QposLayout
     from mjx_pusht.task.rules import SUCCESS_COVERAGE, coverage_np
 
     assert traced.trace is not None and traced.episode is not None

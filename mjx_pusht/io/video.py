@@ -12,12 +12,13 @@ from pathlib import Path
 
 import numpy as np
 
+from mjx_pusht.errors import MjxPushtError
 from mjx_pusht.task.rules import coverage_np
 
 FORMATS = (".gif", ".mp4")
 
 
-class VideoError(RuntimeError):
+class VideoError(MjxPushtError, RuntimeError):
     """A video that cannot be written (format, missing encoder, unwritable path): one line."""
 
 
@@ -96,9 +97,9 @@ def write(path: Path, frames: np.ndarray, fps: float) -> None:
         imgs = [Image.fromarray(f) for f in frames]
         imgs[0].save(tmp, save_all=True, append_images=imgs[1:], duration=round(1000 / fps), loop=0, optimize=False)
     else:
-        import imageio.v3 as iio
-
         import warnings
+
+        import imageio.v3 as iio
 
         even = frames[:, : frames.shape[1] // 2 * 2, : frames.shape[2] // 2 * 2]  # yuv420p wants even sizes
         with warnings.catch_warnings():

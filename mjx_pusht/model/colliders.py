@@ -22,6 +22,8 @@ import dataclasses
 import mujoco
 import numpy as np
 
+from mjx_pusht.errors import MjxPushtError
+
 GEOM_NAME = {int(v): k.removeprefix("mjGEOM_").lower() for k, v in mujoco.mjtGeom.__members__.items()}
 NATIVECCD = int(mujoco.mjtDisableBit.mjDSBL_NATIVECCD)
 
@@ -37,7 +39,7 @@ class PairColliders:
 
 def _touching_qpos(model: mujoco.MjModel, g1: int, g2: int) -> np.ndarray | None:
     """qpos where geoms g1 and g2 overlap by 2 mm, moving the one on joints toward the other."""
-    from mjx_pusht.task.reset import QposLayout
+    from mjx_pusht.model.layout import QposLayout
 
     layout = QposLayout.of(model)
     if layout.tee is None:
@@ -118,10 +120,30 @@ def mjx_jax_kind(t1: int, t2: int) -> str:
     return inner[0].__name__ if inner else fn.__name__
 
 
+def collision_pairs(model: mujoco.MjModel) -> list[tuple[str, str]]:
+    """Geom pairs the collision filter lets touch: different bodies, not both static, masks overlap."""
+    pairs = []
+    for i in range(model.ngeom):
+        for j in range(i + 1, model.ngeom):
+            bi, bj = int(model.geom_bodyid[i]), int(model.geom_bodyid[j])
+            if bi == bj or (model.body_weldid[bi] == 0 and model.body_weldid[bj] == 0):
+                continue
+            if not (model.geom_contype[i] & model.geom_conaffinity[j] or model.geom_contype[j] & model.geom_conaffinity[i]):
+                continue
+            pairs.append((model.geom(i).name, model.geom(j).name))
+    return pairs
+
+
 def collider_table(break_it: str = "none", match_c_colliders: bool = True) -> list[PairColliders]:
-    """Every collidable geom pair of the scene and the function each side calls for it."""
-    from mjx_pusht.backends.mjx import collision_pairs
+    """Every collidable geom pair of the scene and the function each side calls for it (MJX-Warp's table
+    is read from MuJoCo Warp itself, so warp-lang must be installed)."""
     from mjx_pusht.model.scene import SceneSpec, build_model
+
+    try:
+        import warp  # noqa: F401
+    except ImportError:
+        raise MjxPushtError("the collider table reads MuJoCo Warp's own tables, which need warp-lang: "
+                            "pip install 'mjx-pusht[warp]'") from None
 
     model = build_model(SceneSpec(break_it))
     capsule = build_model(SceneSpec(break_it, "capsule"))

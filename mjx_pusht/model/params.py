@@ -14,6 +14,8 @@ from collections.abc import Callable
 import mujoco
 import numpy as np
 
+from mjx_pusht.errors import MjxPushtError
+
 
 def _tee_dofs(m: mujoco.MjModel) -> list[int]:
     return [int(m.joint(n).dofadr[0]) for n in ("tee_x", "tee_y")]
@@ -50,7 +52,7 @@ PARAMS: dict[str, tuple[Callable[[mujoco.MjModel, float], None], str]] = {
 }
 
 
-class ParamError(ValueError):
+class ParamError(MjxPushtError, ValueError):
     pass
 
 

@@ -11,6 +11,8 @@ from typing import Literal
 
 import mujoco
 
+from mjx_pusht.errors import ConfigError
+
 BreakMode = Literal["none", "split-tee", "free-tee"]
 PusherShape = Literal["cylinder", "capsule"]
 BREAK_MODES: tuple[str, ...] = ("none", "split-tee", "free-tee")
@@ -113,9 +115,9 @@ class SceneSpec:
 
     def __post_init__(self) -> None:
         if self.break_it not in BREAK_MODES:
-            raise ValueError(f"unknown break mode {self.break_it!r}; choose from {', '.join(BREAK_MODES)}")
+            raise ConfigError(f"unknown break mode {self.break_it!r}; choose from {', '.join(BREAK_MODES)}")
         if self.pusher not in PUSHER_SHAPES:
-            raise ValueError(f"unknown pusher shape {self.pusher!r}; choose from {', '.join(PUSHER_SHAPES)}")
+            raise ConfigError(f"unknown pusher shape {self.pusher!r}; choose from {', '.join(PUSHER_SHAPES)}")
 
 
 def scene_xml(spec: SceneSpec) -> str:

@@ -12,6 +12,8 @@ import json
 
 import mujoco
 
+from mjx_pusht.errors import MjxPushtError
+
 JOINT_TYPE_NAME = {
     int(mujoco.mjtJoint.mjJNT_FREE): "free",
     int(mujoco.mjtJoint.mjJNT_BALL): "ball",
@@ -105,7 +107,7 @@ EXPECTED_TREES: dict[str, Tree] = {
 }
 
 
-class TreeMismatch(ValueError):
+class TreeMismatch(MjxPushtError, ValueError):
     """The compiled tree is not the authored one."""
 
 

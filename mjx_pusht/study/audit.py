@@ -38,11 +38,11 @@ def flagged(r: Rollouts, welded: bool) -> np.ndarray:
 
 
 def _modes(r: Rollouts) -> dict[str, np.ndarray]:
-    from mjx_pusht.study.compare import SPIN_RAD
+    from mjx_pusht.study.outcomes import MODES, modes
     from mjx_pusht.task.rules import wrap_angle
 
-    yaw = wrap_angle(r.final[:, 2])
-    return {"straight": np.abs(yaw) < SPIN_RAD, "spun_ccw": yaw >= SPIN_RAD, "spun_cw": yaw <= -SPIN_RAD}
+    m = modes(wrap_angle(r.final[:, 2]))
+    return {k: m == k for k in MODES}
 
 
 def compare_rows(mjx: Rollouts, cpu: Rollouts) -> dict:
@@ -80,7 +80,7 @@ def _cpu_scenario(backend):
     from mjx_pusht.scenario import Scenario
 
     sc = backend.scenario
-    return Scenario(backend.runner.scene, sc.schedule, sc.params, sc.reset, sc.controller, sc.episode)
+    return Scenario(backend.simulated_scene, sc.schedule, sc.params, sc.reset, sc.controller, sc.episode)
 
 
 class Audit:
@@ -98,8 +98,8 @@ class Audit:
         sweep's own `poses` hold only this process's block)."""
         from concurrent.futures import ThreadPoolExecutor
 
-        from mjx_pusht.task.reset import start_poses
         from mjx_pusht.backends.cpu import run_cpu
+        from mjx_pusht.task.reset import start_poses
 
         self.reset = self.backend.scenario.reset
         idx = self.random
@@ -110,8 +110,8 @@ class Audit:
         pool.shutdown(wait=False)
 
     def finish(self, rows: Rollouts, *, welded: bool, out: Path | None = None) -> dict:
-        from mjx_pusht.task.reset import start_poses
         from mjx_pusht.backends.cpu import run_cpu
+        from mjx_pusht.task.reset import start_poses
 
         if self.future is None:
             self.start()
@@ -128,7 +128,7 @@ class Audit:
         block = compare_rows(picked, cpu)
         block["fraction"] = self.fraction
         block["n_flagged"] = int(flags.sum())
-        block["cpu_pusher_shape"] = self.backend.runner.scene.pusher
+        block["cpu_pusher_shape"] = self.backend.simulated_scene.pusher
         if out is not None:
             from mjx_pusht.io.outputs import atomic_write_table
 

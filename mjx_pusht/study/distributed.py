@@ -14,10 +14,12 @@ import dataclasses
 
 import numpy as np
 
+from mjx_pusht.errors import MjxPushtError
+
 BARRIER_TIMEOUT_MS = 24 * 3600 * 1000  # a sweep may take long; a process that died is caught by JAX's heartbeat
 
 
-class DistributedError(RuntimeError):
+class DistributedError(MjxPushtError, RuntimeError):
     """A multi-process run that cannot start or finish (bad ids, no coordinator): one line."""
 
 

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-MAX_SEED = 2**63 - 1
+from mjx_pusht.errors import MjxPushtError
+from mjx_pusht.task.reset import SEED_MAX as MAX_SEED
 
 
-class SeedSpecError(ValueError):
+class SeedSpecError(MjxPushtError, ValueError):
     pass
 
 

@@ -1,4 +1,4 @@
-"""Evaluation at scale: a controller on many start states, one episode per seed, and its success rate.
+"""Statistics every report shares: sample distributions, Wilson intervals, paired differences, episode summaries.
 
 The episodes run through the same backends, chunks, resume and out-of-memory halving as a
 sweep (sweep.run_sweep); this module adds the episode table and the summary a policy
@@ -27,13 +27,14 @@ def wilson(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
     return (0.0 if successes == 0 else max(0.0, centre - half), 1.0 if successes == n else min(1.0, centre + half))
 
 
-def _stats(x: np.ndarray) -> dict:
+def distribution(x) -> dict:
+    """The one summary of a sample every report uses: count, extremes, mean and quantiles (just n when empty)."""
     x = np.asarray(x, float)
     if x.size == 0:
         return {"n": 0}
-    q = np.quantile(x, [0.05, 0.5, 0.95])
-    return {"n": int(x.size), "mean": float(x.mean()), "p05": float(q[0]), "median": float(q[1]), "p95": float(q[2]),
-            "min": float(x.min()), "max": float(x.max())}
+    q = np.quantile(x, [0.05, 0.25, 0.5, 0.75, 0.95, 0.99])
+    return {"n": int(x.size), "min": float(x.min()), "p05": float(q[0]), "p25": float(q[1]), "median": float(q[2]),
+            "mean": float(x.mean()), "p75": float(q[3]), "p95": float(q[4]), "p99": float(q[5]), "max": float(x.max())}
 
 
 def summarize_episodes(r: Rollouts) -> dict:
@@ -51,12 +52,12 @@ def summarize_episodes(r: Rollouts) -> dict:
         "n_success": k,
         "success_rate": k / n if n else 0.0,
         "success_rate_ci95": [lo, hi],
-        "steps_to_success": _stats(steps),
+        "steps_to_success": distribution(steps),
         "median_steps_to_success": float(np.median(steps)) if steps.size else None,
-        "final_coverage": _stats(np.asarray(ep["coverage"])[finite]),
-        "best_coverage": _stats(np.asarray(ep["best_coverage"])[finite]),
-        "return": _stats(np.asarray(ep["return"])[finite]),
-        "episode_length": _stats(np.asarray(ep["length"])[finite]),
+        "final_coverage": distribution(np.asarray(ep["coverage"])[finite]),
+        "best_coverage": distribution(np.asarray(ep["best_coverage"])[finite]),
+        "return": distribution(np.asarray(ep["return"])[finite]),
+        "episode_length": distribution(np.asarray(ep["length"])[finite]),
         "n_rigid": int(r.rigid.sum()),
         "n_non_finite": int((~finite).sum()),
         "non_finite_seeds": [int(s) for s in r.seeds[~finite][:100]],

@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pusht.backends.base import make_backend, resolve, versions
-from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json, prepare_out_dir
-from mjx_pusht.scenario import Scenario
-from mjx_pusht.model.scene import SceneSpec
-from mjx_pusht.task.score import task_score
-from mjx_pusht.study.sweep import rows_for
 from mjx_pusht.cli.banner import tier
+from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json, prepare_out_dir
+from mjx_pusht.model.scene import SceneSpec
+from mjx_pusht.scenario import Scenario
+from mjx_pusht.study.sweep import rows_for
+from mjx_pusht.task.score import task_score
 
 KV_VALUES = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
 
@@ -96,9 +96,9 @@ def _kv_plot(path: Path, per_kv, r, combos, kvs) -> None:
 
 def kv_expert_study(seeds: np.ndarray, out: Path, backend: str = "auto", kvs=KV_VALUES) -> dict:
     """Exercise 3 closed loop: the expert (tuned at the authored kv 20) on task starts, under every kv, one batch."""
+    from mjx_pusht.study.stats import wilson
     from mjx_pusht.task.controllers import Expert
     from mjx_pusht.task.episode import Episode
-    from mjx_pusht.study.stats import wilson
 
     name, _ = resolve(backend)
     episode = Episode()

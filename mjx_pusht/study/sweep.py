@@ -18,13 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pusht.io.outputs import atomic_write_json, atomic_write_table, read_table
 from mjx_pusht.backends.results import Rollouts
+from mjx_pusht.errors import MjxPushtError
+from mjx_pusht.io.outputs import atomic_write_json, atomic_write_table, read_table
+from mjx_pusht.study.stats import distribution
 
 PARTS = ".parts"
 
 
-class ResumeError(RuntimeError):
+class ResumeError(MjxPushtError, RuntimeError):
     """--resume asked for, but the folder's unfinished sweep is another sweep."""
 
 
@@ -110,7 +112,7 @@ def run_sweep(
     first, last = processes.block(len(seeds))  # this process's rows; all of them for one process
     if not chunk and len(seeds):
         # the backend's default, but never a small sweep padded up to it (MJX: a multiple of its devices)
-        n_dev = len(getattr(getattr(backend, "runner", None), "devices", None) or [None])
+        n_dev = len(backend.devices)
         chunk = min(backend.default_chunk, -(-len(seeds) // n_dev) * n_dev)
     chunk = int(chunk or backend.default_chunk)
     done = np.ones(len(seeds), bool)
@@ -120,8 +122,7 @@ def run_sweep(
     todo = np.flatnonzero(~done)
     from mjx_pusht.task.reset import start_poses
 
-    scenario = getattr(backend, "scenario", None)
-    reset = scenario.reset if scenario is not None else "chapter"
+    reset = backend.scenario.reset
     t_poses = time.perf_counter()
     poses = np.zeros((len(seeds), 3 if reset == "chapter" else 5))
     poses[todo] = start_poses(seeds[todo], reset=reset)  # once for the whole sweep, vectorised over seeds
@@ -134,7 +135,7 @@ def run_sweep(
                file=sys.stderr, desc=f"sweep [{backend.name}]" + (f" process {processes.process_id}" if processes.many else ""))
     # Pipelined where the backend can: chunk k + 1 is on the device while the host scores chunk k
     # and a writer thread puts its file on disk. The chunks still land one file each, in order.
-    pipelined = hasattr(backend, "submit")
+    pipelined = backend.pipelined
     writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="chunk-writer")
     written, tables = [], {}
     pending: list = []  # (lo, hi, submitted) in launch order, at most two
@@ -149,16 +150,11 @@ def run_sweep(
         return (lo, min(hi, len(seeds))) if lo < len(seeds) else None
 
     def launch(lo, hi):
-        if pipelined:
-            return backend.submit(seeds[lo:hi], batch=chunk, combos=combos[lo:hi], poses=poses[lo:hi])
-        return None
+        return backend.submit(seeds[lo:hi], batch=chunk, combos=combos[lo:hi], poses=poses[lo:hi])
 
     def land(lo, hi, submitted):
         t_run = time.perf_counter()
-        if pipelined:
-            rows = backend.collect(submitted)
-        else:
-            rows = backend.run(seeds[lo:hi], batch=chunk, combos=combos[lo:hi], poses=poses[lo:hi])
+        rows = backend.collect(submitted)
         t_score = time.perf_counter()
         timing["rollout_and_compile"] += t_score - t_run
         cols = rows.columns(episodes=episodes)
@@ -188,8 +184,7 @@ def run_sweep(
                 if not _is_out_of_memory(e) or chunk <= 1:
                     raise
                 for *_, other in pending[1:]:  # let what is in flight finish before the smaller retry
-                    if other is not None:
-                        other.future.exception()
+                    other.future.exception()
                 pending.clear()
                 cursor = lo
                 chunk //= 2
@@ -201,9 +196,8 @@ def run_sweep(
             f.result()  # a chunk file that failed to write fails the sweep
         timing["scoring_and_chunk_writing"] += time.perf_counter() - t_wait
     finally:
-        for *_, other in pending:  # an error or ^C: nothing left running behind the caller's back
-            if other is not None:
-                other.future.cancel()
+        for *_, other in pending if pipelined else ():  # an error or ^C: nothing left running behind our back
+            other.future.cancel()
         writer.shutdown(wait=True)
     bar.close()
     wall = time.perf_counter() - t0
@@ -235,19 +229,6 @@ def finish(out: Path, run: SweepRun, *, name: str = "per_seed.parquet", episodes
     shutil.rmtree(out / PARTS, ignore_errors=True)
 
 
-def _stats(x: np.ndarray) -> dict:
-    if x.size == 0:
-        return {"n": 0}
-    return {
-        "n": int(x.size),
-        "min": float(x.min()),
-        "median": float(np.median(x)),
-        "mean": float(x.mean()),
-        "p99": float(np.quantile(x, 0.99)),
-        "max": float(x.max()),
-    }
-
-
 def _task_summary(rollouts: Rollouts, table: dict | None = None) -> dict:
     """The PushT score over finite seeds: success rate at coverage >= 0.95, and the error spreads.
     A sweep's table already holds every row's score (its chunks were scored as they landed)."""
@@ -262,9 +243,9 @@ def _task_summary(rollouts: Rollouts, table: dict | None = None) -> dict:
     return {
         "success_coverage": SUCCESS_COVERAGE,
         "success_rate": float((s["coverage"] >= SUCCESS_COVERAGE).mean()),
-        "coverage": _stats(s["coverage"]),
-        "pos_err": _stats(s["pos_err"]),
-        "abs_yaw_err": _stats(np.abs(s["yaw_err"])),
+        "coverage": distribution(s["coverage"]),
+        "pos_err": distribution(s["pos_err"]),
+        "abs_yaw_err": distribution(np.abs(s["yaw_err"])),
     }
 
 
@@ -276,13 +257,8 @@ def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s
     finite = rollouts.finite
     n = len(rollouts)
     return {
-        "backend": backend.name,
-        "device": backend.device,
+        **backend.describe(),
         "versions": versions(),
-        "pusher_shape": backend.pusher,
-        "warp_buffers": getattr(backend, "buffer_info", None),
-        "warp_kernels": getattr(backend, "warp_kernels", None),
-        "collision_functions": getattr(backend, "collisions", None),
         "n_seeds": n,
         "steps": schedule.nudge_steps,
         "settle_steps": schedule.settle_steps,
@@ -294,9 +270,9 @@ def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s
         "non_finite_seeds": [int(s) for s in rollouts.seeds[~finite][:100]],
         "n_escaped": int((~rollouts.contained).sum()),
         "escaped_seeds": [int(s) for s in rollouts.seeds[~rollouts.contained][:100]],
-        "gap_max_dev": _stats(rollouts.gap_max_dev[finite]),
-        "tee_gap_settled": _stats(rollouts.gap_settled[finite]),
-        "tee_final_y": _stats(rollouts.final[finite, 1]),
+        "gap_max_dev": distribution(rollouts.gap_max_dev[finite]),
+        "tee_gap_settled": distribution(rollouts.gap_settled[finite]),
+        "tee_final_y": distribution(rollouts.final[finite, 1]),
         "task": _task_summary(rollouts, table),
         "compile_seconds": round(compile_s, 3),
         "run_seconds": round(run_s, 3),

@@ -20,18 +20,23 @@ from collections.abc import Callable
 
 import numpy as np
 
+from mjx_pusht.errors import MjxPushtError
+from mjx_pusht.task.rules import (
+    ACTION_TYPES,
+    CTRL_LIMIT,
+    T_REACH,
+    array_namespace,
+    distance_to_tee,
+    wrap_angle,
+)
 from mjx_pusht.task.schedule import Schedule
-from mjx_pusht.task.rules import ACTION_TYPES, CTRL_LIMIT, T_REACH, distance_to_tee, wrap_angle
 
 BUILTIN = ("zero", "nudge", "random", "expert")
 
 
-class ControllerError(ValueError):
+class ControllerError(MjxPushtError, ValueError):
     """A controller cannot be found, loaded or used; the message says why."""
 
-
-def _xp(a):
-    return a.__array_namespace__()
 
 
 def seed_key(seeds) -> np.ndarray:
@@ -51,7 +56,7 @@ def _mix32(h, xp):
 
 def uniform_hash(key, t, lane: int):
     """A uniform draw in [0, 1) from (seed key, step, lane): counter-based, so identical in NumPy and JAX."""
-    xp = _xp(key)
+    xp = array_namespace(key)
     t = xp.astype(xp.asarray(t), xp.uint32)
     salt = xp.asarray((0x9E3779B9 + lane) & 0xFFFFFFFF, dtype=xp.uint32)
     with np.errstate(over="ignore"):  # wrap-around is the point (uint32 arithmetic mod 2**32)
@@ -71,11 +76,11 @@ class Controller:
             raise ControllerError(f"unknown action type {self.action_type!r}; choose from {', '.join(ACTION_TYPES)}")
 
     def init(self, key):
-        xp = _xp(key)
+        xp = array_namespace(key)
         return xp.zeros(key.shape[:-1], dtype=xp.int32)
 
     def act(self, carry, obs, t, key):
-        xp = _xp(obs["state"])
+        xp = array_namespace(obs["state"])
         return xp.zeros(obs["state"].shape[:-1] + (2,), dtype=obs["state"].dtype), carry
 
     def open_loop(self, steps: int, frame_skip: int) -> np.ndarray | None:
@@ -100,7 +105,7 @@ class Nudge(Controller):
     frame_skip: int = 1
 
     def act(self, carry, obs, t, key):
-        xp = _xp(obs["state"])
+        xp = array_namespace(obs["state"])
         settling = t * self.frame_skip < self.schedule.settle_steps
         nudge = xp.asarray(self.schedule.nudge_ctrl, dtype=obs["state"].dtype)
         u = xp.where(settling, xp.zeros_like(nudge), nudge)
@@ -118,7 +123,7 @@ class Random(Controller):
     name: str = "random"
 
     def act(self, carry, obs, t, key):
-        xp = _xp(obs["state"])
+        xp = array_namespace(obs["state"])
         u = xp.stack([uniform_hash(key, t, 0), uniform_hash(key, t, 1)], axis=-1)
         return xp.astype(2.0 * u - 1.0, obs["state"].dtype) * CTRL_LIMIT, carry
 
@@ -164,7 +169,7 @@ class Expert(Controller):
     wall_room: float = 0.2  # m: from here (fully at +4 cm) a stem toward the wall leaves no room behind it
 
     def act(self, mode, obs, t, key):
-        xp = _xp(obs["state"])
+        xp = array_namespace(obs["state"])
         s = obs["state"]
         p, o, th = s[..., 0:2], s[..., 2:4], s[..., 4]
         c, sn = xp.cos(th), xp.sin(th)

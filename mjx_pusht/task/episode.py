@@ -9,8 +9,16 @@ from __future__ import annotations
 
 import dataclasses
 
+from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.invariants import invariants_init, invariants_update
-from mjx_pusht.task.rules import SUCCESS_COVERAGE, coverage, episode_init, episode_update, observe, to_ctrl
+from mjx_pusht.task.rules import (
+    SUCCESS_COVERAGE,
+    coverage,
+    episode_init,
+    episode_update,
+    observe,
+    to_ctrl,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -29,9 +37,9 @@ class Episode:
 
     def __post_init__(self) -> None:
         if self.frame_skip < 1:
-            raise ValueError(f"frame_skip must be a positive number of physics steps, got {self.frame_skip}")
+            raise ConfigError(f"frame_skip must be a positive number of physics steps, got {self.frame_skip}")
         if self.max_steps < 1:
-            raise ValueError(f"--max-steps must be a positive number of control steps, got {self.max_steps}")
+            raise ConfigError(f"max_steps must be a positive number of control steps, got {self.max_steps}")
 
     @property
     def physics_steps(self) -> int:
@@ -66,14 +74,26 @@ def begin(layout, qpos0, key, controller, episode: Episode, xp):
     }
 
 
-def decide(carry, qpos, k, key, controller, layout, xp):
-    """The servo ctrl for control step k, and the controller's next state. A finished episode's pusher stops."""
+def act(carry, qpos, k, key, controller, layout, xp):
+    """A controller's action for control step k from the observation of `qpos`, and its next state."""
     obs = observe(layout.pusher_xy(qpos), layout.tee_pose(qpos))
     action, cstate = controller.act(carry["ctrl"], obs, k, key)
-    action = xp.astype(xp.asarray(action), qpos.dtype)
-    u = to_ctrl(action, obs["state"][..., 0:2], controller.action_type)
+    return action, {**carry, "ctrl": cstate}
+
+
+def control_step(sim, carry, qpos, k, action, action_type: str, physics, layout, episode: Episode, xp):
+    """The control step, the only one: every rollout and the environment call this.
+
+    The action becomes servo ctrl (`rules.to_ctrl`; an ended episode's pusher gets 0),
+    `physics(sim, u, carry, k)` runs the backend's `frame_skip` physics steps, folding each
+    into the invariants (`after_physics_step`), and returns (qpos after, carry, sim); then
+    the step is scored (`after_control_step`). `sim` is the backend's own state (MjData
+    copies, an mjx.Data), passed through untouched. Returns (qpos, carry, sim).
+    """
+    u = to_ctrl(xp.astype(xp.asarray(action), qpos.dtype), layout.pusher_xy(qpos), action_type)
     u = xp.where(carry["ep"]["done"][..., None], 0.0, u)
-    return u, {**carry, "ctrl": cstate}
+    qpos, carry, sim = physics(sim, u, carry, k)
+    return qpos, after_control_step(carry, k, layout, qpos, episode, xp), sim
 
 
 def after_physics_step(carry, t, settle_step, layout, qpos, qvel, sensordata, xp):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from mjx_pusht.task.rules import array_namespace
+
 WELD_GAP = 0.06  # bar centre to stem centre in the authored T, metres
 RIGID_TOL = 1e-4  # peak |gap - 0.06| below this over the whole run: one rigid body
 WORKSPACE = 0.40  # the walls' inner faces are at +-0.39 m: a tee centre beyond this went through a wall
@@ -24,9 +26,6 @@ def stayed_rigid(gap_max_dev):
     return gap_max_dev < RIGID_TOL
 
 
-def _xp(a):
-    return a.__array_namespace__()
-
 
 def invariants_init(n: int, xp):
     """The running reduction's start: nothing settled yet, zero peak, all finite."""
@@ -42,7 +41,7 @@ def invariants_init(n: int, xp):
 
 def sane(x):
     """Per row: every entry finite and within MuJoCo's mjMAXVAL (its own divergence test)."""
-    xp = _xp(x)
+    xp = array_namespace(x)
     return xp.all(xp.isfinite(x) & (abs(x) < MAX_VAL), axis=-1)
 
 
@@ -54,7 +53,7 @@ def invariants_update(acc, t, settle_step, tee_pose, qpos, qvel, bar_pos, stem_p
     mj_step); `qpos` and `tee_pose` are the state after step t. The settled
     values are those after step `settle_step` (the last settle step).
     """
-    xp = _xp(qpos)
+    xp = array_namespace(qpos)
     gap = weld_gap(bar_pos, stem_pos)
     at_settle = t == settle_step  # a scalar, or per row when rows are at different steps (an env's batch)
     at_pose = at_settle[..., None] if getattr(at_settle, "ndim", 0) else at_settle

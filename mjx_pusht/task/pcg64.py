@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from mjx_pusht.errors import ConfigError
+
 _U32 = np.uint64(0xFFFFFFFF)
 INIT_A, MULT_A = 0x43B0D7E5, 0x931E8875
 INIT_B, MULT_B = 0x8B51F9DD, 0x58F38DED
@@ -94,7 +96,7 @@ class Streams:
     def __init__(self, seeds):
         seeds = np.asarray(seeds, np.int64).reshape(-1)
         if (seeds < 0).any():
-            raise ValueError("seeds must be non-negative")
+            raise ConfigError("seeds must be non-negative")
         with np.errstate(over="ignore"):
             s0, s1, i0, i1 = _seed_state(seeds)
             # pcg64_set_seed: state constant (s0, s1), increment ((i0, i1) << 1) | 1, then srandom's two steps

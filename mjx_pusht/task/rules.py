@@ -24,6 +24,8 @@ import math
 
 import numpy as np
 
+from mjx_pusht.errors import ConfigError
+
 # The T in its own frame (origin = bar centre): bar and stem as (centre_x, centre_y, half_x, half_y),
 # from the scene's geoms (scene.TEE_WELDED_MJCF).
 T_RECTS = ((0.0, 0.0, 0.06, 0.015), (0.0, -0.06, 0.015, 0.045))
@@ -48,35 +50,36 @@ KEYPOINTS_DIM = 16
 WORKSPACE_HALF = 0.39  # the walls' inner faces, m
 
 
-def _xp(a):
+def array_namespace(a):
+    """NumPy or jax.numpy, whichever `a` belongs to: the task is written once for both."""
     return a.__array_namespace__()
 
 
 def to_pixels(xy, size: int = 512):
     """World (x, y) in metres to pixel (column, row) on a size x size image of the walled workspace,
     rows downward: gym-pusht's 512-pixel frame when size is 512 (0.78 m / 512 px = 1.52 mm a pixel)."""
-    xp = _xp(xy)
+    xp = array_namespace(xy)
     scale = size / (2 * WORKSPACE_HALF)
     return xp.stack([(xy[..., 0] + WORKSPACE_HALF) * scale, (WORKSPACE_HALF - xy[..., 1]) * scale], axis=-1)
 
 
 def from_pixels(px, size: int = 512):
     """Pixel (column, row) on the size x size workspace image back to world (x, y) in metres."""
-    xp = _xp(px)
+    xp = array_namespace(px)
     scale = (2 * WORKSPACE_HALF) / size
     return xp.stack([px[..., 0] * scale - WORKSPACE_HALF, WORKSPACE_HALF - px[..., 1] * scale], axis=-1)
 
 
 def wrap_angle(a):
     """Wrap to (-pi, pi]."""
-    xp = _xp(a)
+    xp = array_namespace(a)
     w = (a + math.pi) % (2 * math.pi) - math.pi
     return xp.where(w == -math.pi, math.pi, w)
 
 
 def rotate(pose, local):
     """Points given in a T's frame placed at `pose` (..., 3): (..., K, 2) world points from (K, 2) local ones."""
-    xp = _xp(pose)
+    xp = array_namespace(pose)
     c, s = xp.cos(pose[..., 2])[..., None], xp.sin(pose[..., 2])[..., None]
     lx, ly = local[:, 0], local[:, 1]
     return xp.stack([c * lx - s * ly + pose[..., 0:1], s * lx + c * ly + pose[..., 1:2]], axis=-1)
@@ -84,7 +87,7 @@ def rotate(pose, local):
 
 def distance_to_tee(points, pose):
     """Distance from (..., 2) world points to the T at (..., 3) poses (0 inside it)."""
-    xp = _xp(pose)
+    xp = array_namespace(pose)
     c, s = xp.cos(pose[..., 2]), xp.sin(pose[..., 2])
     dx, dy = points[..., 0] - pose[..., 0], points[..., 1] - pose[..., 1]
     lx, ly = c * dx + s * dy, -s * dx + c * dy
@@ -99,26 +102,26 @@ def distance_to_tee(points, pose):
 
 def keypoints(pose):
     """(..., 16) the T's outline corners in the world frame, from (..., 3) tee poses."""
-    xp = _xp(pose)
+    xp = array_namespace(pose)
     pts = rotate(pose, xp.asarray(T_OUTLINE, dtype=pose.dtype))
     return xp.reshape(pts, pts.shape[:-2] + (KEYPOINTS_DIM,))
 
 
 def observe(pusher_xy, tee_pose) -> dict:
     """The observation dict every controller receives: `state` (..., 5) and `keypoints` (..., 16)."""
-    xp = _xp(tee_pose)
+    xp = array_namespace(tee_pose)
     return {"state": xp.concat([pusher_xy, tee_pose], axis=-1), "keypoints": keypoints(tee_pose)}
 
 
 def to_ctrl(action, pusher_xy, action_type: str):
     """Servo ctrl (..., 2) from an action: velocity as given, or a position target tracked proportionally."""
-    xp = _xp(action)
+    xp = array_namespace(action)
     if action_type == "velocity":
         u = action
     elif action_type == "position":
         u = POSITION_GAIN * (action - pusher_xy)
     else:
-        raise ValueError(f"unknown action type {action_type!r}; choose from {', '.join(ACTION_TYPES)}")
+        raise ConfigError(f"unknown action type {action_type!r}; choose from {', '.join(ACTION_TYPES)}")
     # NaN from a broken policy becomes 0, not a NaN ctrl that would poison the physics silently
     u = xp.where(xp.isfinite(u), u, 0.0)
     return xp.clip(u, -CTRL_LIMIT, CTRL_LIMIT)
@@ -142,7 +145,7 @@ def _take(pts, idx, xp):
 
 def _clip(pts, n, a, b):
     """Clip polygons (..., 8, 2) with n valid vertices by the half-plane left of edge a->b."""
-    xp = _xp(pts)
+    xp = array_namespace(pts)
     valid = xp.arange(_SLOTS) < n[..., None]
     q = _take(pts, _next_index(n, xp), xp)
     ex, ey = (b - a)[..., None, 0], (b - a)[..., None, 1]
@@ -166,14 +169,14 @@ def _clip(pts, n, a, b):
 
 
 def _area(pts, n):
-    xp = _xp(pts)
+    xp = array_namespace(pts)
     q = _take(pts, _next_index(n, xp), xp)
     cross = pts[..., 0] * q[..., 1] - q[..., 0] * pts[..., 1]
     return 0.5 * xp.abs(xp.sum(xp.where(xp.arange(_SLOTS) < n[..., None], cross, 0.0), axis=-1))
 
 
 def _rect_corners(pose, rect):
-    xp = _xp(pose)
+    xp = array_namespace(pose)
     cx, cy, hx, hy = rect
     local = xp.asarray([[cx - hx, cy - hy], [cx + hx, cy - hy], [cx + hx, cy + hy], [cx - hx, cy + hy]], dtype=pose.dtype)
     return rotate(pose, local)
@@ -181,7 +184,7 @@ def _rect_corners(pose, rect):
 
 def _overlap(subject, clipper):
     """Area of convex quads (..., 4, 2) clipped by convex quads (..., 4, 2), counter-clockwise."""
-    xp = _xp(subject)
+    xp = array_namespace(subject)
     pts = xp.concat([subject, xp.zeros(subject.shape[:-2] + (_SLOTS - 4, 2), dtype=subject.dtype)], axis=-2)
     n = xp.full(subject.shape[:-2], 4, dtype=xp.int32)
     for k in range(4):
@@ -197,7 +200,7 @@ def coverage(pose, target=TARGET_POSE):
 
 
 def _coverage(pose, target=TARGET_POSE):
-    xp = _xp(pose)
+    xp = array_namespace(pose)
     tgt = xp.broadcast_to(xp.asarray(target, dtype=pose.dtype), pose.shape)
     pairs = [(ra, rb) for ra in T_RECTS for rb in T_RECTS]
     # the four (block rect, target rect) pairs clipped as one stacked batch: a quarter of the array calls
@@ -241,7 +244,7 @@ def episode_init(coverage0, success: float, terminate: bool, xp):
 
 def episode_update(ep, reward, k, success: float, terminate: bool):
     """Fold control step k's reward (the coverage after it) into the episode; finished episodes stay frozen."""
-    xp = _xp(reward)
+    xp = array_namespace(reward)
     live = ~ep["done"]
     hit = live & (reward >= success)
     k1 = xp.astype(xp.asarray(k + 1), xp.int32)

@@ -6,6 +6,8 @@ import dataclasses
 
 import numpy as np
 
+from mjx_pusht.errors import ConfigError
+
 SETTLE_STEPS = 40
 DEFAULT_NUDGE_STEPS = 120
 SMOKE_NUDGE_STEPS = 120  # fixed under --smoke so CI can diff two runs byte for byte
@@ -21,9 +23,9 @@ class Schedule:
 
     def __post_init__(self) -> None:
         if self.settle_steps < 1:
-            raise ValueError(f"settle steps must be positive, got {self.settle_steps}")
+            raise ConfigError(f"settle steps must be positive, got {self.settle_steps}")
         if self.nudge_steps < 1:
-            raise ValueError(f"--steps must be a positive number of nudge steps, got {self.nudge_steps}")
+            raise ConfigError(f"nudge steps must be positive, got {self.nudge_steps}")
 
     @property
     def total_steps(self) -> int:

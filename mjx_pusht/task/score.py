@@ -8,7 +8,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from mjx_pusht.task.rules import SUCCESS_COVERAGE, T_AREA, T_REACH, T_RECTS, TARGET_POSE, wrap_angle
+from mjx_pusht.task.rules import (
+    SUCCESS_COVERAGE,
+    T_AREA,
+    T_REACH,
+    T_RECTS,
+    TARGET_POSE,
+    wrap_angle,
+)
 from mjx_pusht.task.rules import coverage_np as coverage
 
 __all__ = ["SUCCESS_COVERAGE", "T_AREA", "T_REACH", "T_RECTS", "TARGET_POSE", "coverage", "task_score", "wrap_angle"]

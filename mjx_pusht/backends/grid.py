@@ -1,0 +1,51 @@
+"""A parameter grid's models on the device as one pytree: a row's model is gathered by index in one program.
+
+Each combination is the CPU model edited and re-derived (`model.params.apply`), put on the
+device; only the leaves that differ are stacked along a leading combo axis, so a sweep over
+kv values is one compiled program. With no parameters swept there is one combination and
+nothing is stacked.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+
+class ModelGrid:
+    def __init__(self, model: mujoco.MjModel, grid: list[dict], *, impl: str, device, graph_mode: str | None = None):
+        import jax
+        import jax.numpy as jnp
+        from mujoco import mjx
+
+        from mjx_pusht.model.params import apply
+
+        models = [apply(model, g) for g in grid] if any(grid) else [model]
+        kw = {}
+        if graph_mode is not None:
+            import warp as wp
+
+            kw["graph_mode"] = wp.JaxCallableGraphMode[graph_mode]
+        flat = [jax.tree.flatten(mjx.put_model(m, impl=impl, device=device, **kw)) for m in models]
+        leaves, batched = [], []
+        for column in zip(*(f[0] for f in flat)):
+            same = all(np.array_equal(np.asarray(column[0]), np.asarray(c)) for c in column[1:])
+            leaves.append(column[0] if same else jnp.stack([jnp.asarray(c) for c in column]))
+            batched.append(not same)
+        self.treedef, self.leaves, self.batched = flat[0][1], leaves, batched
+
+    def leaves_on(self, device=None) -> list:
+        """The model's array leaves, on `device` if given."""
+        import jax
+
+        return self.leaves if device is None else [jax.device_put(x, device) for x in self.leaves]
+
+    def row(self, leaves, combo):
+        """The mjx.Model of one row: stacked leaves indexed by the row's parameter combination."""
+        import jax
+
+        return jax.tree.unflatten(self.treedef, [x[combo] if b else x for x, b in zip(leaves, self.batched)])
+
+    def first(self):
+        """The first combination's model (the only one when nothing is swept)."""
+        return self.row(self.leaves, 0)

@@ -1,0 +1,151 @@
+"""The `mjx-pusht` argument parser: flags, their types and their one-line errors."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+from mjx_pusht.errors import MjxPushtError
+from mjx_pusht.model.scene import BREAK_MODES
+
+
+class UsageError(MjxPushtError):
+    """Bad input: printed as one line, exit 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, no usage dump
+        raise UsageError(message)
+
+
+def _int_at_least(low: int):
+    """An argparse type: an integer >= low, with a one-line message otherwise."""
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if v < low:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {v}")
+        return v
+
+    return parse
+
+
+_positive = _int_at_least(1)
+_nonneg = _int_at_least(0)
+
+
+def _positive_float(text: str) -> float:
+    """An argparse type: a finite float > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return v
+
+
+def _fraction(text: str) -> float:
+    """An argparse type: a number from 0 to 1."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0.0 <= v <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be a fraction from 0 to 1, got {text}")
+    return v
+
+
+def _seed(text: str) -> int:
+    v = _nonneg(text)
+    from mjx_pusht.task.reset import SEED_MAX
+
+    if v > SEED_MAX:
+        raise argparse.ArgumentTypeError("seeds are integers from 0 to 2**63-1")
+    return v
+
+
+def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str) -> None:
+    """The options every batch command shares: seeds, backend, scene, output, chunks, recording, parameters."""
+    p.add_argument("--seeds", default=seeds, help=f"N (0..N-1), A:B, or a,b,c (default {seeds})")
+    p.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
+    p.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
+    p.add_argument("--out", type=Path, default=Path(f"outputs/{name}"))
+    p.add_argument("--chunk", type=_positive, default=None, help=f"{rows} per batch (default: by backend)")
+    p.add_argument("--resume", action="store_true", help=f"finish an interrupted {name} in --out")
+    p.add_argument("--record", type=_nonneg, default=4, help=f"{rows} to show side by side in {name}.rrd (default 4)")
+    p.add_argument("--no-rerun", dest="rerun", action="store_false", help=f"skip {name}.rrd")
+    p.add_argument("--no-progress", dest="progress", action="store_false")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
+                   help="sweep a physical parameter as a grid: kv, tee_damping, tee_frictionloss, tee_mass; "
+                        "VALUES is a,b,c, lo:hi:n (evenly spaced) or ~lo:hi:n (n random draws) (repeatable)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="mjx-pusht", description="PushT in MuJoCo at scale: CPU reference and MJX batch.")
+    p.add_argument("--verbose", action="store_true",
+                   help="show the libraries' own set-up chatter (Warp's banner and its kernel module loads)")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    s = sub.add_parser("scene", help="the chapter's run: one seed, settle, push, weld check, recording")
+    s.add_argument("--seed", type=_seed, default=0, help="seeds the block's start pose, like a PushT reset")
+    s.add_argument("--steps", type=_positive, default=120, help="nudge length in steps (default 120)")
+    s.add_argument("--smoke", action="store_true", help="fixed 120-step run; two runs match byte for byte")
+    s.add_argument("--out", type=Path, default=Path("outputs/scene"))
+    s.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip the .rrd recording")
+    s.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
+    s.add_argument("--compare-welded", action="store_true",
+                   help="with --break: also run the welded T and record both side by side in walk.rrd "
+                        "(the chapter's diagnosis walk)")
+
+    t = sub.add_parser("tree", help="print the compiled kinematic tree")
+    t.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
+    t.add_argument("--pusher", choices=("cylinder", "capsule"), default="cylinder")
+    t.add_argument("--json", action="store_true")
+    t.add_argument("--colliders", action="store_true",
+                   help="for every collidable geom pair: the collision function MuJoCo C, MJX-Warp and MJX-JAX call")
+
+    w = sub.add_parser("sweep", help="many seeds at once on a backend; per_seed.parquet + summary.json")
+    _batch_args(w, "sweep", "seeds", seeds="4096")
+    w.add_argument("--steps", type=_positive, default=120, help="nudge length in steps (default 120)")
+    w.add_argument("--audit", type=_fraction, default=0.01, metavar="FRACTION",
+                   help="MJX backends: re-run this fraction of the rows (at least 64, at most 16,384) plus every "
+                        "flagged row on the CPU reference and record whether they agree (default 0.01; 0 skips)")
+    w.add_argument("--num-processes", type=_positive, default=1,
+                   help="processes sharing this sweep through jax.distributed, one a host or GPU (default 1)")
+    w.add_argument("--process-id", type=_nonneg, default=0, help="this process's index, 0 .. N-1 (0 writes the table)")
+    w.add_argument("--coordinator", default=None, metavar="HOST:PORT", help="where process 0 listens")
+
+    e = sub.add_parser("eval", help="a controller on many start states: per_episode.parquet, success rate + interval")
+    _batch_args(e, "eval", "episodes", seeds="512")
+    e.add_argument("--controller", default="expert",
+                   help="zero, nudge, random, expert (default), or your own as package.module:function")
+    e.add_argument("--action", choices=("velocity", "position"), default=None,
+                   help="what your controller's actions mean (default velocity; built-ins command velocities)")
+    e.add_argument("--reset", choices=("task", "chapter"), default="task", help="start distribution (default task)")
+    e.add_argument("--max-steps", type=_positive, default=300, help="control steps before truncation (default 300)")
+    e.add_argument("--frame-skip", type=_positive, default=10, help="physics steps per control step (default 10)")
+    e.add_argument("--video", type=Path, default=None, metavar="FILE.gif|FILE.mp4",
+                   help="the first --video-episodes episodes as a grid of tiles, coverage on each (rendered on the CPU)")
+    e.add_argument("--video-episodes", type=_positive, default=16, help="tiles in --video (default 16)")
+    e.add_argument("--video-size", type=_int_at_least(32), default=128, help="pixels per tile side (default 128)")
+
+    c = sub.add_parser("compare", help="CPU vs MJX fidelity report: compare.json, compare.md, compare.png")
+    c.add_argument("--seeds", default="64", help="N, A:B or a,b,c (default 64)")
+    c.add_argument("--backend", default="mjx-jax", help="mjx-jax or mjx-warp (default mjx-jax)")
+    c.add_argument("--out", type=Path, default=Path("outputs/compare"))
+    c.add_argument("--no-root-cause", dest="root_cause", action="store_false",
+                   help="skip the one-change-at-a-time runs (x64, solver, contact census)")
+    c.add_argument("--tolerance", type=_positive_float, default=None,
+                   help="MJX solver tolerance instead of the scene's 1e-8 (the CPU reference keeps its own)")
+    c.add_argument("--iterations", type=_positive, default=None, help="MJX solver iterations instead of the scene's")
+    c.add_argument("--controller", default=None,
+                   help="compare closed-loop episodes of this controller instead (e.g. expert): success rates, "
+                        "per-seed agreement, final poses")
+    c.add_argument("--reset", choices=("task", "chapter"), default="task", help="closed loop: start distribution")
+    c.add_argument("--max-steps", type=_positive, default=300, help="closed loop: control steps per episode")
+    return p

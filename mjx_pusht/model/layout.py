@@ -1,0 +1,71 @@
+"""Where the tee and the pusher live in a compiled model's qpos: the one reader every backend uses."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mujoco
+import numpy as np
+
+PUSHER_START_Y = -0.25  # the chapter's pusher start (m), for starts that place only the tee
+
+
+@dataclasses.dataclass(frozen=True)
+class QposLayout:
+    """Where the tee's pose and the pusher live in qpos, found by joint name.
+
+    Planar variants read (x, y, yaw) from three joints; the free-tee variant reads
+    position and a quaternion from one free joint.
+    """
+
+    tee: tuple[int, int, int] | None  # planar: qpos addresses of tee_x, tee_y, tee_yaw
+    tee_free: int | None  # free-tee: qpos address of the free joint
+    pusher: tuple[int, int]
+    nq: int
+
+    @classmethod
+    def of(cls, model: mujoco.MjModel) -> "QposLayout":
+        def adr(name: str) -> int:
+            return int(model.joint(name).qposadr[0])
+
+        names = {model.joint(j).name for j in range(model.njnt)}
+        if "tee_free" in names:
+            tee, free = None, adr("tee_free")
+        else:
+            tee, free = (adr("tee_x"), adr("tee_y"), adr("tee_yaw")), None
+        return cls(tee, free, (adr("pusher_x"), adr("pusher_y")), int(model.nq))
+
+    def tee_pose(self, qpos):
+        """(..., 3) tee (x, y, yaw) from (..., nq) qpos; NumPy or JAX arrays alike."""
+        xp = qpos.__array_namespace__()
+        if self.tee is not None:
+            return qpos[..., list(self.tee)]
+        a = self.tee_free
+        w, x, y, z = (qpos[..., a + 3 + k] for k in range(4))
+        yaw = xp.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+        return xp.stack([qpos[..., a], qpos[..., a + 1], yaw], axis=-1)
+
+    def pusher_xy(self, qpos):
+        return qpos[..., list(self.pusher)]
+
+    def initial_qpos(self, model: mujoco.MjModel, poses: np.ndarray) -> np.ndarray:
+        """(N, nq) start qpos: qpos0 with the tee at each pose and the pusher south of it
+        (or, for (N, 5) starts, where columns 3 and 4 put it).
+
+        Only the tee's own joints are seeded; in split-tee the stem body keeps its
+        qpos0, which is exactly why that T cannot be set down as one piece.
+        """
+        qpos = np.tile(model.qpos0, (len(poses), 1))
+        if self.tee is not None:
+            qpos[:, list(self.tee)] = poses[:, :3]
+        else:
+            a = self.tee_free
+            qpos[:, a], qpos[:, a + 1] = poses[:, 0], poses[:, 1]
+            qpos[:, a + 3] = np.cos(poses[:, 2] / 2)
+            qpos[:, a + 4 : a + 6] = 0.0
+            qpos[:, a + 6] = np.sin(poses[:, 2] / 2)
+        if poses.shape[1] >= 5:
+            qpos[:, list(self.pusher)] = poses[:, 3:5]
+        else:
+            qpos[:, self.pusher[1]] = PUSHER_START_Y
+        return qpos

@@ -1,0 +1,29 @@
+"""Helpers the test files share (imported as `helpers`: pytest puts this folder on sys.path)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+from mjx_pusht.task.episode import Episode
+
+EPISODE = Episode()  # 10 Hz control, 300 steps
+ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
+
+
+def cli(*args, cwd=None, env=None) -> subprocess.CompletedProcess:
+    """`python -m mjx_pusht ARGS` as a user runs it."""
+    return subprocess.run([sys.executable, "-m", "mjx_pusht", *args], capture_output=True, text=True,
+                          cwd=cwd, env=env or ENV)
+
+
+def assert_matches_cpu(mjx, cpu) -> None:
+    """MJX rows against the CPU's: the same starts, the contact-free settle to float32, every verdict equal."""
+    np.testing.assert_array_equal(mjx.start, cpu.start)
+    np.testing.assert_allclose(mjx.settled, cpu.settled, atol=1e-5)  # no contact yet: float32 rounding only
+    np.testing.assert_allclose(mjx.gap_settled, cpu.gap_settled, atol=1e-5)
+    np.testing.assert_array_equal(mjx.rigid, cpu.rigid)
+    assert mjx.finite.all()
