@@ -31,6 +31,7 @@ def test_the_cpu_agrees_with_itself():
     assert block["agrees"] and block["settle_max_abs_err"] == 0.0 and block["fraction_final_over_1mm"] == 0.0
 
 
+@pytest.mark.slow
 @pytest.mark.warp
 def test_a_backend_with_another_kv_under_the_hood_fails_the_audit_loudly(capsys, tmp_path):
     from mjx_pusht.backends.warp import warp_available
@@ -55,6 +56,7 @@ def test_a_backend_with_another_kv_under_the_hood_fails_the_audit_loudly(capsys,
     assert "DOES NOT AGREE WITH THE CPU REFERENCE" in err and len(err.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 @pytest.mark.warp
 def test_an_mjx_sweep_records_its_audit_beside_the_table(tmp_path, capsys):
     from mjx_pusht.backends.warp import warp_available

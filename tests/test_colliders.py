@@ -14,6 +14,7 @@ from mjx_pusht.model.colliders import contacts_c
 from mjx_pusht.model.scene import SceneSpec, build_model
 
 
+@pytest.mark.slow
 def test_tree_colliders_lists_every_pair_the_scene_can_collide():
     r = subprocess.run([sys.executable, "-m", "mjx_pusht", "tree", "--colliders", "--json"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
@@ -43,6 +44,7 @@ def _tee_against_north_wall(model, yaw):
     return q
 
 
+@pytest.mark.slow
 @pytest.mark.warp
 def test_mjx_warp_box_box_contacts_match_mujoco_c():
     from mjx_pusht.backends.warp import warp_available

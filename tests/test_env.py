@@ -110,3 +110,23 @@ def test_velocity_actions_are_clipped_and_position_actions_are_tracked():
 
 
 # --- one rollout: the chapter's schedule is one controller ------------------------------------
+
+
+@pytest.mark.warp
+@pytest.mark.slow
+def test_an_undersized_warp_buffer_is_caught_loudly_never_handed_on_as_physics():
+    from mjx_pusht.backends.warp import BufferOverflow
+
+    # one contact and four rows per world cannot hold the pusher pressing into the T (a cylinder-box
+    # contact is up to 4 points and 4 rows each): drive the pusher up into the T until something is dropped
+    env = PushTEnv(backend="mjx-warp", reset_kind="chapter", contacts_per_world=1, rows_per_world=4)
+    state = env.reset(np.arange(4))
+    with pytest.raises(BufferOverflow, match="dropped"):
+        for _ in range(30):
+            state = env.check(env.step(state, np.tile([0.0, 1.0], (4, 1))))
+    # the default sizes (the sweep's) hold the same push without a drop
+    env = PushTEnv(backend="mjx-warp", reset_kind="chapter")
+    state = env.reset(np.arange(4))
+    for _ in range(30):
+        state = env.check(env.step(state, np.tile([0.0, 1.0], (4, 1))))
+    assert not np.asarray(state.dropped).any()

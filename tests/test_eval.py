@@ -101,6 +101,7 @@ def test_bad_eval_input_is_one_line(tmp_path, capsys):
 # --- MJX: the controller runs inside the compiled scan -----------------------------------------
 
 
+@pytest.mark.slow
 def test_mjx_jax_runs_the_expert_in_the_scan_and_solves_the_chapter_starts():
     from mjx_pusht.backends.mjx import MjxBackend
 
@@ -114,6 +115,7 @@ def test_mjx_jax_runs_the_expert_in_the_scan_and_solves_the_chapter_starts():
     assert again.episode["success"].all()
 
 
+@pytest.mark.slow
 @pytest.mark.warp
 def test_mjx_warp_runs_the_expert_in_the_scan_and_agrees_with_the_cpu():
     from mjx_pusht.backends.mjx import MjxBackend
@@ -128,6 +130,7 @@ def test_mjx_warp_runs_the_expert_in_the_scan_and_agrees_with_the_cpu():
     assert np.abs(r.episode["steps_to_success"] - c.episode["steps_to_success"]).max() <= 3
 
 
+@pytest.mark.slow
 @pytest.mark.warp
 def test_eval_on_mjx_warp_through_the_cli_matches_the_cpu_verdicts(tmp_path):
     from mjx_pusht.backends.warp import warp_available

@@ -144,6 +144,7 @@ def test_bad_arguments_are_one_line_errors():
         gym.make_vec(ENV, num_envs=2, backend="mjx-jax", obs_type="pixels")
 
 
+@pytest.mark.slow
 @pytest.mark.warp
 def test_vector_env_on_mjx_warp_renders_pixels_in_the_batch_and_autoresets():
     from mjx_pusht.backends.warp import warp_available
@@ -178,3 +179,32 @@ def test_a_diverged_world_is_flagged_and_warned_about_not_handed_on_quietly():
         warnings.simplefilter("error")  # healthy worlds: no warning
         *_, info = envs.step(np.zeros((2, 2)))
     assert info["finite"].all() and info["contained"].all()
+
+
+@pytest.mark.parametrize("bad", [np.zeros((2, 3)), np.zeros(6), np.zeros((3, 2, 1)), np.zeros((2, 2))])
+def test_a_wrong_shaped_action_is_an_error_never_a_reshape(bad):
+    # (2, 3) has the 6 numbers 3 envs need: a reshape would accept it and scramble the worlds
+    envs = gym.make_vec(ENV, num_envs=3, backend="cpu")
+    envs.reset(seed=0)
+    with pytest.raises(ValueError, match=r"shape \(3, 2\)"):
+        envs.step(bad)
+    one = gym.make(ENV)
+    one.reset(seed=0)
+    with pytest.raises(ValueError, match=r"shape \(2,\)"):
+        one.step(np.zeros(3))
+
+
+def test_the_vector_api_as_sync_vector_env_offers_it():
+    envs = gym.make_vec(ENV, num_envs=3, backend="cpu", max_episode_steps=7, autoreset_mode="same_step")
+    copies = gym.make_vec(ENV, num_envs=3, vectorization_mode="sync", max_episode_steps=7)
+    # LeRobot reads the episode limit this way; SyncVectorEnv answers with one value per env
+    assert envs.call("_max_episode_steps") == copies.call("_max_episode_steps") == (7, 7, 7)
+    assert envs.get_attr("obs_type") == copies.get_attr("obs_type") == ("state",) * 3
+    assert envs.metadata["autoreset_mode"] == gym.vector.AutoresetMode.SAME_STEP
+    assert gym.make_vec(ENV, num_envs=2, backend="cpu", autoreset_mode="SAME_STEP").autoreset_mode.value == "SameStep"
+    envs.set_attr("render_size", 64)
+    assert envs.get_attr("render_size") == (64, 64, 64)
+    with pytest.raises(ValueError, match="one batch"):
+        envs.set_attr("render_size", [64, 32, 64])
+    with pytest.raises(ValueError, match="unknown autoreset_mode"):
+        gym.make_vec(ENV, num_envs=2, backend="cpu", autoreset_mode="sometimes")

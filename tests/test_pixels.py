@@ -123,6 +123,7 @@ def test_bad_sizes_and_missing_gl_are_one_line(model, monkeypatch):
     assert "\n" not in str(e.value)
 
 
+@pytest.mark.slow
 @pytest.mark.warp
 def test_mjx_warp_renders_the_cpus_image_of_the_same_states():
     """MJX-Warp's ray tracer (through Warp's CPU device here) against MuJoCo C's OpenGL, same states."""

@@ -51,17 +51,20 @@ def test_cpu_sweep_rows_equal_scene_runs(tmp_path, break_it):
 
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("break_it", ["none", "split-tee"])
 def test_mjx_jax_agrees_with_cpu_before_contact_and_on_every_verdict(mjx_jax_runs, cpu_runs, break_it):
     assert_matches_cpu(mjx_jax_runs[break_it], cpu_runs[(break_it, "capsule")])
 
 
+@pytest.mark.slow
 @pytest.mark.warp
 @pytest.mark.parametrize("break_it", ["none", "split-tee"])
 def test_mjx_warp_agrees_with_cpu_before_contact_and_on_every_verdict(mjx_warp_runs, cpu_runs, break_it):
     assert_matches_cpu(mjx_warp_runs[break_it], cpu_runs[(break_it, "cylinder")])
 
 
+@pytest.mark.slow
 def test_split_tee_is_split_on_every_seed_and_backend(mjx_jax_runs, cpu_runs):
     assert not mjx_jax_runs["split-tee"].rigid.any() and not cpu_runs[("split-tee", "cylinder")].rigid.any()
     assert np.all(mjx_jax_runs["split-tee"].gap_max_dev >= 0.03)

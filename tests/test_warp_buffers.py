@@ -10,6 +10,7 @@ from mjx_pusht.model.scene import SceneSpec
 from mjx_pusht.scenario import Scenario
 
 
+@pytest.mark.slow
 @pytest.mark.warp
 def test_warp_buffers_too_small_to_hold_the_contacts_are_an_error_not_a_result():
     from mjx_pusht.backends.mjx import MjxBackend
@@ -22,6 +23,7 @@ def test_warp_buffers_too_small_to_hold_the_contacts_are_an_error_not_a_result()
         backend.run(np.arange(8))
 
 
+@pytest.mark.slow
 @pytest.mark.warp
 def test_warp_buffers_that_overflow_grow_and_the_chunk_is_rerun(monkeypatch, cpu_runs):
     import mjx_pusht.backends.warp as rm
@@ -37,6 +39,7 @@ def test_warp_buffers_that_overflow_grow_and_the_chunk_is_rerun(monkeypatch, cpu
     assert_matches_cpu(rows, cpu_runs[("none", "cylinder")])
 
 
+@pytest.mark.slow
 def test_the_dry_step_finds_every_warp_module_a_real_step_launches(mjx_warp_runs):
     """The up-front parallel compile is only complete if the recorded step saw every module the real one uses."""
     import mujoco

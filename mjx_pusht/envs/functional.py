@@ -52,6 +52,7 @@ class State(NamedTuple):
     truncated: Any  # (N,) bool: max_steps control steps taken without success
     step: Any  # (N,) int32 control steps taken
     key: Any  # (N, 2) uint32 seed words
+    dropped: Any = None  # (N,) int32 MJX-Warp overflow bits this episode (0: nothing dropped); None on cpu/mjx-jax
 
     @property
     def metrics(self) -> dict:
@@ -59,6 +60,15 @@ class State(NamedTuple):
         ep, inv = self.carry["ep"], self.carry["inv"]
         return {k: ep[k] for k in ("coverage", "best_coverage", "return", "success", "steps_to_success")} | {
             "gap_max_dev": inv["gap_max_dev"], "finite": inv["finite"], "contained": inv["contained"]}
+
+
+def _check_actions(action, n: int):
+    """Actions must be (n, 2): anything else is an error, never reshaped (a reshape scrambles the worlds)."""
+    shape = getattr(action, "shape", None)
+    if shape != (n, 2):
+        raise ConfigError(f"actions must have shape ({n}, 2), one (x, y) per environment; got "
+                          f"{'no array' if shape is None else tuple(shape)}")
+    return action
 
 
 class _Stateless(Controller):
@@ -78,6 +88,9 @@ class PushTEnv:
     threads: int = 1  # cpu: worlds stepped on this many threads at once (same bits as one)
     # cpu: False steps the MjData in place (an old state is then stale): what a stateful vector env wants
     keep_states: bool = True
+    # MJX-Warp: contacts and constraint rows per world; None: the sweep's start sizes (backends/warp.py)
+    contacts_per_world: int | None = None
+    rows_per_world: int | None = None
 
     def __post_init__(self) -> None:
         from mjx_pusht.backends.base import BackendError
@@ -102,21 +115,16 @@ class PushTEnv:
         else:
             import jax.numpy as jnp
 
-            from mjx_pusht.backends.mjx import (
-                MjxConfig,
-                MjxRunner,
-                constraints_per_world,
-                contacts_per_world,
-                simulated_scene,
-            )
-            from mjx_pusht.model.scene import build_model
+            from mjx_pusht.backends.base import IMPL
+            from mjx_pusht.backends.mjx import MjxConfig, MjxRunner
 
-            impl = self.backend.split("-")[1]
-            # Buffers at the scene's geometric bound: an environment cannot rerun a step, so it
-            # must never be able to drop a contact.
-            geometry = build_model(simulated_scene(self.scenario, impl))
-            cfg = MjxConfig(impl=impl, contacts_per_world=contacts_per_world(geometry),
-                            constraints_per_world=constraints_per_world(geometry))
+            impl = IMPL[self.backend]
+            # MJX-Warp's buffers as the sweep sizes them (the measured need with headroom), not at the
+            # scene's geometric bound, whose EPA scratch alone is 16 GB at 65,536 worlds. Every step's
+            # overflow bits are kept in the state (`dropped`), and `check` raises on them: a step that
+            # dropped a contact is never handed on as physics.
+            cfg = MjxConfig(impl=impl, contacts_per_world=self.contacts_per_world,
+                            constraints_per_world=self.rows_per_world)
             self.runner = MjxRunner(self.scenario, cfg)
             self.model = self.runner.model
             self._xp = jnp
@@ -174,8 +182,9 @@ class PushTEnv:
         obs = self._observe(qpos, data)
         n = qpos.shape[:-1]
         # an episode that starts covered is terminated at reset, before any step
+        dropped = xp.zeros(n, dtype=xp.int32) if self.backend == "mjx-warp" else None
         return State(data, carry, obs, xp.zeros(n, dtype=qpos.dtype), ep["done"] & ep["success"],
-                     xp.zeros(n, dtype=bool), xp.zeros(n, dtype=xp.int32) + step, key)
+                     xp.zeros(n, dtype=bool), xp.zeros(n, dtype=xp.int32) + step, key, dropped)
 
     # -- step -------------------------------------------------------------------------------------
     def step_one(self, state: State, action) -> State:
@@ -186,9 +195,10 @@ class PushTEnv:
 
         physics = physics_for(self._mx, self.episode.frame_skip, self._settle, self.layout, self.backend == "mjx-warp")
         sim = (state.data, jnp.zeros((), jnp.int32), None)
-        qpos, carry, (d, _, _) = control_step(sim, state.carry, state.data.qpos, state.step, action, self.action_type,
-                                              physics, self.layout, self.episode, jnp)
-        return self._after(state, d, carry, jnp)
+        qpos, carry, (d, ovf, _) = control_step(sim, state.carry, state.data.qpos, state.step, action,
+                                                self.action_type, physics, self.layout, self.episode, jnp)
+        new = self._after(state, d, carry, jnp)
+        return new if state.dropped is None else new._replace(dropped=state.dropped | ovf)
 
     def _after(self, state, data, carry, xp) -> State:
         was_done = state.carry["ep"]["done"]
@@ -199,7 +209,8 @@ class PushTEnv:
         terminated = ep["done"] & ep["success"]
         truncated = ~terminated & (step >= self.episode.max_steps)
         carry = {**carry, "ep": {**ep, "done": ep["done"] | truncated}}
-        return State(data, carry, self._observe(qpos, data), reward, terminated, truncated, step, state.key)
+        return State(data, carry, self._observe(qpos, data), reward, terminated, truncated, step, state.key,
+                     state.dropped)
 
     def _observe(self, qpos, data):
         obs = observe(self.layout.pusher_xy(qpos), self.layout.tee_pose(qpos))
@@ -212,9 +223,7 @@ class PushTEnv:
 
     def _step_cpu(self, state: State, action) -> State:
         """The batch's control step on MuJoCo C: the same episode.py functions on NumPy arrays."""
-        action = np.asarray(action, np.float64)
-        if action.shape != (len(state.step), 2):
-            raise ConfigError(f"actions must have shape ({len(state.step)}, 2), got {action.shape}")
+        action = _check_actions(np.asarray(action, np.float64), len(state.step))
         from mjx_pusht.backends.cpu import cpu_physics
 
         worlds = state.data.copy() if self.keep_states else state.data
@@ -241,7 +250,21 @@ class PushTEnv:
         return self._jitted[n]
 
     def _step_mjx(self, state: State, action) -> State:
+        import jax.numpy as jnp
+
+        action = _check_actions(jnp.asarray(action), len(state.step))
         return self._batch_fns(len(state.step))[0](state, action)
+
+    def check(self, state: State) -> State:
+        """Raise `BufferOverflow` if any world of `state` dropped a contact or a constraint row in its episode
+        (MJX-Warp); call it after a jitted scan of `step_one`. Returns the state, so it chains."""
+        if state.dropped is not None:
+            from mjx_pusht.backends.warp import dropped
+
+            bits = np.asarray(state.dropped)
+            if dropped(bits).any():
+                self.runner.buffers.check(bits)
+        return state
 
     # -- partial reset ----------------------------------------------------------------------------
     def reset_where(self, state: State, mask, seeds=None, starts=None) -> State:

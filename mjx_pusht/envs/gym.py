@@ -193,8 +193,10 @@ class PushTGymEnv(_Pictures, gym.Env):
     def step(self, action):
         if self._state is None:
             raise RuntimeError("call reset() before step()")
-        action = np.asarray(action, np.float64).reshape(1, 2)
-        self._state = self._env.step(self._state, action)
+        action = np.asarray(action, np.float64)
+        if action.shape != (2,):
+            raise ConfigError(f"an action is one (x, y) pair, shape (2,); got shape {action.shape}")
+        self._state = self._env.step(self._state, action[None])
         s = self._state
         return self._obs(), float(s.reward[0]), bool(s.terminated[0]), bool(s.truncated[0]), self._info()
 
@@ -238,7 +240,12 @@ class PushTVectorEnv(_Pictures, VectorEnv):
         self.num_envs = int(num_envs)
         self.backend, _ = resolve(backend)
         self.obs_type, self.action_type, self.render_mode = obs_type, action_type, render_mode
-        self.autoreset_mode = AutoresetMode(autoreset_mode)
+        # by enum, by value ("SameStep"), by name ("SAME_STEP") or in snake case ("same_step")
+        names = {k: m for m in AutoresetMode for k in (m, m.value, m.name, m.name.lower())}
+        if autoreset_mode not in names:
+            raise ConfigError(f"unknown autoreset_mode {autoreset_mode!r}; choose from "
+                              f"{', '.join(m.name.lower() for m in AutoresetMode)}")
+        self.autoreset_mode = names[autoreset_mode]
         self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
         self.render_size = render_size
         threads = threads or (min(default_threads(), max(1, self.num_envs // 64)) if self.backend == "cpu" else 1)
@@ -294,8 +301,11 @@ class PushTVectorEnv(_Pictures, VectorEnv):
     def step(self, actions):
         if self._state is None:
             raise RuntimeError("call reset() before step()")
-        actions = np.asarray(actions, np.float64).reshape(self.num_envs, 2)
-        self._state = self._env.step(self._state, actions)
+        actions = np.asarray(actions, np.float64)
+        if actions.shape != (self.num_envs, 2):
+            raise ConfigError(f"actions must have shape ({self.num_envs}, 2), one (x, y) per environment; "
+                              f"got {actions.shape} (never reshaped: that would scramble the environments)")
+        self._state = self._env.check(self._env.step(self._state, actions))
         if self.autoreset_mode == AutoresetMode.NEXT_STEP and self._needs_reset.any():
             # the episodes that ended last step start again now; this step's action is not theirs
             rows = np.flatnonzero(self._needs_reset)
@@ -342,6 +352,22 @@ class PushTVectorEnv(_Pictures, VectorEnv):
 
     def close_extras(self, **kwargs):
         self._close_renderers()
+
+    # gymnasium's vector API, as SyncVectorEnv offers it: one batch, so an attribute is the same for every env
+    def call(self, name: str, *args, **kwargs) -> tuple:
+        """`name` called (or read, if not callable) on the env, once per sub-environment, as SyncVectorEnv does."""
+        attr = self._env.episode.max_steps if name == "_max_episode_steps" else getattr(self, name)
+        value = attr(*args, **kwargs) if callable(attr) else attr
+        return (value,) * self.num_envs
+
+    def get_attr(self, name: str) -> tuple:
+        return self.call(name)
+
+    def set_attr(self, name: str, values) -> None:
+        values = values if isinstance(values, (list, tuple)) else [values] * self.num_envs
+        if len(values) != self.num_envs or any(v != values[0] for v in values[1:]):
+            raise ConfigError(f"the {self.num_envs} environments are one batch: set_attr needs one value for all")
+        setattr(self, name, values[0])
 
 
 def register() -> None:

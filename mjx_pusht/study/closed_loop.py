@@ -11,8 +11,9 @@ from mjx_pusht.backends.base import versions
 from mjx_pusht.backends.cpu import run_cpu
 from mjx_pusht.backends.mjx import MjxBackend
 from mjx_pusht.scenario import Scenario
-from mjx_pusht.study.outcomes import distribution, final_diff
+from mjx_pusht.study.outcomes import final_diff
 from mjx_pusht.study.report import render_episodes_markdown
+from mjx_pusht.study.stats import distribution
 
 
 def paired_diff(a: np.ndarray, b: np.ndarray, z: float = 1.959964) -> dict:

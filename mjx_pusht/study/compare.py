@@ -30,7 +30,6 @@ from mjx_pusht.study.contacts import (
 from mjx_pusht.study.outcomes import (
     DIVERGED_M,
     SPIN_RAD,
-    distribution,
     divergence_steps,
     energy_distance,
     final_diff,
@@ -39,6 +38,7 @@ from mjx_pusht.study.outcomes import (
     tee_traj,
 )
 from mjx_pusht.study.report import plots, render_markdown
+from mjx_pusht.study.stats import distribution
 
 
 @dataclasses.dataclass

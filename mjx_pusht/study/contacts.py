@@ -7,7 +7,7 @@ import numpy as np
 
 from mjx_pusht.backends.results import Rollouts
 from mjx_pusht.model.scene import SceneSpec, build_model
-from mjx_pusht.study.outcomes import distribution
+from mjx_pusht.study.stats import distribution
 
 
 def first_contact_steps(model: mujoco.MjModel, qpos_trace: np.ndarray) -> np.ndarray:
