@@ -21,6 +21,11 @@ if _sys.platform.startswith("linux") and not _os.environ.get("DISPLAY") and "MUJ
             _os.environ["MUJOCO_GL"] = _gl
             break
 
+# MJX-Warp allocates scratch through Warp, outside XLA's pool: with JAX holding its default 75% of the
+# GPU up front, a 65,536-world environment step failed to allocate 2.3 GB (H100, benchmarks/env_step.py).
+# JAX then grows its pool as it needs instead; a user's own setting wins.
+_os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
+
 from mjx_pusht.backends.base import make_backend, resolve
 from mjx_pusht.backends.results import Rollouts
 from mjx_pusht.model.scene import SceneSpec, build_model, scene_xml

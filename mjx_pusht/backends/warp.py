@@ -50,7 +50,10 @@ def quiet_warp() -> None:
         import warp
     except ImportError:
         return
-    warp.config.quiet = not os.environ.get("MJX_PUSHT_VERBOSE")
+    verbose = bool(os.environ.get("MJX_PUSHT_VERBOSE"))
+    warp.config.quiet = not verbose  # the "Warp x.y initialized" banner
+    # the per-module "Module ... load on device ... took ... ms" lines print at log level INFO and below
+    warp.config.log_level = warp.LOG_INFO if verbose else warp.LOG_WARNING
 
 
 def banner() -> str | None:
