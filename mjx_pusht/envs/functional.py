@@ -24,6 +24,7 @@ episodes in some rows and leaves the rest running (a vector env's autoreset).
 from __future__ import annotations
 
 import dataclasses
+import os
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -52,7 +53,8 @@ class State(NamedTuple):
     truncated: Any  # (N,) bool: max_steps control steps taken without success
     step: Any  # (N,) int32 control steps taken
     key: Any  # (N, 2) uint32 seed words
-    dropped: Any = None  # (N,) int32 MJX-Warp overflow bits this episode (0: nothing dropped); None on cpu/mjx-jax
+    dropped: Any = None  # (N,) int32 MJX-Warp overflow bits since reset (0: nothing dropped); None on cpu/mjx-jax
+    info: Any = None  # wrappers' own arrays (wrappers.AutoReset: the start pool, the ended episodes' outcome)
 
     @property
     def metrics(self) -> dict:
@@ -91,6 +93,8 @@ class PushTEnv:
     # MJX-Warp: contacts and constraint rows per world; None: the sweep's start sizes (backends/warp.py)
     contacts_per_world: int | None = None
     rows_per_world: int | None = None
+    # MJX-Warp's CUDA-graph mode (None: MJX's default, Warp capturing per call; "JAX": XLA captures, see NOTES)
+    graph_mode: str | None = None
 
     def __post_init__(self) -> None:
         from mjx_pusht.backends.base import BackendError
@@ -123,8 +127,15 @@ class PushTEnv:
             # scene's geometric bound, whose EPA scratch alone is 16 GB at 65,536 worlds. Every step's
             # overflow bits are kept in the state (`dropped`), and `check` raises on them: a step that
             # dropped a contact is never handed on as physics.
-            cfg = MjxConfig(impl=impl, contacts_per_world=self.contacts_per_world,
-                            constraints_per_world=self.rows_per_world)
+            # MJX_PUSHT_ENV_GRAPH_MODE: the benchmarks' knob to compare CUDA-graph modes (benchmarks/env_loop.py)
+            self.graph_mode = self.graph_mode or os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE") or None
+            from mjx_pusht.backends.warp import (
+                ENV_ROWS_PER_WORLD,
+                START_CONTACTS_PER_WORLD,
+            )
+
+            cfg = MjxConfig(impl=impl, contacts_per_world=self.contacts_per_world or START_CONTACTS_PER_WORLD,
+                            constraints_per_world=self.rows_per_world or ENV_ROWS_PER_WORLD, graph_mode=self.graph_mode)
             self.runner = MjxRunner(self.scenario, cfg)
             self.model = self.runner.model
             self._xp = jnp
@@ -133,7 +144,7 @@ class PushTEnv:
                 from mjx_pusht.envs.pixels import PixelsError
 
                 raise PixelsError("pixel observations on MJX need MJX-Warp's renderer: use backend mjx-warp (or cpu)")
-            self._renderers, self._jitted = {}, {}
+            self._renderers, self._jitted, self._templates = {}, {}, {}
             self.step = self._step_mjx
         self.layout = QposLayout.of(self.model)
 
@@ -162,24 +173,32 @@ class PushTEnv:
         import jax.numpy as jnp
 
         n = len(qpos0)
-        d0 = self.runner.initial_data(n)
         q = jnp.asarray(qpos0, self.runner.dtype)
-        return self._batch_fns(n)[1](d0, q, jnp.asarray(key))
+        return self._batch_fns(n)[1](self.template(n), q, jnp.asarray(key))
+
+    def template(self, n: int):
+        """The fresh mjx.Data every episode of an `n`-world batch starts from (MJX-Warp sizes its buffers by n)."""
+        if n not in self._templates:
+            self._templates[n] = self.runner.initial_data(n)
+        return self._templates[n]
+
+    def fresh_one(self, d0, qpos, key, coverage0=None) -> State:
+        """One world's new episode from `qpos` (pure; no pixels: `with_pixels` adds them). `coverage0`, the
+        start's coverage if known, spares the polygon clipping (the costly part of a reset)."""
+        import jax.numpy as jnp
+
+        carry = begin(self.layout, qpos, key, self._ctrl, self.episode, jnp, coverage0)
+        return self._state(d0.replace(qpos=qpos), carry, qpos, key, jnp.zeros((), jnp.int32), pixels=False)
 
     def _reset_batch(self, d0, q, k) -> State:
         import jax
-        import jax.numpy as jnp
 
-        def one(qp, kk):
-            carry = begin(self.layout, qp, kk, self._ctrl, self.episode, jnp)
-            return self._state(d0.replace(qpos=qp), carry, qp, kk, jnp.zeros((), jnp.int32))
+        return jax.vmap(lambda qp, kk: self.with_pixels(self.fresh_one(d0, qp, kk)))(q, k)
 
-        return jax.vmap(one)(q, k)
-
-    def _state(self, data, carry, qpos, key, step) -> State:
+    def _state(self, data, carry, qpos, key, step, pixels=True) -> State:
         xp = self._xp
         ep = carry["ep"]
-        obs = self._observe(qpos, data)
+        obs = self._observe(qpos, data, pixels)
         n = qpos.shape[:-1]
         # an episode that starts covered is terminated at reset, before any step
         dropped = xp.zeros(n, dtype=xp.int32) if self.backend == "mjx-warp" else None
@@ -189,6 +208,17 @@ class PushTEnv:
     # -- step -------------------------------------------------------------------------------------
     def step_one(self, state: State, action) -> State:
         """One world's control step (MJX): pure, jit- and vmap-able."""
+        return self.with_pixels(self.advance_one(state, action))
+
+    def with_pixels(self, state: State) -> State:
+        """`state` with this world's image in obs["pixels"] (under vmap over the batch; a no-op without pixels).
+        Wrappers render once, after they have replaced the rows that ended."""
+        if not self.pixels:
+            return state
+        return state._replace(obs={**state.obs, "pixels": self._renderer(state.data)})
+
+    def advance_one(self, state: State, action) -> State:
+        """One world's control step without the image (pure)."""
         import jax.numpy as jnp
 
         from mjx_pusht.backends.mjx import physics_for
@@ -197,10 +227,10 @@ class PushTEnv:
         sim = (state.data, jnp.zeros((), jnp.int32), None)
         qpos, carry, (d, ovf, _) = control_step(sim, state.carry, state.data.qpos, state.step, action,
                                                 self.action_type, physics, self.layout, self.episode, jnp)
-        new = self._after(state, d, carry, jnp)
+        new = self._after(state, d, carry, jnp, pixels=False)
         return new if state.dropped is None else new._replace(dropped=state.dropped | ovf)
 
-    def _after(self, state, data, carry, xp) -> State:
+    def _after(self, state, data, carry, xp, pixels=True) -> State:
         was_done = state.carry["ep"]["done"]
         qpos = data.qpos if not isinstance(data, np.ndarray) else data
         ep = carry["ep"]
@@ -209,12 +239,12 @@ class PushTEnv:
         terminated = ep["done"] & ep["success"]
         truncated = ~terminated & (step >= self.episode.max_steps)
         carry = {**carry, "ep": {**ep, "done": ep["done"] | truncated}}
-        return State(data, carry, self._observe(qpos, data), reward, terminated, truncated, step, state.key,
-                     state.dropped)
+        return State(data, carry, self._observe(qpos, data, pixels), reward, terminated, truncated, step, state.key,
+                     state.dropped, state.info)
 
-    def _observe(self, qpos, data):
+    def _observe(self, qpos, data, pixels=True):
         obs = observe(self.layout.pusher_xy(qpos), self.layout.tee_pose(qpos))
-        if self.pixels:
+        if self.pixels and pixels:
             if self.backend == "cpu":
                 obs["pixels"] = self.renderer(qpos)
             else:  # under vmap: this world's image, from the renderer made for this batch size
@@ -274,6 +304,8 @@ class PushTEnv:
         rows = np.flatnonzero(mask)
         if not len(rows):
             return state
+        if state.info is not None:  # a wrapper's arrays are not per world: they pass through
+            return self.reset_where(state._replace(info=None), mask, seeds, starts)._replace(info=state.info)
         if starts is None:
             seeds = np.asarray(seeds, np.int64).reshape(-1)
             starts = start_poses(seeds, reset=self.reset_kind)

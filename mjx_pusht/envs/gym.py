@@ -38,6 +38,7 @@ except ImportError as e:  # the extra is optional: say what to install, in one l
     raise ImportError("the gymnasium environments need gymnasium: pip install 'mjx-pusht[gym]'") from e
 
 from mjx_pusht.envs.functional import PushTEnv
+from mjx_pusht.envs.handoff import check_array_type, from_user, hand_off
 from mjx_pusht.envs.pixels import IMAGE_SIZE
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.episode import Episode
@@ -49,11 +50,39 @@ TABLE_HALF = 0.45  # every position in an observation lies on the table (the wal
 ENV_ID = "mjx_pusht/PushT-v0"
 
 
-def _check(obs_type: str, action_type: str) -> None:
+def _check(obs_type: str, action_type: str, observation_size: int = IMAGE_SIZE) -> None:
+    if obs_type.startswith("pixels"):
+        from mjx_pusht.envs.pixels import _check_size
+
+        _check_size(observation_size)
     if obs_type not in OBS_TYPES:
         raise ConfigError(f"unknown obs_type {obs_type!r}; choose from {', '.join(OBS_TYPES)}")
     if action_type not in ACTION_TYPES:
         raise ConfigError(f"unknown action_type {action_type!r}; choose from {', '.join(ACTION_TYPES)}")
+
+
+def _check_seed(seed) -> None:
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))
+                             or not 0 <= int(seed) <= SEED_MAX):
+        raise ConfigError(f"a seed is an integer from 0 to 2**63-1, got {seed!r}")
+
+
+def _check_options(options: dict, allowed: tuple) -> dict:
+    unknown = set(options) - set(allowed)
+    if unknown:
+        raise ConfigError(f"unknown reset option(s) {', '.join(map(repr, sorted(unknown)))}; "
+                          f"the options are {', '.join(allowed)}")
+    return options
+
+
+def _check_starts(starts, rows: int) -> np.ndarray:
+    """reset_to_state: [tee x, y, yaw, pusher x, y] for every reset env (or one for all), finite."""
+    a = np.asarray(starts, np.float64)
+    if a.shape not in ((5,), (rows, 5)):
+        raise ConfigError(f"reset_to_state is [tee x, y, yaw, pusher x, y]: shape (5,) or ({rows}, 5), got {a.shape}")
+    if not np.isfinite(a).all():
+        raise ConfigError("reset_to_state must be finite numbers")
+    return np.broadcast_to(a, (rows, 5))
 
 
 def single_spaces(obs_type: str, action_type: str, size: int, dtype) -> tuple[spaces.Space, spaces.Box]:
@@ -115,6 +144,15 @@ def _infos(h: dict) -> dict:
     }
 
 
+_METRICS = ("coverage", "gap_max_dev", "finite", "contained")
+
+
+def _jnp():
+    import jax.numpy as jnp
+
+    return jnp
+
+
 def _warn_broken(info: dict) -> None:
     """A diverged or escaped world is physics gone wrong: say so, never just hand its numbers on."""
     bad = ~(info["finite"] & info["contained"])
@@ -166,7 +204,7 @@ class PushTGymEnv(_Pictures, gym.Env):
     def __init__(self, obs_type: str = "state", action_type: str = "velocity", render_mode: str | None = None,
                  observation_size: int = IMAGE_SIZE, render_size: int = 512, reset_kind: str = "task",
                  max_episode_steps: int = 300, frame_skip: int = 10):
-        _check(obs_type, action_type)
+        _check(obs_type, action_type, observation_size)
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.obs_type, self.action_type, self.render_mode = obs_type, action_type, render_mode
@@ -178,10 +216,11 @@ class PushTGymEnv(_Pictures, gym.Env):
         self._state = None
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        _check_seed(seed)
+        options = _check_options(options or {}, ("reset_to_state",))
         super().reset(seed=seed)
-        options = options or {}
         if "reset_to_state" in options:
-            start = np.asarray(options["reset_to_state"], np.float64).reshape(1, -1)
+            start = _check_starts(options["reset_to_state"], 1)
             self._state = self._env.reset_to(start, [0 if seed is None else seed])
         else:
             # a given seed is the functional API's seed (same start pose); later resets draw the next
@@ -221,7 +260,16 @@ class PushTVectorEnv(_Pictures, VectorEnv):
     Autoreset follows gymnasium's modes: `next_step` (the default: the step after an episode
     ends resets it and ignores its action), `same_step` (reset at once; the ended episode's
     observation and info go in info["final_obs"] / info["final_info"]) or `disabled`
-    (reset(options={"reset_mask": mask}) resets the ones you pick).
+    (reset(options={"reset_mask": mask}) resets the ones you pick). On MJX the autoreset runs
+    on the device inside the jitted step (wrappers.AutoReset), from start poses drawn ahead
+    by each env's own generator, so the episodes are those of gymnasium's SyncVectorEnv.
+
+    `array_type`: what observations, rewards, flags and infos come out as: "jax" (the default
+    on MJX: arrays on the device, no copy), "torch" (tensors on the same device through DLPack,
+    no copy) or "numpy" (copied to the host; the only choice on cpu). Actions may be any of
+    the three. Physics gone wrong is checked on the device and raised or warned about at least
+    every `depth` // 2 steps (every step with NumPy output): a dropped contact (BufferOverflow),
+    a non-finite or escaped world (RuntimeWarning).
     """
 
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -230,13 +278,14 @@ class PushTVectorEnv(_Pictures, VectorEnv):
                  action_type: str = "velocity", render_mode: str | None = None, observation_size: int = IMAGE_SIZE,
                  render_size: int = 512, reset_kind: str = "task", max_episode_steps: int = 300,
                  frame_skip: int = 10, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
-                 threads: int | None = None):
+                 threads: int | None = None, array_type: str | None = None, depth: int = 8):
         from mjx_pusht.backends.base import resolve
         from mjx_pusht.backends.cpu import default_threads
+        from mjx_pusht.envs.wrappers import AutoReset, StartPool
 
-        _check(obs_type, action_type)
-        if int(num_envs) < 1:
-            raise ConfigError(f"num_envs must be a positive integer, got {num_envs}")
+        _check(obs_type, action_type, observation_size)
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ConfigError(f"num_envs must be a positive integer, got {num_envs!r}")
         self.num_envs = int(num_envs)
         self.backend, _ = resolve(backend)
         self.obs_type, self.action_type, self.render_mode = obs_type, action_type, render_mode
@@ -246,6 +295,9 @@ class PushTVectorEnv(_Pictures, VectorEnv):
             raise ConfigError(f"unknown autoreset_mode {autoreset_mode!r}; choose from "
                               f"{', '.join(m.name.lower() for m in AutoresetMode)}")
         self.autoreset_mode = names[autoreset_mode]
+        self.array_type = check_array_type(array_type or ("numpy" if self.backend == "cpu" else "jax"))
+        if self.backend == "cpu" and self.array_type != "numpy":
+            raise ConfigError("the cpu backend steps MuJoCo C on the host: its arrays are NumPy (array_type='numpy')")
         self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
         self.render_size = render_size
         threads = threads or (min(default_threads(), max(1, self.num_envs // 64)) if self.backend == "cpu" else 1)
@@ -257,36 +309,40 @@ class PushTVectorEnv(_Pictures, VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.metadata["render_fps"] = self._fps
-        self._rngs = [np.random.default_rng() for _ in range(self.num_envs)]
+        # each env's next episode seeds, from its own generator, seeded as SyncVectorEnv seeds its copies
+        # (seed + i), so this batch and N single envs agree
+        self._pool = StartPool(self._env, self.num_envs, depth)
+        self._ar = None
+        if self.backend != "cpu" and self.autoreset_mode != AutoresetMode.DISABLED:
+            mode = "same_step" if self.autoreset_mode == AutoresetMode.SAME_STEP else "next_step"
+            self._ar = AutoReset(self._env, mode, depth, final_pixels=obs_type.startswith("pixels"))
+            self._ar.pool = self._pool
         self._state = None
         self._needs_reset = np.zeros(self.num_envs, bool)
-        self._viewer = None
-
-    # Each sub-environment draws its next episode seed from its own generator, seeded like
-    # gymnasium's SyncVectorEnv seeds its copies (seed + i), so this batch and N single envs agree.
-    def _next_seeds(self, rows) -> np.ndarray:
-        return np.array([int(self._rngs[i].integers(SEED_MAX)) for i in rows], np.int64)
+        self._since_check = 0
+        self._viewer = self._view_jit = None
 
     def reset(self, *, seed=None, options: dict | None = None):
-        options = options or {}
+        options = dict(options or {})
         if seed is not None:
-            seeds = [seed + i for i in range(self.num_envs)] if isinstance(seed, int) else list(seed)
+            seeds = [seed + i for i in range(self.num_envs)] if isinstance(seed, (int, np.integer)) else list(seed)
             if len(seeds) != self.num_envs:
                 raise ConfigError(f"{len(seeds)} seeds for {self.num_envs} environments")
+            for x in seeds:
+                _check_seed(x)
         else:
             seeds = [None] * self.num_envs
-        mask = np.asarray(options.get("reset_mask", np.ones(self.num_envs, bool)), bool)
+        mask = np.asarray(options.pop("reset_mask", np.ones(self.num_envs, bool)), bool)
         if mask.shape != (self.num_envs,):
             raise ConfigError(f"reset_mask must be ({self.num_envs},) booleans, got shape {mask.shape}")
+        starts = options.pop("reset_to_state", None)
+        _check_options(options, ("reset_mask", "reset_to_state"))
+        if self._state is None and not mask.all():
+            raise ConfigError("the first reset starts every environment: reset_mask applies once they are running")
         rows = np.flatnonzero(mask)
-        for i in rows:
-            if seeds[i] is not None:
-                self._rngs[i] = np.random.default_rng(seeds[i])
-        episode_seeds = np.array([seeds[i] if seeds[i] is not None else int(self._rngs[i].integers(SEED_MAX))
-                                  for i in rows], np.int64)
-        starts = options.get("reset_to_state")
+        episode_seeds = self._episode_seeds(rows, [seeds[i] for i in rows])
         if starts is not None:
-            starts = np.broadcast_to(np.asarray(starts, np.float64), (len(rows), 5))
+            starts = _check_starts(starts, len(rows))
         if self._state is None or mask.all():
             if starts is not None:
                 self._state = self._env.reset_to(starts, episode_seeds)
@@ -294,54 +350,136 @@ class PushTVectorEnv(_Pictures, VectorEnv):
                 self._state = self._env.reset(episode_seeds)
         else:
             self._state = self._env.reset_where(self._state, mask, episode_seeds, starts)
+        if self._ar is not None:
+            self._pool.refill(self._pool.used)
+            self._state = self._ar._with_pool(self._state, self._pool.used)
         self._needs_reset[rows] = False
-        self._fetch()
-        return self._obs(), self._info()
+        self._since_check = 0
+        return self._outputs(self._state, reset=True)
+
+    def _episode_seeds(self, rows, given) -> np.ndarray:
+        """The seed of each reset row's episode: the one given (its generator reseeded by it), else the
+        row's next one, from the queue of seeds drawn ahead if there is one (so the sequence stays its own)."""
+        pool = self._pool
+        if self._ar is not None and self._state is not None:
+            pool.used = np.asarray(self._state.info["used"], np.int64).copy()
+        out = []
+        for i, s in zip(rows, given):
+            if s is not None:
+                pool.restart([i], [s])
+                out.append(int(s))
+            elif pool.filled[i] > pool.used[i]:  # drawn ahead: take it, so the row's sequence is unchanged
+                out.append(int(pool.seeds[pool.used[i] % pool.depth, i]))
+                pool.used[i] += 1
+            else:
+                out.append(int(pool.next_seeds([i])[0]))
+                pool.filled[i] = pool.used[i] = 0
+        return np.array(out, np.int64)
 
     def step(self, actions):
         if self._state is None:
             raise RuntimeError("call reset() before step()")
-        actions = np.asarray(actions, np.float64)
-        if actions.shape != (self.num_envs, 2):
+        actions = from_user(actions)
+        if getattr(actions, "shape", None) is None:
+            actions = np.asarray(actions, np.float64)
+        if tuple(actions.shape) != (self.num_envs, 2):
             raise ConfigError(f"actions must have shape ({self.num_envs}, 2), one (x, y) per environment; "
-                              f"got {actions.shape} (never reshaped: that would scramble the environments)")
+                              f"got {tuple(actions.shape)} (never reshaped: that would scramble the environments)")
+        if self._ar is not None:
+            return self._step_device(actions)
+        actions = np.asarray(actions, np.float64) if self.backend == "cpu" else actions
         self._state = self._env.check(self._env.step(self._state, actions))
         if self.autoreset_mode == AutoresetMode.NEXT_STEP and self._needs_reset.any():
             # the episodes that ended last step start again now; this step's action is not theirs
             rows = np.flatnonzero(self._needs_reset)
-            self._state = self._env.reset_where(self._state, self._needs_reset, self._next_seeds(rows))
-        h = self._fetch()
-        terminated, truncated = np.array(h["terminated"], bool), np.array(h["truncated"], bool)
-        reward = np.array(h["reward"], np.float64)
+            self._state = self._env.reset_where(self._state, self._needs_reset, self._pool.next_seeds(rows))
+        obs, reward, terminated, truncated, info = self._outputs(self._state)
+        terminated, truncated, reward = np.array(terminated), np.array(truncated), np.array(reward)
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
             reset_rows = self._needs_reset
             terminated[reset_rows], truncated[reset_rows], reward[reset_rows] = False, False, 0.0
             self._needs_reset = terminated | truncated
-            return self._obs(), reward, terminated, truncated, self._info()
-        obs, info = self._obs(), self._info()
+            return obs, reward, terminated, truncated, info
         ended = terminated | truncated
         if self.autoreset_mode == AutoresetMode.SAME_STEP and ended.any():
             rows = np.flatnonzero(ended)
             final_obs, final_info = obs, info
-            self._state = self._env.reset_where(self._state, ended, self._next_seeds(rows))
-            self._fetch()
-            obs, info = self._obs(), self._info()
+            self._state = self._env.reset_where(self._state, ended, self._pool.next_seeds(rows))
+            obs, _, _, _, info = self._outputs(self._state)
             info = {**info, "final_obs": final_obs, "final_info": final_info, "_final_obs": ended,
                     "_final_info": ended}
         return obs, reward, terminated, truncated, info
 
-    def _fetch(self) -> dict:
-        self._h = _host(self._state, self.obs_type)
-        return self._h
+    def _step_device(self, actions):
+        """MJX with autoreset: one jitted call; the host looks at the flags only every depth // 2 steps."""
+        self._state = self._ar.step(self._state, actions)
+        self._since_check += 1
+        if self.array_type == "numpy" or self._since_check >= max(1, self._pool.depth // 2):
+            self._since_check = 0
+            self._state = self._ar.refill(self._env.check(self._state))
+            _warn_broken({"finite": ~np.asarray(self._state.info["broken"]), "contained": True})
+        out = self._outputs(self._state)
+        if self._ar.mode == "same_step":
+            final = self._state.info["final"]
+            ended = self._state.terminated | self._state.truncated
+            fs = {"obs": {**final["obs"], "state": final["obs"]["state"]}, "reward": self._state.reward,
+                  "terminated": self._state.terminated, "truncated": self._state.truncated,
+                  "step": final["step"], **{k: final["metrics"][k] for k in _METRICS}}
+            f_obs, _, _, _, f_info = self._arrays(fs)
+            out[4].update({"final_obs": f_obs, "final_info": f_info, "_final_obs": ended, "_final_info": ended})
+        return out
 
-    def _obs(self):
-        return _gym_obs(self._h["obs"], self.obs_type, self._dtype)
+    def _outputs(self, state, reset: bool = False):
+        """obs, reward, terminated, truncated, info of `state`, as `array_type` (reset: obs, info)."""
+        m = state.metrics
+        flat = {"obs": state.obs, "reward": state.reward, "terminated": state.terminated,
+                "truncated": state.truncated, "step": state.step, **{k: m[k] for k in _METRICS}}
+        obs, reward, terminated, truncated, info = self._arrays(flat)
+        if self.array_type == "numpy":
+            _warn_broken(info)
+        return (obs, info) if reset else (obs, reward, terminated, truncated, info)
 
-    def _info(self) -> dict:
-        info = _infos(self._h)
-        _warn_broken(info)
-        every = np.ones(self.num_envs, bool)
-        return info | {f"_{k}": every for k in info}
+    def _arrays(self, flat: dict):
+        """The gymnasium view of a state's arrays, then handed off: on the device in one jitted call,
+        copied to the host first for NumPy."""
+        keys = {"state"} | ({"keypoints"} if self.obs_type == "keypoints" else set()) | (
+            {"pixels"} if self.obs_type.startswith("pixels") else set())
+        flat = {**flat, "obs": {k: v for k, v in flat["obs"].items() if k in keys}}
+        if self.array_type == "numpy":
+            return self._view(hand_off(flat, "numpy"), np)
+        if self._view_jit is None:
+            import jax
+
+            self._view_jit = jax.jit(lambda f: self._view(f, _jnp()))
+        out = self._view_jit(flat)
+        return hand_off(out, "torch") if self.array_type == "torch" else out
+
+    def _view(self, flat: dict, xp):
+        o, s = flat["obs"], flat["obs"]["state"]
+        if self.obs_type == "state":
+            obs = xp.concatenate([s[..., :4], wrap_angle(s[..., 4:5])], axis=-1).astype(self._dtype)
+        elif self.obs_type == "keypoints":
+            obs = o["keypoints"].astype(self._dtype)
+        elif self.obs_type == "pixels":
+            obs = o["pixels"]
+        else:
+            obs = {"pixels": o["pixels"], "agent_pos": s[..., 0:2].astype(self._dtype)}
+        every = xp.ones(self.num_envs, dtype=bool)
+        info = {
+            "coverage": flat["coverage"], "is_success": flat["terminated"], "steps": flat["step"],
+            "block_pose": s[..., 2:5], "pos_agent": s[..., 0:2],
+            "weld_gap_max_dev": flat["gap_max_dev"],
+            "finite": flat["finite"],  # every state of the episode finite and bounded
+            "contained": flat["contained"],  # the block never left the walls (no missed contact)
+        }
+        if xp is np:  # the host's convention, as the single env and SyncVectorEnv give them
+            info = {k: np.asarray(v, np.float64 if np.asarray(v).dtype.kind == "f" else
+                                  (bool if np.asarray(v).dtype == bool else np.int64)) for k, v in info.items()}
+            out = (obs, np.asarray(flat["reward"], np.float64), np.asarray(flat["terminated"], bool),
+                   np.asarray(flat["truncated"], bool))
+        else:
+            out = (obs, flat["reward"], flat["terminated"], flat["truncated"])
+        return out + (info | {f"_{k}": every for k in info},)
 
     def render(self):
         """One picture per environment, as a tuple (gymnasium's convention), drawn on the CPU renderer:

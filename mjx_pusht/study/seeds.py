@@ -12,6 +12,12 @@ class SeedSpecError(MjxPushtError, ValueError):
     pass
 
 
+# One run's rows fit in memory: 2**30 seeds is 8.6 GB of seeds alone. NumPy's arange of a count near
+# 2**63 silently comes back empty (an empty table written with exit 0 was issue 23's finding 2), and
+# 10**10 dies allocating: both are refused here, before any work. Larger studies: A:B ranges per run.
+MAX_SEEDS = 1 << 30
+
+
 def _int(text: str, spec: str) -> int:
     try:
         value = int(text.strip())
@@ -34,6 +40,7 @@ def parse_seeds(spec: str) -> np.ndarray:
         lo, hi = _int(parts[0], spec), _int(parts[1], spec)
         if hi <= lo:
             raise SeedSpecError(f"--seeds {spec!r} is an empty range: B must be greater than A")
+        _check_count(hi - lo, spec)
         return np.arange(lo, hi, dtype=np.int64)
     if "," in spec:
         seeds = np.array([_int(p, spec) for p in spec.split(",")], dtype=np.int64)
@@ -43,4 +50,11 @@ def parse_seeds(spec: str) -> np.ndarray:
     n = _int(spec, spec)
     if n == 0:
         raise SeedSpecError("--seeds 0 is an empty sweep: give a positive count")
+    _check_count(n, spec)
     return np.arange(n, dtype=np.int64)
+
+
+def _check_count(n: int, spec: str) -> None:
+    if n > MAX_SEEDS:
+        raise SeedSpecError(f"--seeds {spec!r} asks for {n:,} seeds; one run takes at most 2**30 "
+                            f"({MAX_SEEDS:,}): split the study into A:B ranges")

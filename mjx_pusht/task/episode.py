@@ -57,8 +57,9 @@ def _where(xp, cond, old, new):
     return out
 
 
-def begin(layout, qpos0, key, controller, episode: Episode, xp):
-    """The rollout's carry at reset: invariants, episode bookkeeping, the controller's state, the poses at the end."""
+def begin(layout, qpos0, key, controller, episode: Episode, xp, coverage0=None):
+    """The rollout's carry at reset: invariants, episode bookkeeping, the controller's state, the poses at the end.
+    `coverage0`: the start's coverage, when already known (an autoreset pool computes it once, ahead)."""
     tee = layout.tee_pose(qpos0)
     n = tee.shape[:-1]
     acc = invariants_init(n[0] if n else 1, xp)
@@ -67,7 +68,8 @@ def begin(layout, qpos0, key, controller, episode: Episode, xp):
     acc = {k: (xp.astype(v, qpos0.dtype) if v.dtype != xp.bool else v) for k, v in acc.items()}
     return {
         "inv": acc,
-        "ep": episode_init(coverage(tee), episode.success, episode.terminate, xp),
+        "ep": episode_init(coverage(tee) if coverage0 is None else xp.astype(coverage0, tee.dtype), episode.success,
+                           episode.terminate, xp),
         "ctrl": controller.init(key),
         "final": tee,
         "pusher_final": layout.pusher_xy(qpos0),

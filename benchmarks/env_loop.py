@@ -1,0 +1,176 @@
+"""The environment in a user's loop, against the raw physics, side by side in one process per batch size.
+
+    python -m benchmarks.env_loop --envs 4096,16384,65536,131072 [--obs state] [--steps 50] [--json out.json]
+    python -m benchmarks.env_loop --envs 4096,16384 --obs pixels
+
+For each N (one process each, so that one size failing to fit is recorded, not fatal), on MJX-Warp:
+- `raw`: the physics alone: a jitted scan of `steps` control steps, each 10 `mjx.step`s of all N
+  worlds at a constant ctrl (no task, no reset, no observation): the ceiling;
+- `scan_autoreset`: the env (`wrappers.AutoReset(PushTEnv)`, same-step autoreset, start poses from
+  the device pool) stepped in a jitted scan by a JAX policy (a fixed random linear layer + tanh on
+  the observation), with pixels rendered in the step for `--obs pixels`;
+- `gym_torch`: `gym.make_vec("mjx_pusht/PushT-v0", num_envs=N, array_type="torch")` stepped from
+  Python by a torch policy on the same GPU (observations reach torch through DLPack);
+- `gym_numpy`: the same vector env with `array_type="numpy"` and NumPy actions (copies to the host).
+Each figure is N x steps / seconds after one warm-up (compile) call or 3 warm-up steps, timed until
+the results are ready on the device. Memory: the GPU's used bytes (nvidia-smi, every allocator:
+XLA, Warp, torch) after each case, and JAX's peak bytes in use.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+
+ONE = r"""
+import json, os, subprocess, sys, time
+import numpy as np
+n, steps, obs_kind, cases = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], sys.argv[4].split(",")
+import jax, jax.numpy as jnp
+import mjx_pusht
+from mujoco import mjx
+from mjx_pusht.envs.functional import PushTEnv
+from mjx_pusht.envs.wrappers import AutoReset
+
+pixels = 96 if obs_kind == "pixels" else 0
+row = {"envs": n, "obs": obs_kind, "steps": steps, "graph_mode": os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE") or "default"}
+
+def gpu_used():
+    try:
+        out = subprocess.run(["nvidia-smi", "--query-gpu=memory.used", "--format=csv,noheader,nounits"],
+                             capture_output=True, text=True).stdout
+        return int(out.split()[0]) * 2**20
+    except Exception:
+        return None
+
+def record(name, seconds, extra=None):
+    stats = jax.devices()[0].memory_stats() or {}
+    row[name] = {"seconds": seconds, "control_steps_per_s": n * steps / seconds, "ms_per_step": 1000 * seconds / steps,
+                 "gpu_used_bytes": gpu_used(), "jax_peak_bytes": stats.get("peak_bytes_in_use"), **(extra or {})}
+    print(json.dumps({name: row[name]}), file=sys.stderr, flush=True)
+
+def attempt(name, fn):
+    try:
+        fn()
+    except Exception as e:
+        row[name] = {"error": f"{type(e).__name__}: {str(e).splitlines()[0][:300]}", "gpu_used_bytes": gpu_used()}
+        print(json.dumps({name: row[name]}), file=sys.stderr, flush=True)
+
+env = PushTEnv(backend="mjx-warp", pixels=pixels)
+W = jax.random.normal(jax.random.PRNGKey(0), (5, 2)) * 0.5
+
+def raw():
+    mx, d0 = env._mx, env.template(n)
+    d = jax.vmap(lambda q: d0.replace(qpos=q))(jnp.asarray(env.layout.initial_qpos(env.model, np.zeros((n, 5))), jnp.float32))
+    def ctrl_step(d, u):
+        def phys(d, _):
+            return mjx.step(mx, d.replace(ctrl=u)), None
+        return jax.lax.scan(phys, d, None, env.episode.frame_skip)[0]
+    vstep = jax.vmap(ctrl_step)
+    @jax.jit
+    def run(d, key):
+        def body(d, k):
+            u = jax.random.uniform(k, (n, 2), minval=-1, maxval=1)
+            return vstep(d, u), None
+        return jax.lax.scan(body, d, jax.random.split(key, steps))[0]
+    jax.block_until_ready(run(d, jax.random.PRNGKey(1)))
+    t0 = time.perf_counter(); jax.block_until_ready(run(d, jax.random.PRNGKey(2))); record("raw", time.perf_counter() - t0)
+
+def scan_autoreset():
+    ar = AutoReset(env, mode="same_step")
+    s = ar.reset(np.arange(n))
+    @jax.jit
+    def run(s):
+        def body(s, _):
+            a = jnp.tanh(s.obs["state"] @ W)
+            return ar.step(s, a), s.reward
+        return jax.lax.scan(body, s, None, steps)
+    s1, _ = jax.block_until_ready(run(s))
+    t0 = time.perf_counter(); s2, r = jax.block_until_ready(run(s1)); dt = time.perf_counter() - t0
+    env.check(s2)
+    ended = int(np.asarray(s2.info["used"]).sum())
+    record("scan_autoreset", dt, {"episodes_reset": ended, "max_resets_per_row": int(np.asarray(s2.info["used"]).max())})
+
+def gym_loop(array_type):
+    import gymnasium as gym
+    envs = gym.make_vec("mjx_pusht/PushT-v0", num_envs=n, backend="mjx-warp", obs_type="state" if not pixels else "pixels_agent_pos",
+                        array_type=array_type, autoreset_mode="same_step")
+    obs, _ = envs.reset(seed=0)
+    if array_type == "torch":
+        import torch
+        Wt = torch.as_tensor(np.asarray(W), device="cuda")
+        def act(obs):
+            x = obs if not pixels else torch.cat([obs["agent_pos"], obs["agent_pos"], obs["agent_pos"][:, :1]], 1)
+            return torch.tanh(x @ Wt)
+        sync = torch.cuda.synchronize
+    else:
+        rng = np.random.default_rng(0)
+        acts = [rng.uniform(-1, 1, (n, 2)).astype(np.float32) for _ in range(4)]
+        act = lambda obs, i=[0]: acts[(i.__setitem__(0, i[0] + 1) or i[0]) % 4]
+        sync = lambda: None
+    for _ in range(3):
+        obs, r, te, tr, info = envs.step(act(obs))
+    sync(); jax.block_until_ready(envs.unwrapped._state.reward) if hasattr(envs, "unwrapped") else None
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        obs, r, te, tr, info = envs.step(act(obs))
+    sync(); jax.block_until_ready(envs._state.reward)
+    record("gym_" + array_type, time.perf_counter() - t0, {"output": type(r).__module__.split(".")[0]})
+    envs.close()
+
+for c in cases:
+    attempt(c, {"raw": raw, "scan_autoreset": scan_autoreset, "gym_torch": lambda: gym_loop("torch"),
+                "gym_numpy": lambda: gym_loop("numpy")}[c])
+if "raw" in row and "control_steps_per_s" in row["raw"]:
+    for c in cases:
+        if c != "raw" and "control_steps_per_s" in row.get(c, {}):
+            row[c]["fraction_of_raw"] = row[c]["control_steps_per_s"] / row["raw"]["control_steps_per_s"]
+print(json.dumps(row))
+"""
+
+CASES = "raw,scan_autoreset,gym_torch,gym_numpy"
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--envs", default="4096,16384,65536,131072")
+    p.add_argument("--obs", default="state", choices=["state", "pixels"])
+    p.add_argument("--steps", type=int, default=50)
+    p.add_argument("--cases", default=CASES)
+    p.add_argument("--json", default=None)
+    args = p.parse_args(argv)
+    rows = []
+    for n in (int(x) for x in args.envs.split(",")):
+        t0 = time.perf_counter()
+        r = subprocess.run([sys.executable, "-c", ONE, str(n), str(args.steps), args.obs, args.cases],
+                           capture_output=True, text=True)
+        try:
+            row = json.loads(r.stdout.strip().splitlines()[-1])
+        except (IndexError, json.JSONDecodeError):
+            row = {"envs": n, "obs": args.obs, "error": ((r.stderr.strip().splitlines() or ["?"])[-1])[:300]}
+        row["process_seconds"] = time.perf_counter() - t0
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    if args.json:
+        import jax
+
+        from mjx_pusht.backends.base import versions
+
+        d = jax.devices()[0]
+        out = {"command": "python -m benchmarks.env_loop " + " ".join(argv if argv is not None else sys.argv[1:]),
+               "device": getattr(d, "device_kind", d.platform), "host": platform.node(),
+               "date": time.strftime("%Y-%m-%d"), "versions": versions(), "rows": rows}
+        prev = json.load(open(args.json)) if os.path.exists(args.json) else {}
+        prev.setdefault("runs", []).append(out)
+        with open(args.json, "w") as f:
+            json.dump(prev, f, indent=2)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

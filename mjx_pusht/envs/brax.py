@@ -1,0 +1,149 @@
+"""PushT as a Brax `Env`, so Brax's trainers run on it unchanged.
+
+    from brax.training.agents.ppo import train as ppo
+    env = BraxPushT(backend="mjx-warp", max_worlds=4096)
+    make_policy, params, metrics = ppo.train(environment=env, num_envs=4096, episode_length=300, ...)
+
+`reset(rng)` and `step(state, action)` are one world's, pure, as Brax expects (its VmapWrapper
+batches them). The physics state (`State.pipeline_state`) is the functional env's State, and
+`step` is its control step (`PushTEnv.step_one`), so an episode here is an episode of `eval`.
+
+Start poses come from a table drawn ahead on the host (task seeds `first_seed` ..
+`first_seed + table - 1`, reset.py), held on the device; `reset(rng)` picks a row of it.
+`info["seed"]` says which seed an episode started from, so any episode can be replayed by
+`eval`. Brax's own AutoResetWrapper restarts a done env from that env's *first* state (every
+episode of an env then starts the same); `wrap_for_training` is the same wrapper stack with a
+fresh start from the table on every reset instead: pass it as `ppo.train(..., wrap_env_fn=...)`.
+
+On MJX-Warp the contact buffers are sized for `max_worlds` (the largest batch you will vmap,
+training and evaluation envs alike) and every world's overflow bits are in
+`metrics["dropped"]`: nonzero means a contact was dropped, and the numbers are not physics.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+try:
+    import jax
+    import jax.numpy as jnp
+    from brax.envs.base import Env, State
+    from brax.envs.wrappers import training as brax_training
+except ImportError as e:  # optional: say what to install
+    raise ImportError("the Brax adapter needs brax: pip install 'mjx-pusht[brax]'") from e
+
+from mjx_pusht.envs.functional import PushTEnv
+from mjx_pusht.errors import ConfigError
+
+
+def _brax_compat() -> None:
+    """Brax 0.14.2's trainers call `jax.device_put_replicated`, which JAX 0.10 removed from its public API
+    (google/brax#671, open); the function itself is still in `jax._src.api`. Put it back where Brax looks,
+    only if it is missing, so `ppo.train` runs unchanged."""
+    from jax._src import api
+
+    for name in ("device_put_replicated", "device_put_sharded"):
+        deprecations = getattr(jax, "_deprecations", {})
+        if name in deprecations and deprecations[name][1] is None and hasattr(api, name):
+            deprecations[name] = (deprecations[name][0], getattr(api, name))
+
+
+_brax_compat()
+from mjx_pusht.task.controllers import seed_key
+from mjx_pusht.task.episode import Episode
+from mjx_pusht.task.reset import start_poses
+
+OBS_TYPES = ("state", "keypoints")
+
+
+class BraxPushT(Env):
+    """One PushT world as a Brax Env (state or keypoints observations; reward: coverage, or your `reward_fn`)."""
+
+    def __init__(self, backend: str = "mjx-warp", obs_type: str = "state", reset_kind: str = "task",
+                 episode: Episode = Episode(), max_worlds: int = 4096, table: int = 65536, first_seed: int = 0,
+                 reward_fn=None):
+        if obs_type not in OBS_TYPES:
+            raise ConfigError(f"the Brax adapter observes {' or '.join(OBS_TYPES)}, not {obs_type!r}")
+        if backend == "cpu":
+            raise ConfigError("Brax runs jitted JAX: use backend mjx-warp or mjx-jax (cpu is MuJoCo C on the host)")
+        self.env = PushTEnv(backend=backend, reset_kind=reset_kind, episode=episode)
+        self.obs_type, self.reward_fn = obs_type, reward_fn
+        self.first_seed, self.table = int(first_seed), int(table)
+        seeds = np.arange(self.first_seed, self.first_seed + self.table, dtype=np.int64)
+        qpos = self.env.layout.initial_qpos(self.env.model, start_poses(seeds, reset=reset_kind))
+        self._qpos = jnp.asarray(qpos, self.env.runner.dtype)
+        self._keys = jnp.asarray(seed_key(seeds))
+        self._d0 = self.env.template(int(max_worlds))
+
+    def _brax(self, s, reward, pipeline_info: dict, metrics: dict | None = None) -> State:
+        m = s.metrics
+        # keep the keys wrappers added (Brax's EvalWrapper adds "reward"): a scan carries the same tree
+        metrics = {**(metrics or {}), "coverage": m["coverage"], "success": m["success"].astype(jnp.float32)}
+        if s.dropped is not None:
+            metrics["dropped"] = s.dropped.astype(jnp.float32)
+        done = (s.terminated | s.truncated).astype(jnp.float32)
+        return State(pipeline_state=s, obs=s.obs[self.obs_type], reward=reward, done=done, metrics=metrics,
+                     info=pipeline_info)
+
+    def reset(self, rng: jax.Array) -> State:
+        i = jax.random.randint(rng, (), 0, self.table)
+        s = self.env.fresh_one(self._d0, self._qpos[i], self._keys[i])
+        return self._brax(s, jnp.zeros((), s.reward.dtype), {"seed": self.first_seed + i})
+
+    def step(self, state: State, action: jax.Array) -> State:
+        s = self.env.advance_one(state.pipeline_state, action)
+        reward = s.reward if self.reward_fn is None else self.reward_fn(state.pipeline_state, s)
+        return self._brax(s, reward, state.info, state.metrics)
+
+    @property
+    def observation_size(self) -> int:
+        return 5 if self.obs_type == "state" else 16
+
+    @property
+    def action_size(self) -> int:
+        return 2
+
+    @property
+    def backend(self) -> str:
+        return self.env.backend
+
+
+class FreshStartAutoReset(brax_training.Wrapper):
+    """Brax's AutoResetWrapper, but a done env restarts from a new start drawn from the table (a key per env)."""
+
+    def reset(self, rng: jax.Array) -> State:
+        state = self.env.reset(rng)
+        state.info["reset_key"] = jax.vmap(lambda k: jax.random.fold_in(k, 1))(rng) if rng.ndim > 1 else rng
+        return state
+
+    def step(self, state: State, action: jax.Array) -> State:
+        if "steps" in state.info:
+            state.info.update(steps=jnp.where(state.done, jnp.zeros_like(state.info["steps"]), state.info["steps"]))
+        state = state.replace(done=jnp.zeros_like(state.done))
+        state = self.env.step(state, action)
+        keys = jax.vmap(jax.random.split)(state.info["reset_key"])
+        fresh = self.env.reset(keys[:, 0])
+        done = state.done
+
+        def where_done(new, old):
+            if not hasattr(new, "shape") or not new.shape or new.shape[0] != done.shape[0]:
+                return old
+            return jnp.where(done.reshape((-1,) + (1,) * (new.ndim - 1)) > 0, new, old)
+
+        pipeline = state.pipeline_state
+        merged = jax.tree.map(where_done, fresh.pipeline_state._replace(data=None),
+                              pipeline._replace(data=None))
+        data = jax.vmap(lambda d, f, x: x.where(d > 0, f))(done, fresh.pipeline_state.data, pipeline.data)
+        info = {**state.info, "reset_key": keys[:, 1],
+                "seed": jnp.where(done > 0, fresh.info["seed"], state.info["seed"])}
+        return state.replace(pipeline_state=merged._replace(data=data), obs=where_done(fresh.obs, state.obs),
+                             info=info)
+
+
+def wrap_for_training(env: Env, episode_length: int = 300, action_repeat: int = 1, randomization_fn=None):
+    """Brax's `training.wrap` with fresh starts on every reset (pass as `ppo.train(wrap_env_fn=...)`)."""
+    if randomization_fn is not None:
+        raise ConfigError("domain randomisation is not supported by the PushT Brax adapter")
+    env = brax_training.VmapWrapper(env)
+    env = brax_training.EpisodeWrapper(env, episode_length, action_repeat)
+    return FreshStartAutoReset(env)

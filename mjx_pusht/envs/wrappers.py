@@ -1,0 +1,248 @@
+"""Wrappers around the functional env: autoreset on the device, and the pool of start poses it draws from.
+
+    env = AutoReset(PushTEnv(backend="mjx-warp"), mode="same_step")
+    state = env.reset(np.arange(4096))                 # pure from here on: jit, scan, vmap-free
+    state = jax.lax.scan(lambda s, _: (env.step(s, policy(s.obs)), None), state, None, 1000)[0]
+
+`step` is the env's control step followed, inside the same jitted program, by a `jnp.where` that
+replaces only the rows whose episode ended with a new episode (MJX's `Data.where`, which leaves
+MJX-Warp's shared contact buffers alone), as Brax's `AutoResetWrapper` and gymnax's `step` do.
+The image, if any, is rendered once, after the merge.
+
+Where do the new episodes start? Not from a fixed first state (Brax's choice: every episode of a
+row would start the same), and not from a generator run on the device (the task's per-seed
+generator is PCG64 in float64, reset.py, which XLA's float32 GPU path cannot reproduce bit for
+bit). Instead each row has a queue of its next `depth` episode seeds, drawn on the host by
+gymnasium's rule (row i's generator is `np.random.default_rng(seed_i)`, as SyncVectorEnv seeds
+its copies), with their start poses and controller keys computed once and held on the device
+(`StartPool`). A row's k-th autoreset takes slot k mod depth. `refill` (host) tops the queues up;
+the gymnasium vector env calls it every `depth` // 2 steps, so no row ever reuses a slot there.
+Inside one long scan, a row that ends more than `depth` episodes repeats its starts from the
+first slot: `state.info["used"]` says how many it took, so that is visible, never silent.
+
+The episode that ended is reported in the step that ends it (`mode="same_step"`): its reward,
+terminated, truncated, and in `info["final"]` its observation (no image unless `final_pixels`)
+and metrics. `mode="next_step"` is gymnasium's default: the step after the end starts the new
+episode, ignores that row's action and reports reward 0, not terminated.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mjx_pusht.errors import ConfigError
+from mjx_pusht.task.controllers import seed_key
+from mjx_pusht.task.reset import SEED_MAX, start_poses
+from mjx_pusht.task.rules import coverage
+
+MODES = ("same_step", "next_step")
+
+
+class StartPool:
+    """Each row's next `depth` episode seeds, their start qpos and keys: host bookkeeping for AutoReset."""
+
+    def __init__(self, env, n: int, depth: int):
+        if int(depth) < 1:
+            raise ConfigError(f"the start pool's depth must be a positive number of episodes, got {depth}")
+        self.env, self.n, self.depth = env, int(n), int(depth)
+        self.rngs = [np.random.default_rng() for _ in range(self.n)]
+        self.seeds = np.zeros((self.depth, self.n), np.int64)  # slot (seq % depth, row)
+        self.qpos = np.zeros((self.depth, self.n, env.model.nq), np.float64)
+        self.keys = np.zeros((self.depth, self.n, 2), np.uint32)
+        self.coverage = np.zeros((self.depth, self.n), np.float64)  # each start's coverage, computed here once
+        self.filled = np.zeros(self.n, np.int64)  # entries drawn per row (sequence numbers < filled exist)
+        self.used = np.zeros(self.n, np.int64)  # entries consumed per row, as of the last refill
+
+    def restart(self, rows, seeds) -> None:
+        """Rows `rows` start over: their generators seeded by `seeds` (None: left as they are), queues emptied."""
+        for i, s in zip(rows, seeds):
+            if s is not None:
+                self.rngs[i] = np.random.default_rng(int(s))
+        self.filled[rows] = self.used[rows] = 0
+
+    def next_seeds(self, rows) -> np.ndarray:
+        """One seed per row in `rows`, drawn now from its generator (a reset without a given seed)."""
+        return np.array([int(self.rngs[i].integers(SEED_MAX)) for i in rows], np.int64)
+
+    def refill(self, used) -> bool:
+        """Top every row's queue up to `depth` unconsumed entries, given how many each row has consumed."""
+        self.used = np.asarray(used, np.int64).copy()
+        need = self.used + self.depth - self.filled
+        rows = np.flatnonzero(need > 0)
+        if not len(rows):
+            return False
+        seq, row = [], []
+        for i in rows:
+            for j in range(int(self.filled[i]), int(self.used[i] + self.depth)):
+                seq.append(j)
+                row.append(i)
+        seq, row = np.array(seq), np.array(row)
+        seeds = self.next_seeds(row)  # in order per row: each row's generator yields its sequence
+        slot = seq % self.depth
+        self.seeds[slot, row] = seeds
+        qpos = self.env.layout.initial_qpos(self.env.model, start_poses(seeds, reset=self.env.reset_kind))
+        self.qpos[slot, row] = qpos
+        self.coverage[slot, row] = coverage(self.env.layout.tee_pose(qpos))
+        self.keys[slot, row] = seed_key(seeds)
+        self.filled[rows] = self.used[rows] + self.depth
+        return True
+
+    def arrays(self, xp, dtype) -> dict:
+        return {"pool_qpos": xp.asarray(self.qpos.astype(dtype)), "pool_key": xp.asarray(self.keys),
+                "pool_coverage": xp.asarray(self.coverage.astype(dtype))}
+
+
+class AutoReset:
+    """Resets the episodes that ended, on the device, inside the step (see the module's docstring)."""
+
+    def __init__(self, env, mode: str = "same_step", depth: int = 8, final_pixels: bool = False,
+                 donate: bool = False):
+        if mode not in MODES:
+            raise ConfigError(f"unknown autoreset mode {mode!r}; choose from {', '.join(MODES)}")
+        self.env, self.mode, self.depth = env, mode, int(depth)
+        self.final_pixels = final_pixels
+        self.donate = donate  # the step may reuse the old state's memory (a stateful caller keeps no old state)
+        self.pool: StartPool | None = None
+        self._jitted: dict = {}
+
+    # -- host side -----------------------------------------------------------------------------------
+    def reset(self, seeds, starts=None, pool: StartPool | None = None):
+        """Episodes from `seeds` (or `starts`, (N, 5)), each row's later episodes from its own generator
+        seeded by its seed (gymnasium's rule), unless a ready `pool` is given."""
+        seeds = np.asarray(seeds, np.int64).reshape(-1)
+        state = self.env.reset(seeds) if starts is None else self.env.reset_to(starts, seeds)
+        if pool is None:
+            pool = StartPool(self.env, len(seeds), self.depth)
+            pool.restart(range(len(seeds)), seeds)
+        self.pool = pool
+        pool.refill(np.zeros(len(seeds), np.int64))
+        return self._with_pool(state, np.zeros(len(seeds), np.int32))
+
+    def _with_pool(self, state, used):
+        xp = self.env._xp
+        dtype = np.float64 if self.env.backend == "cpu" else self.env.runner.dtype
+        info = dict(state.info or {}) | self.pool.arrays(xp, dtype) | {"used": xp.asarray(used, dtype=xp.int32)}
+        info.setdefault("broken", xp.zeros(len(used), dtype=bool))
+        if self.mode == "same_step" and "final" not in info:
+            info["final"] = self._final(state, state)
+        return state._replace(info=info)
+
+    def refill(self, state):
+        """Top up every row's start queue (reads `info["used"]` from the device: one small transfer)."""
+        if self.pool.refill(np.asarray(state.info["used"])):
+            return self._with_pool(state, state.info["used"])
+        return state
+
+    # -- the step ------------------------------------------------------------------------------------
+    def step(self, state, action):
+        if self.env.backend == "cpu":
+            return self._step_cpu(state, action)
+        import jax
+        import jax.numpy as jnp
+
+        from mjx_pusht.envs.functional import _check_actions
+
+        n = len(state.step)
+        action = _check_actions(jnp.asarray(action), n)
+        if n not in self._jitted:
+            self.env._batch_fns(n)  # this batch size's renderer
+            self._jitted[n] = jax.jit(self._step_batch, donate_argnums=(1,) if self.donate else ())
+        self.env._batch_fns(n)
+        return self._jitted[n](self.env.template(n), state, action)
+
+    def _slot(self, info, ended, xp):
+        """Each ended row's next queue slot, and the counters after taking it."""
+        used = info["used"]
+        slot = used % self.depth
+        rows = xp.arange(used.shape[0])
+        return (info["pool_qpos"][slot, rows], info["pool_key"][slot, rows], info["pool_coverage"][slot, rows],
+                used + ended.astype(used.dtype))
+
+    def _final(self, stepped, old):
+        """What the ended episode was: obs (image only if asked), metrics and step count."""
+        obs = {k: v for k, v in stepped.obs.items() if k != "pixels" or self.final_pixels}
+        return {"obs": obs, "metrics": stepped.metrics, "step": stepped.step}
+
+    def _step_batch(self, d0, state, action):
+        import jax
+        import jax.numpy as jnp
+
+        env, info = self.env, state.info
+        stepped = jax.vmap(env.advance_one)(state._replace(info=None), action)  # info's pool is not per world
+        if self.mode == "same_step":
+            ended = stepped.terminated | stepped.truncated
+        else:  # next_step: the rows that ended last step start now, in place of this step
+            ended = state.terminated | state.truncated
+        q, k, cov, used = self._slot(info, ended, jnp)
+        fresh = jax.vmap(lambda qp, kk, c: env.fresh_one(d0, qp, kk, c))(q, k, cov)
+        out = jax.vmap(_merge)(ended, fresh, stepped)
+        if self.mode == "same_step":
+            # the step that ended an episode reports it: its reward and flags, its obs in info["final"]
+            out = out._replace(reward=stepped.reward, terminated=stepped.terminated, truncated=stepped.truncated)
+            final = jax.tree.map(lambda a, b: _rows(ended, a, b),
+                                 self._final(jax.vmap(env.with_pixels)(stepped) if self.final_pixels else stepped,
+                                             state), info["final"])
+            new_info = {**info, "used": used, "final": final}
+        else:
+            zero = jnp.zeros_like(stepped.reward)
+            out = out._replace(reward=jnp.where(ended, zero, stepped.reward),
+                               terminated=jnp.where(ended, False, out.terminated),
+                               truncated=jnp.where(ended, False, out.truncated))
+            new_info = {**info, "used": used}
+        # an overflow is kept for the row whatever episode it was in: a dropped contact is never forgotten,
+        # and so is a world that went non-finite or left the walls (checked by the caller when it syncs)
+        m = stepped.metrics
+        new_info["broken"] = info["broken"] | ~(m["finite"] & m["contained"])
+        out = out._replace(dropped=stepped.dropped)
+        return jax.vmap(env.with_pixels)(out)._replace(info=new_info)
+
+    def _step_cpu(self, state, action):
+        env = self.env
+        if self.mode == "next_step":
+            ended = np.asarray(state.terminated | state.truncated)
+            stepped = env.step(state, action)
+        else:
+            stepped = env.step(state, action)
+            ended = np.asarray(stepped.terminated | stepped.truncated)
+        info = state.info
+        used = np.asarray(info["used"])
+        rows = np.flatnonzero(ended)
+        if not len(rows):
+            m = stepped.metrics
+            return stepped._replace(info={**info, "broken": info["broken"] | ~(m["finite"] & m["contained"])})
+        slot = used[rows] % self.depth
+        seeds = self.pool.seeds[slot, rows]
+        out = env.reset_where(stepped, ended, seeds=seeds)
+        new_used = used + ended
+        m = stepped.metrics
+        new_info = {**info, "used": new_used.astype(np.int32),
+                    "broken": info["broken"] | ~(np.asarray(m["finite"]) & np.asarray(m["contained"]))}
+        if self.mode == "same_step":
+            out = out._replace(reward=stepped.reward, terminated=stepped.terminated, truncated=stepped.truncated)
+            import jax
+
+            new_info["final"] = jax.tree.map(lambda a, b: _rows(ended, a, b), self._final(stepped, state),
+                                             info["final"])
+        else:
+            out = out._replace(reward=np.where(ended, 0.0, stepped.reward),
+                               terminated=np.where(ended, False, out.terminated),
+                               truncated=np.where(ended, False, out.truncated))
+        return out._replace(info=new_info)
+
+
+def _rows(mask, new, old):
+    """Per row: `new` where `mask`, else `old` (arrays of any trailing shape)."""
+    xp = np if isinstance(new, np.ndarray) else __import__("jax.numpy", fromlist=["where"])
+    m = mask.reshape(mask.shape + (1,) * (new.ndim - mask.ndim))
+    return xp.where(m, new, old)
+
+
+def _merge(ended, fresh, stepped):
+    """One world: the fresh episode if its last one ended, else the stepped one (physics via Data.where)."""
+    import jax
+    import jax.numpy as jnp
+
+    data = stepped.data.where(ended, fresh.data)
+    rest = jax.tree.map(lambda a, b: jnp.where(ended, a, b), fresh._replace(data=None, info=None, dropped=None),
+                        stepped._replace(data=None, info=None, dropped=None))
+    return rest._replace(data=data, info=stepped.info, dropped=stepped.dropped)
