@@ -124,7 +124,7 @@ class AutoReset:
         info = dict(state.info or {}) | self.pool.arrays(xp, dtype) | {"used": xp.asarray(used, dtype=xp.int32)}
         info.setdefault("broken", xp.zeros(len(used), dtype=bool))
         if self.mode == "same_step" and "final" not in info:
-            info["final"] = self._final(state, state)
+            info["final"] = self._final(state)
         return state._replace(info=info)
 
     def refill(self, state):
@@ -144,10 +144,9 @@ class AutoReset:
 
         n = len(state.step)
         action = _check_actions(jnp.asarray(action), n)
+        self.env._batch_fns(n)  # this batch size's renderer
         if n not in self._jitted:
-            self.env._batch_fns(n)  # this batch size's renderer
             self._jitted[n] = jax.jit(self._step_batch, donate_argnums=(1,) if self.donate else ())
-        self.env._batch_fns(n)
         return self._jitted[n](self.env.template(n), state, action)
 
     def _slot(self, info, ended, xp):
@@ -158,7 +157,7 @@ class AutoReset:
         return (info["pool_qpos"][slot, rows], info["pool_key"][slot, rows], info["pool_coverage"][slot, rows],
                 used + ended.astype(used.dtype))
 
-    def _final(self, stepped, old):
+    def _final(self, stepped):
         """What the ended episode was: obs (image only if asked), metrics and step count."""
         obs = {k: v for k, v in stepped.obs.items() if k != "pixels" or self.final_pixels}
         return {"obs": obs, "metrics": stepped.metrics, "step": stepped.step}
@@ -181,7 +180,7 @@ class AutoReset:
             out = out._replace(reward=stepped.reward, terminated=stepped.terminated, truncated=stepped.truncated)
             final = jax.tree.map(lambda a, b: _rows(ended, a, b),
                                  self._final(jax.vmap(env.with_pixels)(stepped) if self.final_pixels else stepped,
-                                             state), info["final"])
+                                             ), info["final"])
             new_info = {**info, "used": used, "final": final}
         else:
             zero = jnp.zeros_like(stepped.reward)
@@ -221,7 +220,7 @@ class AutoReset:
             out = out._replace(reward=stepped.reward, terminated=stepped.terminated, truncated=stepped.truncated)
             import jax
 
-            new_info["final"] = jax.tree.map(lambda a, b: _rows(ended, a, b), self._final(stepped, state),
+            new_info["final"] = jax.tree.map(lambda a, b: _rows(ended, a, b), self._final(stepped),
                                              info["final"])
         else:
             out = out._replace(reward=np.where(ended, 0.0, stepped.reward),
