@@ -11,7 +11,10 @@ For each N (one process each, so that one size failing to fit is recorded, not f
   the observation), with pixels rendered in the step for `--obs pixels`;
 - `gym_torch`: `gym.make_vec("mjx_pusht/PushT-v0", num_envs=N, array_type="torch")` stepped from
   Python by a torch policy on the same GPU (observations reach torch through DLPack);
-- `gym_numpy`: the same vector env with `array_type="numpy"` and NumPy actions (copies to the host).
+- `gym_numpy`: the same vector env with `array_type="numpy"` and NumPy actions (copies to the host);
+- `dropin_numpy` / `dropin_torch`: the gym-pusht drop-in's vector env
+  (`gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", ...)`, `pixels_agent_pos` with `--obs pixels`),
+  random pixel targets, NumPy out (its default, what a gym-pusht loop reads) or torch tensors.
 Each figure is N x steps / seconds after one warm-up (compile) call or 3 warm-up steps, timed until
 the results are ready on the device. Memory: the GPU's used bytes (nvidia-smi, every allocator:
 XLA, Warp, torch) after each case, and JAX's peak bytes in use.
@@ -123,9 +126,33 @@ def gym_loop(array_type):
     record("gym_" + array_type, time.perf_counter() - t0, {"output": type(r).__module__.split(".")[0]})
     envs.close()
 
+def dropin(array_type):
+    import gymnasium as gym
+    envs = gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", num_envs=n, backend="mjx-warp",
+                        obs_type="pixels_agent_pos" if pixels else "state", array_type=array_type,
+                        autoreset_mode="same_step")
+    envs.reset(seed=0)
+    rng = np.random.default_rng(0)
+    acts = [rng.uniform(0, 512, (n, 2)).astype(np.float32) for _ in range(4)]
+    if array_type == "torch":
+        import torch
+        acts = [torch.as_tensor(a, device="cuda") for a in acts]
+    for i in range(3):
+        envs.step(acts[i % 4])
+    jax.block_until_ready(envs._state.reward)
+    t0 = time.perf_counter()
+    for i in range(steps):
+        obs, r, te, tr, info = envs.step(acts[i % 4])
+    if array_type == "torch":
+        torch.cuda.synchronize()
+    jax.block_until_ready(envs._state.reward)
+    record("dropin_" + array_type, time.perf_counter() - t0, {"output": type(r).__module__.split(".")[0]})
+    envs.close()
+
 for c in cases:
     attempt(c, {"raw": raw, "scan_autoreset": scan_autoreset, "gym_torch": lambda: gym_loop("torch"),
-                "gym_numpy": lambda: gym_loop("numpy")}[c])
+                "gym_numpy": lambda: gym_loop("numpy"), "dropin_numpy": lambda: dropin("numpy"),
+                "dropin_torch": lambda: dropin("torch")}[c])
 if "raw" in row and "control_steps_per_s" in row["raw"]:
     for c in cases:
         if c != "raw" and "control_steps_per_s" in row.get(c, {}):

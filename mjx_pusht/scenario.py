@@ -31,6 +31,10 @@ class Scenario:
 
         if self.reset not in RESETS:
             raise ConfigError(f"unknown reset {self.reset!r}; choose from {', '.join(RESETS)}")
+        targets = getattr(self.controller, "action_type", None) == "target"
+        if self.controller is not None and targets != (self.scene.variant == "gym-pusht"):
+            raise ConfigError("the gym-pusht scene's pusher is on position servos: its actions are targets "
+                              "(action_type 'target'); the chapter scene's servos take 'velocity' or 'position'")
 
     def grid(self) -> list[dict[str, float]]:
         """Every parameter combination; a single empty one when nothing is swept."""

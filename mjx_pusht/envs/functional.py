@@ -104,6 +104,8 @@ class PushTEnv:
             raise ConfigError(f"unknown action type {self.action_type!r}; choose from {', '.join(ACTION_TYPES)}")
         if self.backend not in ("cpu", "mjx-jax", "mjx-warp"):
             raise BackendError(f"the environment runs on cpu, mjx-jax or mjx-warp, not {self.backend!r}")
+        if self.scene.variant == "gym-pusht" and self.reset_kind == "task":
+            self.reset_kind = "gym-pusht"  # the variant's own reset, unless another is asked for
         self._ctrl = _Stateless(action_type=self.action_type)
         self.scenario = Scenario(self.scene, reset=self.reset_kind, controller=self._ctrl, episode=self.episode)
         self._settle = self.scenario.schedule.settle_steps - 1
@@ -230,7 +232,7 @@ class PushTEnv:
         new = self._after(state, d, carry, jnp, pixels=False)
         return new if state.dropped is None else new._replace(dropped=state.dropped | ovf)
 
-    def _after(self, state, data, carry, xp, pixels=True) -> State:
+    def _after(self, state, data, carry, xp, pixels=True, qvel=None) -> State:
         was_done = state.carry["ep"]["done"]
         qpos = data.qpos if not isinstance(data, np.ndarray) else data
         ep = carry["ep"]
@@ -239,11 +241,16 @@ class PushTEnv:
         terminated = ep["done"] & ep["success"]
         truncated = ~terminated & (step >= self.episode.max_steps)
         carry = {**carry, "ep": {**ep, "done": ep["done"] | truncated}}
-        return State(data, carry, self._observe(qpos, data, pixels), reward, terminated, truncated, step, state.key,
-                     state.dropped, state.info)
+        return State(data, carry, self._observe(qpos, data, pixels, qvel), reward, terminated, truncated, step,
+                     state.key, state.dropped, state.info)
 
-    def _observe(self, qpos, data, pixels=True):
+    def _observe(self, qpos, data, pixels=True, qvel=None):
         obs = observe(self.layout.pusher_xy(qpos), self.layout.tee_pose(qpos))
+        if self.scene.variant == "gym-pusht":  # gym-pusht reports its agent's velocity (info["vel_agent"])
+            if qvel is None:
+                qvel = data.qvel[-1] if self.backend == "cpu" else data.qvel
+            # the pusher's slide joints: in this scene (no free joint) dof addresses are qpos addresses
+            obs["pusher_vel"] = qvel[..., list(self.layout.pusher)]
         if self.pixels and pixels:
             if self.backend == "cpu":
                 obs["pixels"] = self.renderer(qpos)
@@ -261,7 +268,7 @@ class PushTEnv:
         qpos = state.data.qpos[-1]
         qpos, carry, _ = control_step((worlds, None), state.carry, qpos, state.step, action, self.action_type, physics,
                                       self.layout, self.episode, np)
-        return self._after(state, qpos, carry, np)._replace(data=worlds)
+        return self._after(state, qpos, carry, np, qvel=worlds.qvel[-1])._replace(data=worlds)
 
     def step(self, state: State, action) -> State:  # replaced by _step_mjx on MJX
         return self._step_cpu(state, action)

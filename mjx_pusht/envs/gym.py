@@ -155,7 +155,7 @@ def _jnp():
 
 def _warn_broken(info: dict) -> None:
     """A diverged or escaped world is physics gone wrong: say so, never just hand its numbers on."""
-    bad = ~(info["finite"] & info["contained"])
+    bad = ~(np.asarray(info["finite"], bool) & np.asarray(info["contained"], bool))
     if np.any(bad):
         import warnings
 
@@ -165,12 +165,16 @@ def _warn_broken(info: dict) -> None:
 
 
 def _functional(backend: str, obs_type: str, action_type: str, observation_size: int, reset_kind: str,
-                max_episode_steps: int, frame_skip: int, threads: int = 1) -> PushTEnv:
-    """The functional env behind both gymnasium envs; stepped in place (a gymnasium env keeps no old states)."""
+                max_episode_steps: int, frame_skip: int, threads: int = 1, variant: str = "chapter") -> PushTEnv:
+    """The functional env behind the gymnasium envs; stepped in place (a gymnasium env keeps no old states).
+    The gym-pusht variant's episodes run as gym-pusht's do: a start on the goal is scored by the first step."""
+    from mjx_pusht.model.scene import SceneSpec
+
     return PushTEnv(backend=backend, reset_kind=reset_kind, action_type=action_type,
                     pixels=observation_size if obs_type.startswith("pixels") else 0,
-                    episode=Episode(frame_skip=frame_skip, max_steps=max_episode_steps), threads=threads,
-                    keep_states=False)
+                    episode=Episode(frame_skip=frame_skip, max_steps=max_episode_steps,
+                                    end_covered_start=variant == "chapter"),
+                    scene=SceneSpec(variant=variant), threads=threads, keep_states=False)
 
 
 class _Pictures:
@@ -278,12 +282,13 @@ class PushTVectorEnv(_Pictures, VectorEnv):
                  action_type: str = "velocity", render_mode: str | None = None, observation_size: int = IMAGE_SIZE,
                  render_size: int = 512, reset_kind: str = "task", max_episode_steps: int = 300,
                  frame_skip: int = 10, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
-                 threads: int | None = None, array_type: str | None = None, depth: int = 8):
+                 threads: int | None = None, array_type: str | None = None, depth: int = 8,
+                 variant: str = "chapter"):
         from mjx_pusht.backends.base import resolve
         from mjx_pusht.backends.cpu import default_threads
         from mjx_pusht.envs.wrappers import AutoReset, StartPool
 
-        _check(obs_type, action_type, observation_size)
+        self._check_args(obs_type, action_type, observation_size)
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ConfigError(f"num_envs must be a positive integer, got {num_envs!r}")
         self.num_envs = int(num_envs)
@@ -302,9 +307,9 @@ class PushTVectorEnv(_Pictures, VectorEnv):
         self.render_size = render_size
         threads = threads or (min(default_threads(), max(1, self.num_envs // 64)) if self.backend == "cpu" else 1)
         self._env = _functional(self.backend, obs_type, action_type, observation_size, reset_kind,
-                                max_episode_steps, frame_skip, threads)
+                                max_episode_steps, frame_skip, threads, variant)
         self._dtype = np.float64 if self.backend == "cpu" else np.dtype(self._env.runner.dtype)
-        self.single_observation_space, self.single_action_space = single_spaces(
+        self.single_observation_space, self.single_action_space = self._single_spaces(
             obs_type, action_type, observation_size, self._dtype)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -321,6 +326,14 @@ class PushTVectorEnv(_Pictures, VectorEnv):
         self._needs_reset = np.zeros(self.num_envs, bool)
         self._since_check = 0
         self._viewer = self._view_jit = None
+
+    _check_args = staticmethod(_check)
+    _single_spaces = staticmethod(single_spaces)
+    _starts_in = staticmethod(lambda starts, rows: _check_starts(starts, rows))  # reset_to_state, in the env's units
+
+    def _actions_in(self, actions):
+        """Actions in the functional env's units (this env's are those already)."""
+        return actions
 
     def reset(self, *, seed=None, options: dict | None = None):
         options = dict(options or {})
@@ -342,7 +355,7 @@ class PushTVectorEnv(_Pictures, VectorEnv):
         rows = np.flatnonzero(mask)
         episode_seeds = self._episode_seeds(rows, [seeds[i] for i in rows])
         if starts is not None:
-            starts = _check_starts(starts, len(rows))
+            starts = self._starts_in(starts, len(rows))
         if self._state is None or mask.all():
             if starts is not None:
                 self._state = self._env.reset_to(starts, episode_seeds)
@@ -385,6 +398,7 @@ class PushTVectorEnv(_Pictures, VectorEnv):
         if tuple(actions.shape) != (self.num_envs, 2):
             raise ConfigError(f"actions must have shape ({self.num_envs}, 2), one (x, y) per environment; "
                               f"got {tuple(actions.shape)} (never reshaped: that would scramble the environments)")
+        actions = self._actions_in(actions)
         if self._ar is not None:
             return self._step_device(actions)
         actions = np.asarray(actions, np.float64) if self.backend == "cpu" else actions
@@ -442,7 +456,7 @@ class PushTVectorEnv(_Pictures, VectorEnv):
     def _arrays(self, flat: dict):
         """The gymnasium view of a state's arrays, then handed off: on the device in one jitted call,
         copied to the host first for NumPy."""
-        keys = {"state"} | ({"keypoints"} if self.obs_type == "keypoints" else set()) | (
+        keys = {"state", "pusher_vel"} | ({"keypoints"} if self.obs_type == "keypoints" else set()) | (
             {"pixels"} if self.obs_type.startswith("pixels") else set())
         flat = {**flat, "obs": {k: v for k, v in flat["obs"].items() if k in keys}}
         if self.array_type == "numpy":
@@ -509,8 +523,14 @@ class PushTVectorEnv(_Pictures, VectorEnv):
 
 
 def register() -> None:
-    """Register `mjx_pusht/PushT-v0` with gymnasium (done on `import mjx_pusht` when gymnasium is installed)."""
-    if ENV_ID in gym.registry:
-        return
-    gym.register(id=ENV_ID, entry_point="mjx_pusht.envs.gym:PushTGymEnv",
-                 vector_entry_point="mjx_pusht.envs.gym:PushTVectorEnv", max_episode_steps=None)
+    """Register `mjx_pusht/PushT-v0` and the gym-pusht drop-in `mjx_pusht/PushT-gym-pusht-v0` with gymnasium
+    (done on `import mjx_pusht` when gymnasium is installed). The drop-in is registered as gym-pusht registers
+    its env: gymnasium's TimeLimit at 300 steps, which `max_episode_steps=` replaces."""
+    if ENV_ID not in gym.registry:
+        gym.register(id=ENV_ID, entry_point="mjx_pusht.envs.gym:PushTGymEnv",
+                     vector_entry_point="mjx_pusht.envs.gym:PushTVectorEnv", max_episode_steps=None)
+    drop_in = "mjx_pusht/PushT-gym-pusht-v0"
+    if drop_in not in gym.registry:
+        gym.register(id=drop_in, entry_point="mjx_pusht.envs.gym_pusht:GymPushTEnv",
+                     vector_entry_point="mjx_pusht.envs.gym_pusht:GymPushTVectorEnv", max_episode_steps=300,
+                     kwargs={"obs_type": "state"})

@@ -43,8 +43,10 @@ def view_model(model, size: int = IMAGE_SIZE):
 
     view = copy.deepcopy(model)
     cam = view.camera(CAMERA).id
-    view.cam_projection[cam] = mujoco.mjtProjection.mjPROJ_ORTHOGRAPHIC
-    view.cam_fovy[cam] = 2 * WORKSPACE_HALF  # orthographic fovy is the frame's height in metres
+    if view.cam_projection[cam] != mujoco.mjtProjection.mjPROJ_ORTHOGRAPHIC:  # the chapter's camera
+        view.cam_projection[cam] = mujoco.mjtProjection.mjPROJ_ORTHOGRAPHIC
+        view.cam_fovy[cam] = 2 * WORKSPACE_HALF  # orthographic fovy is the frame's height in metres
+    # else a variant's camera, authored orthographic over its own frame (gym-pusht's 512 px)
     table_rgb = view.geom_rgba[view.geom("table").id, :3].copy()
     for name in ("target_bar", "target_stem"):
         rgba = view.geom_rgba[view.geom(name).id]

@@ -91,12 +91,14 @@ SENSOR_MJCF = """
 
 # autoreset off: MuJoCo would otherwise silently reset a diverged state to qpos0
 # and keep stepping; we want the NaN, so the non-finite flag can catch it.
+CAMERA_MJCF = """
+    <camera name="top" pos="0 0 1.0" quat="1 0 0 0" fovy="50"/>"""
+
 SCENE_TEMPLATE = """<mujoco model="pusht">
-  <option timestep="0.01" integrator="implicitfast">
+  <option timestep="0.01" {option}>
     <flag autoreset="disable"/>
   </option>
-  <worldbody>
-    <camera name="top" pos="0 0 1.0" quat="1 0 0 0" fovy="50"/>{ground}{target}{tee}{pusher}
+  <worldbody>{camera}{ground}{target}{tee}{pusher}
   </worldbody>
   <actuator>{actuator}
   </actuator>
@@ -108,21 +110,37 @@ SCENE_TEMPLATE = """<mujoco model="pusht">
 
 @dataclasses.dataclass(frozen=True)
 class SceneSpec:
-    """Which scene to author: the break mode and the pusher's collision shape."""
+    """Which scene to author: the break mode, the pusher's collision shape, and the variant.
+
+    `variant="gym-pusht"` is gym-pusht's PushT in this project's physics (model/gym_pusht.py):
+    its walls, goal, camera and colours, and its agent's PD law on position servos; the same
+    T, joints and sensors, so every backend, invariant and env runs it unchanged.
+    """
 
     break_it: str = "none"
     pusher: str = "cylinder"
+    variant: str = "chapter"
 
     def __post_init__(self) -> None:
         if self.break_it not in BREAK_MODES:
             raise ConfigError(f"unknown break mode {self.break_it!r}; choose from {', '.join(BREAK_MODES)}")
         if self.pusher not in PUSHER_SHAPES:
             raise ConfigError(f"unknown pusher shape {self.pusher!r}; choose from {', '.join(PUSHER_SHAPES)}")
+        if self.variant not in VARIANTS:
+            raise ConfigError(f"unknown scene variant {self.variant!r}; choose from {', '.join(VARIANTS)}")
+        if self.variant != "chapter" and (self.break_it, self.pusher) != ("none", "cylinder"):
+            raise ConfigError(f"the {self.variant} scene is the welded T with a cylinder pusher "
+                              "(break modes and pusher shapes are the chapter's)")
+
+
+VARIANTS: tuple[str, ...] = ("chapter", "gym-pusht")
 
 
 def scene_xml(spec: SceneSpec) -> str:
     """The MJCF document for `spec`, assembled region by region."""
-    return SCENE_TEMPLATE.format(
+    regions = dict(
+        option='integrator="implicitfast"',
+        camera=CAMERA_MJCF,
         ground=GROUND_MJCF,
         target=TARGET_MJCF,
         tee=_TEE_REGIONS[spec.break_it],
@@ -130,6 +148,11 @@ def scene_xml(spec: SceneSpec) -> str:
         actuator=ACTUATOR_MJCF,
         sensor=SENSOR_MJCF,
     )
+    if spec.variant == "gym-pusht":
+        from mjx_pusht.model import gym_pusht
+
+        regions.update(gym_pusht.regions())
+    return SCENE_TEMPLATE.format(**regions)
 
 
 def compile_xml(xml: str) -> mujoco.MjModel:
@@ -143,5 +166,5 @@ def build_model(spec: SceneSpec, *, validate: bool = True) -> mujoco.MjModel:
 
     model = compile_xml(scene_xml(spec))
     if validate:
-        check_tree(model, spec.break_it)
+        check_tree(model, spec.break_it, spec.variant)
     return model

@@ -34,6 +34,9 @@ class Episode:
     max_steps: int = 300
     terminate: bool = True
     success: float = SUCCESS_COVERAGE
+    # A start that is already covered: over at reset (this project's rule: nothing left to do), or,
+    # as gym-pusht does, run until its first step scores it (reward 1, terminated).
+    end_covered_start: bool = True
 
     def __post_init__(self) -> None:
         if self.frame_skip < 1:
@@ -69,7 +72,7 @@ def begin(layout, qpos0, key, controller, episode: Episode, xp, coverage0=None):
     return {
         "inv": acc,
         "ep": episode_init(coverage(tee) if coverage0 is None else xp.astype(coverage0, tee.dtype), episode.success,
-                           episode.terminate, xp),
+                           episode.terminate and episode.end_covered_start, xp),
         "ctrl": controller.init(key),
         "final": tee,
         "pusher_final": layout.pusher_xy(qpos0),

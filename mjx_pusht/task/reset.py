@@ -8,6 +8,9 @@ so seed s starts the same in a batch of a million as alone, on every backend:
 - `task`: gym-pusht's random start. The tee anywhere in the walled workspace at any yaw, clear
   of the walls (x, y, yaw drawn in that order); then up to `PUSHER_TRIES` pusher positions
   (x, y pairs) anywhere in the workspace, the first one clear of the tee taken.
+- `gym-pusht`: gym-pusht's own reset, for the gym-pusht scene: its five draws (agent x, y and
+  block x, y as integer pixels, then the angle) from the same generator, placed as it places
+  them (model/gym_pusht.py), so a seed starts where gym-pusht's `reset(seed=seed)` does.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ SEED_MAX = 2**63 - 1
 TEE_X_RANGE = (-0.03, 0.03)
 TEE_Y_RANGE = (0.02, 0.06)
 TEE_YAW_RANGE = (-0.2, 0.2)
-RESETS = ("chapter", "task")
+RESETS = ("chapter", "task", "gym-pusht")
 
 # task: the walls' inner faces are at +-0.39 m. A tee centre within TASK_TEE_HALF keeps every point
 # of the T (reach 0.106 m) 1 cm clear of them; a pusher centre within TASK_PUSHER_HALF keeps the
@@ -65,6 +68,8 @@ def start_state(seed: int, reset: str = "chapter") -> tuple[float, ...]:
         return (*start_pose(seed), 0.0, PUSHER_START_Y)
     if reset == "task":
         return task_start(seed)
+    if reset == "gym-pusht":
+        return tuple(float(v) for v in gym_pusht_starts([seed])[0])
     raise ConfigError(f"unknown reset {reset!r}; choose from {', '.join(RESETS)}")
 
 
@@ -81,6 +86,8 @@ def start_poses(seeds: Sequence[int] | np.ndarray, *, reset: str = "chapter") ->
     if reset not in RESETS:
         raise ConfigError(f"unknown reset {reset!r}; choose from {', '.join(RESETS)}")
     seeds = np.asarray(seeds, dtype=np.int64).reshape(-1)
+    if reset == "gym-pusht":
+        return gym_pusht_starts(seeds)
     out = np.empty((len(seeds), 3 if reset == "chapter" else 5))
     for lo in range(0, len(seeds), _BLOCK):
         out[lo : lo + _BLOCK] = _draw(seeds[lo : lo + _BLOCK], reset)
@@ -106,3 +113,14 @@ def _draw(seeds: np.ndarray, reset: str) -> np.ndarray:
             break
         st = st.subset(~clear)
     return np.concatenate([tee, pusher], axis=-1)
+
+
+def gym_pusht_starts(seeds) -> np.ndarray:
+    """(N, 5) starts of gym-pusht's reset, one generator per seed (about 20 us a seed: a drop-in's
+    resets are few; the integer draws' bounded sampling is not in pcg64.Streams)."""
+    from mjx_pusht.model.gym_pusht import legacy_state_to_world, reset_state
+
+    seeds = np.asarray(seeds, np.int64).reshape(-1)
+    if not len(seeds):
+        return np.empty((0, 5))
+    return legacy_state_to_world(np.stack([reset_state(int(s)) for s in seeds]))

@@ -14,6 +14,8 @@ Conventions (metres, radians, world frame, z up, the target T at the origin with
 - action `position` = a target (x, y) for the pusher, tracked by the velocity command
   `POSITION_GAIN * (target - pusher)`, clipped to the ctrlrange (gym-pusht's convention
   of commanding positions, here on velocity servos);
+- action `target` = a target (x, y) for the pusher, in metres, handed to the gym-pusht
+  scene's position servos as it is: gym-pusht's own PD law (model/gym_pusht.py);
 - reward = coverage of the target T by the block T, in [0, 1]; an episode terminates
   at coverage >= `SUCCESS_COVERAGE` and is truncated after `max_steps` control steps.
 """
@@ -41,7 +43,7 @@ TARGET_POSE = (0.0, 0.0, 0.0)
 SUCCESS_COVERAGE = 0.95
 CTRL_LIMIT = 1.0  # the servos' ctrlrange, m/s (scene.ACTUATOR_MJCF)
 POSITION_GAIN = 10.0  # 1/s: a position action closes 63% of its error in one 0.1 s control step
-ACTION_TYPES = ("velocity", "position")
+ACTION_TYPES = ("velocity", "position", "target")  # target: the gym-pusht scene only (its servos take positions)
 OBS_TYPES = ("state", "keypoints")
 STATE_DIM = 5
 KEYPOINTS_DIM = 16
@@ -116,6 +118,9 @@ def observe(pusher_xy, tee_pose) -> dict:
 def to_ctrl(action, pusher_xy, action_type: str):
     """Servo ctrl (..., 2) from an action: velocity as given, or a position target tracked proportionally."""
     xp = array_namespace(action)
+    if action_type == "target":
+        # the servos track the target themselves; a non-finite target holds the pusher where it is
+        return xp.where(xp.isfinite(action), action, pusher_xy)
     if action_type == "velocity":
         u = action
     elif action_type == "position":

@@ -1,0 +1,251 @@
+"""`mjx_pusht/PushT-gym-pusht-v0`: gym-pusht's interface, point for point, on this project's physics.
+
+    env = gym.make("mjx_pusht/PushT-gym-pusht-v0", obs_type="pixels_agent_pos")   # was "gym_pusht/PushT-v0"
+    envs = gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", num_envs=16384)          # the batch, on the GPU if any
+
+The same kwargs (obs_type, render_mode, observation_/visualization_width/height), spaces,
+units (pixels of gym-pusht's 512 x 512 frame, y down; angles as pymunk's), action (an absolute
+target in pixels, tracked by gym-pusht's PD law, kp 100 and kv 20 at 100 Hz, 10 Hz control),
+reward clip(coverage / 0.95, 0, 1), success coverage > 0.95, info keys, `reset_to_state` (with
+its legacy placement quirk), registration with max_episode_steps=300 (gymnasium's TimeLimit, so
+the kwarg and `_max_episode_steps` behave as they do for gym-pusht), and render_fps 10.
+
+Underneath it is the `gym-pusht` scene variant (model/gym_pusht.py) on the one functional env:
+this file only converts units at the boundary (`gym_view`). A single env is MuJoCo C; the vector
+env is `gym.PushTVectorEnv` (the batch, device autoreset, the full vector API), handing out
+NumPy by default, as a gym-pusht loop expects (`array_type="torch"` or `"jax"` to stay on the GPU).
+What differs from pymunk's physics is in the README ("Coming from gym-pusht / LeRobot").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+
+from mjx_pusht.envs import gym as base
+from mjx_pusht.envs.gym import (
+    PushTVectorEnv,
+    _check_options,
+    _check_seed,
+    _Pictures,
+    _warn_broken,
+)
+from mjx_pusht.errors import ConfigError
+from mjx_pusht.model import gym_pusht as frame
+from mjx_pusht.task.rules import SUCCESS_COVERAGE
+
+ENV_ID = "mjx_pusht/PushT-gym-pusht-v0"
+OBS_TYPES = ("state", "environment_state_agent_pos", "pixels", "pixels_agent_pos")
+NEVER = 2**31 - 1  # a single env's own step limit: gymnasium's TimeLimit ends its episodes, as gym-pusht's
+CONTACT_PX = 1.0  # a gap this small counts as touching (n_contacts)
+
+
+def _check_kwargs(obs_type, width, height, render_mode, block_cog, damping) -> None:
+    if obs_type not in OBS_TYPES:
+        raise ConfigError(f"unknown obs_type {obs_type!r}; choose from {', '.join(OBS_TYPES)}")
+    if width != height:
+        raise ConfigError(f"images are square here: observation_width {width} != observation_height {height}")
+    if render_mode not in (None, "rgb_array"):
+        raise ConfigError(f"render_mode must be 'rgb_array' (or None), got {render_mode!r}")
+    if block_cog is not None or damping is not None:
+        raise ConfigError("block_cog and damping are pymunk settings: this physics is MuJoCo's "
+                          "(see the README, 'Coming from gym-pusht / LeRobot')")
+
+
+def gym_pusht_spaces(obs_type: str, width: int = 96, height: int = 96, dtype=np.float64):
+    """gym-pusht 0.1.8's observation and action spaces, as it builds them."""
+    if obs_type == "state":
+        obs = spaces.Box(low=np.array([0, 0, 0, 0, 0]), high=np.array([512, 512, 512, 512, 2 * np.pi]), dtype=dtype)
+    elif obs_type == "environment_state_agent_pos":
+        obs = spaces.Dict({"environment_state": spaces.Box(low=np.zeros(16), high=np.full((16,), 512), dtype=dtype),
+                           "agent_pos": spaces.Box(low=np.array([0, 0]), high=np.array([512, 512]), dtype=dtype)})
+    else:
+        img = spaces.Box(low=0, high=255, shape=(height, width, 3), dtype=np.uint8)
+        obs = img if obs_type == "pixels" else spaces.Dict(
+            {"pixels": img, "agent_pos": spaces.Box(low=np.array([0, 0]), high=np.array([512, 512]), dtype=dtype)})
+    return obs, spaces.Box(low=0, high=512, shape=(2,), dtype=np.float32)
+
+
+def gym_view(obs_type: str, obs: dict, coverage, terminated, xp, dtype):
+    """The functional env's world-frame observation (batched or not) as gym-pusht's (obs, info), in pixels."""
+    s = obs["state"]
+    agent = frame.to_px(s[..., 0:2], xp)
+    origin, angle = frame.pose_to_px(s[..., 2:5], xp)
+    if obs_type == "state":
+        out = xp.concatenate([agent, origin, angle[..., None]], axis=-1).astype(dtype)
+    elif obs_type == "environment_state_agent_pos":
+        out = {"environment_state": frame.keypoints_px(origin, angle, xp).astype(dtype), "agent_pos": agent.astype(dtype)}
+    elif obs_type == "pixels":
+        out = obs["pixels"]
+    else:
+        out = {"pixels": obs["pixels"], "agent_pos": agent.astype(dtype)}
+    info = {
+        "pos_agent": agent,
+        "vel_agent": frame.velocity_to_px(obs["pusher_vel"], xp),
+        "block_pose": xp.concatenate([origin, angle[..., None]], axis=-1),
+        "goal_pose": xp.broadcast_to(xp.asarray(frame.GOAL_PX, dtype=agent.dtype), origin.shape[:-1] + (3,)),
+        "n_contacts": n_contacts(agent, origin, angle, xp),
+        "is_success": terminated,
+        "coverage": coverage,
+    }
+    return out, info
+
+
+def n_contacts(agent, origin, angle, xp):
+    """gym-pusht's n_contacts, which its formula makes 1 when anything touched in the step and 0 otherwise
+    (contact points / 1000, rounded up): here 1 when the pusher touches the T or a corner of the T
+    touches a wall (within CONTACT_PX), from the poses."""
+    from mjx_pusht.task.rules import distance_to_tee
+
+    pose = frame.pose_to_world(origin, angle, xp)
+    pusher = distance_to_tee(frame.to_world(agent, xp), pose) <= (frame.AGENT_RADIUS_PX + CONTACT_PX) * frame.PX
+    k = frame.keypoints_px(origin, angle, xp)
+    lo, hi = frame.WALL_INNER_PX
+    wall = xp.any((k <= lo + CONTACT_PX) | (k >= hi - CONTACT_PX), axis=-1)
+    return (pusher | wall).astype(xp.int64 if xp is np else xp.int32)
+
+
+def reward_of(coverage, xp):
+    return xp.clip(coverage / SUCCESS_COVERAGE, 0.0, 1.0)
+
+
+def _check_state(state, rows: int) -> np.ndarray:
+    """reset_to_state in gym-pusht's convention: [agent x, y, block x, y, angle], pixels and radians."""
+    a = np.asarray(state, np.float64)
+    if a.shape not in ((5,), (rows, 5)):
+        raise ConfigError(f"reset_to_state is [agent x, y, block x, y, block angle]: shape (5,) or ({rows}, 5), "
+                          f"got {a.shape}")
+    if not np.isfinite(a).all():
+        raise ConfigError("reset_to_state must be finite numbers")
+    return frame.legacy_state_to_world(np.broadcast_to(a, (rows, 5)))
+
+
+def _marker(img: np.ndarray, action, size: int) -> np.ndarray:
+    """gym-pusht's red cross at the last action (cv2.drawMarker, MARKER_CROSS, its sizes)."""
+    half, t = int(8 / 96 * size) // 2, max(1, int(1 / 96 * size))
+    x, y = (np.asarray(action, np.float64) / 512 * size).astype(int)
+    img = img.copy()
+    lo = -(t // 2)
+    img[max(0, y + lo):max(0, y + lo + t), max(0, x - half):max(0, x + half + 1)] = (255, 0, 0)
+    img[max(0, y - half):max(0, y + half + 1), max(0, x + lo):max(0, x + lo + t)] = (255, 0, 0)
+    return img
+
+
+class GymPushTEnv(_Pictures, base.gym.Env):
+    """One episode at a time on MuJoCo C, with gym-pusht's interface. Resets draw from the env's generator
+    exactly as gym-pusht's do, so `reset(seed=s)` and every later reset start where gym-pusht's start."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(self, obs_type: str = "state", render_mode: str | None = "rgb_array", block_cog=None, damping=None,
+                 observation_width: int = 96, observation_height: int = 96, visualization_width: int = 680,
+                 visualization_height: int = 680):
+        _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping)
+        if visualization_width != visualization_height:
+            raise ConfigError(f"renders are square here: visualization_width {visualization_width} != "
+                              f"visualization_height {visualization_height}")
+        self.obs_type, self.render_mode = obs_type, render_mode
+        self.observation_width, self.observation_height = observation_width, observation_height
+        self.visualization_width, self.visualization_height = visualization_width, visualization_height
+        self.render_size = visualization_width
+        self.observation_space, self.action_space = gym_pusht_spaces(obs_type, observation_width, observation_height)
+        self.k_p, self.k_v, self.control_hz, self.dt = frame.KP, frame.KV, 10, 0.01  # as gym-pusht names them
+        self.success_threshold = SUCCESS_COVERAGE
+        self._env = base._functional("cpu", obs_type, "target", observation_width, "gym-pusht", NEVER, 10,
+                                     variant="gym-pusht")
+        self._state, self._last_action = None, None
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        _check_seed(seed)
+        options = _check_options(options or {}, ("reset_to_state",))
+        super().reset(seed=seed)
+        if options.get("reset_to_state") is not None:
+            start = _check_state(options["reset_to_state"], 1)
+        else:  # gym-pusht's draws, in its order, from this env's generator
+            r = self.np_random
+            start = frame.legacy_state_to_world([r.integers(50, 450), r.integers(50, 450), r.integers(100, 400),
+                                                 r.integers(100, 400), r.uniform(-np.pi, np.pi)])
+        self._state = self._env.reset_to(start, [0 if seed is None else seed])
+        self._last_action = None
+        obs, info = self._view()
+        info["is_success"] = False
+        return obs, info
+
+    def step(self, action):
+        if self._state is None:
+            raise RuntimeError("call reset() before step()")
+        a = np.asarray(action, np.float64)
+        if a.shape != (2,):
+            raise ConfigError(f"an action is one (x, y) target in pixels, shape (2,); got shape {a.shape}")
+        self._last_action = a
+        self._state = self._env.step(self._state, frame.to_world(a)[None])
+        obs, info = self._view()
+        return obs, float(info["reward"]), bool(info["is_success"]), False, info
+
+    def _view(self):
+        s = self._state
+        m = s.metrics
+        obs, info = gym_view(self.obs_type, {k: v[0] for k, v in s.obs.items()}, float(m["coverage"][0]),
+                             bool(s.terminated[0]), np, np.float64)
+        info = {**info, "n_contacts": int(info["n_contacts"]), "reward": float(reward_of(m["coverage"][0], np)),
+                "finite": bool(m["finite"][0]), "contained": bool(m["contained"][0])}
+        _warn_broken(info)
+        return obs, info
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        img = self._draw(self._state.data.qpos[-1])[0]
+        return img if self._last_action is None else _marker(img, self._last_action, self.render_size)
+
+    def close(self):
+        self._close_renderers()
+
+
+class GymPushTVectorEnv(PushTVectorEnv):
+    """The batch (`gym.PushTVectorEnv`: any backend, device autoreset, the vector API) with gym-pusht's
+    kwargs, spaces, units and infos; NumPy out by default, as a gym-pusht loop expects."""
+
+    def __init__(self, num_envs: int = 1, obs_type: str = "state", render_mode: str | None = "rgb_array",
+                 block_cog=None, damping=None, observation_width: int = 96, observation_height: int = 96,
+                 visualization_width: int = 680, visualization_height: int = 680, max_episode_steps: int = 300,
+                 backend: str = "auto", autoreset_mode="next_step", array_type: str | None = "numpy",
+                 threads: int | None = None, depth: int = 8):
+        _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping)
+        self.observation_width, self.observation_height = observation_width, observation_height
+        self.visualization_width, self.visualization_height = visualization_width, visualization_height
+        super().__init__(num_envs, backend, obs_type, "target", render_mode, observation_width, visualization_width,
+                         "gym-pusht", max_episode_steps, 10, autoreset_mode, threads, array_type, depth,
+                         variant="gym-pusht")
+
+    @staticmethod
+    def _check_args(obs_type, action_type, observation_size):
+        pass  # checked by _check_kwargs, in gym-pusht's terms
+
+    @staticmethod
+    def _single_spaces(obs_type, action_type, size, dtype):
+        return gym_pusht_spaces(obs_type, size, size, dtype)
+
+    @staticmethod
+    def _starts_in(starts, rows):
+        return _check_state(starts, rows)
+
+    def _actions_in(self, actions):
+        xp = np if isinstance(actions, np.ndarray) or not hasattr(actions, "__array_namespace__") else \
+            actions.__array_namespace__()
+        a = xp.asarray(actions, dtype=np.float64 if self.backend == "cpu" else self._dtype)
+        return frame.to_world(a, xp)
+
+    def _view(self, flat: dict, xp):
+        cov = flat["coverage"]
+        obs, info = gym_view(self.obs_type, flat["obs"], cov, flat["terminated"], xp, self._dtype)
+        info |= {"steps": flat["step"], "weld_gap_max_dev": flat["gap_max_dev"], "finite": flat["finite"],
+                 "contained": flat["contained"]}
+        reward = reward_of(flat["reward"], xp)
+        if xp is np:  # the host's convention, as SyncVectorEnv over gym-pusht's envs gives them
+            info = {k: np.asarray(v, np.float64 if np.asarray(v).dtype.kind == "f" else
+                                  (bool if np.asarray(v).dtype == bool else np.int64)) for k, v in info.items()}
+            reward = np.asarray(reward, np.float64)
+        every = xp.ones(self.num_envs, dtype=bool)
+        return (obs, reward, flat["terminated"], flat["truncated"], info | {f"_{k}": every for k in info})
+
