@@ -20,6 +20,14 @@ if _sys.platform.startswith("linux") and not _os.environ.get("DISPLAY") and "MUJ
         if _cu.find_library(_lib):
             _os.environ["MUJOCO_GL"] = _gl
             break
+# A MUJOCO_GL whose library is missing breaks `import mujoco` itself, so every command would die at
+# import, `tree` and `sweep` included, that never draw. Only pixels need GL: the setting is set aside
+# here and the renderer (envs/pixels.py) refuses in one line, naming it, when pixels are asked for.
+elif _os.environ.get("MUJOCO_GL") in ("egl", "osmesa") and _sys.platform.startswith("linux"):
+    import ctypes.util as _cu
+
+    if not _cu.find_library({"egl": "EGL", "osmesa": "OSMesa"}[_os.environ["MUJOCO_GL"]]):
+        _os.environ["MJX_PUSHT_GL_MISSING"] = _os.environ.pop("MUJOCO_GL")
 
 # MJX-Warp allocates scratch through Warp, outside XLA's pool: with JAX holding its default 75% of the
 # GPU up front, a 65,536-world environment step failed to allocate 2.3 GB (H100, benchmarks/env_step.py).

@@ -61,3 +61,45 @@ def test_vector_env_inputs_are_checked_up_front():
         env.reset(options={"reset_to": [0, 0, 0, 0, 0]})
     with pytest.raises(ValueError, match="finite"):
         env.reset(options={"reset_to_state": [0, 0, np.inf, 0, 0]})
+
+
+def _without_osmesa():
+    import ctypes.util
+
+    if ctypes.util.find_library("OSMesa"):
+        pytest.skip("OSMesa is installed here: MUJOCO_GL=osmesa is not a missing GL on this machine")
+
+
+def test_a_mujoco_gl_whose_library_is_missing_breaks_only_pixels(tmp_path):
+    # finding 6: MUJOCO_GL=osmesa without OSMesa broke `import mujoco`, so every command died at import
+    _without_osmesa()
+    import os
+    import subprocess
+    import sys
+
+    from helpers import ENV as RUN_ENV
+
+    env = {**RUN_ENV, "MUJOCO_GL": "osmesa"}
+    r = cli("tree", env=env)
+    assert r.returncode == 0 and "kinematic tree" in r.stdout, r.stderr[-500:]
+    code = ("import gymnasium as gym, mjx_pusht\n"
+            "from mjx_pusht.envs.pixels import PixelsError\n"
+            "try:\n    gym.make('mjx_pusht/PushT-v0', obs_type='pixels')\n"
+            "except PixelsError as e:\n    print('REFUSED', e)\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=os.getcwd())
+    assert "REFUSED MUJOCO_GL=osmesa but OSMesa" in p.stdout, p.stderr[-500:]
+
+
+def test_a_controller_that_calls_exit_is_one_line_not_a_silent_exit_code(tmp_path):
+    # finding 7: a controller raising SystemExit(3) ended the run with exit 3 and no message
+    import os
+
+    from helpers import ENV as RUN_ENV
+
+    (tmp_path / "quits.py").write_text("def policy(obs, t):\n    raise SystemExit(3)\n")
+    env = {**RUN_ENV, "PYTHONPATH": f"{tmp_path}{os.pathsep}{RUN_ENV.get('PYTHONPATH', '')}"}
+    r = cli("eval", "--backend", "cpu", "--controller", "quits:policy", "--seeds", "2", "--no-rerun",
+            "--out", str(tmp_path / "out"), env=env)
+    assert r.returncode == 1, (r.returncode, r.stderr[-500:])
+    errors = [line for line in r.stderr.splitlines() if "error" in line.lower()]  # beside the progress bar
+    assert len(errors) == 1 and "called exit(3)" in errors[0] and "Traceback" not in r.stderr

@@ -78,6 +78,12 @@ class CpuRenderer:
         import mujoco
 
         self.size = _check_size(size)
+        missing = os.environ.get("MJX_PUSHT_GL_MISSING")
+        if missing:  # set aside at import (mjx_pusht/__init__.py): its library is not installed
+            lib = {"egl": "EGL (apt-get install libegl1 libgl1-mesa-dri)",
+                   "osmesa": "OSMesa (apt-get install libosmesa6)"}[missing]
+            raise PixelsError(f"MUJOCO_GL={missing} but {lib} is not installed: install it, or set MUJOCO_GL "
+                              "to a GL this machine has (pixels only; everything else runs without GL)")
         self.view = view_model(model, self.size)
         self.data = mujoco.MjData(self.view)
         try:

@@ -288,6 +288,9 @@ class FromFunction(Controller):
             action = self.fn(obs, t)
         except ControllerError:
             raise
+        except SystemExit as e:  # exit() inside a policy would end the run with its code and no word of why
+            raise ControllerError(f"controller {self.name} called exit({e.code}): a controller returns actions; "
+                                  "the run stopped here") from None
         except Exception as e:  # noqa: BLE001 - a user's bug, said in one line with what it was
             raise ControllerError(f"controller {self.name} raised {type(e).__name__}: {e}".splitlines()[0]) from None
         shape = getattr(action, "shape", None)
@@ -312,7 +315,7 @@ def load(spec: str, *, action_type: str | None = None, schedule: Schedule = Sche
     module_name, _, attr = spec.partition(":")
     try:
         module = importlib.import_module(module_name)
-    except Exception as e:  # noqa: BLE001 - whatever the user's module raises, say it in one line
+    except (Exception, SystemExit) as e:  # noqa: BLE001 - whatever the user's module raises (exit too), in one line
         raise ControllerError(f"controller {spec!r}: cannot import {module_name!r} ({type(e).__name__}: {e})") from None
     fn = getattr(module, attr, None)
     if not callable(fn):
