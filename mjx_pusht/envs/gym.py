@@ -329,7 +329,7 @@ class PushTVectorEnv(_Pictures, VectorEnv):
 
     _check_args = staticmethod(_check)
     _single_spaces = staticmethod(single_spaces)
-    _starts_in = staticmethod(lambda starts, rows: _check_starts(starts, rows))  # reset_to_state, in the env's units
+    _starts_in = staticmethod(_check_starts)  # reset_to_state, in the env's units
 
     def _actions_in(self, actions):
         """Actions in the functional env's units (this env's are those already)."""

@@ -191,23 +191,19 @@ ACTUATOR_MJCF = """
     <position name="pusher_px" joint="pusher_x" kp="{kp}" kv="{kv}"/>
     <position name="pusher_py" joint="pusher_y" kp="{kp}" kv="{kv}"/>"""
 
-TARGET_MJCF = """
-    <body name="target" pos="0 0 0.0005">
-      <site name="target_site" pos="0 0 0" size="0.005" rgba="0 0 0 0"/>
-      <geom name="target_bar" type="box" size="0.0605 0.0155 0.0005" pos="0 0.00 0" rgba="{goal}" contype="0" conaffinity="0"/>
-      <geom name="target_stem" type="box" size="0.0155 0.0455 0.0005" pos="0 -0.06 0" rgba="{goal}" contype="0" conaffinity="0"/>
-    </body>"""
 
 EXTRA_GEOMS = 3  # the T's two outlines and the agent's lighter face: drawn, never collided
 
 
 def regions() -> dict[str, str]:
     """The variant's MJCF regions, by the names scene.SCENE_TEMPLATE fills."""
+    from mjx_pusht.model.scene import target_mjcf
+
     return {
         "option": 'integrator="Euler"',
         "camera": camera_mjcf(),
         "ground": ground_mjcf(),
-        "target": TARGET_MJCF.format(goal=_rgba("goal")),
+        "target": target_mjcf(_rgba("goal"), grow=PYGAME_OFFSET_PX * PX),
         "tee": TEE_MJCF.format(fill=_rgba("tee"), edge=_rgba("tee_edge")),
         "pusher": PUSHER_MJCF.format(edge=_rgba("agent_edge"), fill=_rgba("agent"), mass=PUSHER_MASS),
         "actuator": ACTUATOR_MJCF.format(kp=KP * PUSHER_MASS, kv=KV * PUSHER_MASS),

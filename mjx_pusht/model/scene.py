@@ -75,12 +75,21 @@ ACTUATOR_MJCF = """
     <velocity name="pusher_vx" joint="pusher_x" kv="20" ctrlrange="-1 1" forcerange="-30 30"/>
     <velocity name="pusher_vy" joint="pusher_y" kv="20" ctrlrange="-1 1" forcerange="-30 30"/>"""
 
-TARGET_MJCF = """
+# The target T, drawn only. `grow` widens the drawing (metres a side: the gym-pusht variant's pygame fill).
+TARGET_TEMPLATE = """
     <body name="target" pos="0 0 0.0005">
       <site name="target_site" pos="0 0 0" size="0.005" rgba="0 0 0 0"/>
-      <geom name="target_bar" type="box" size="0.06 0.015 0.0005" pos="0 0.00 0" rgba="0.35 0.8 0.4 0.5" contype="0" conaffinity="0"/>
-      <geom name="target_stem" type="box" size="0.015 0.045 0.0005" pos="0 -0.06 0" rgba="0.35 0.8 0.4 0.5" contype="0" conaffinity="0"/>
+      <geom name="target_bar" type="box" size="{bx} {by} 0.0005" pos="0 0.00 0" rgba="{rgba}" contype="0" conaffinity="0"/>
+      <geom name="target_stem" type="box" size="{sx} {sy} 0.0005" pos="0 -0.06 0" rgba="{rgba}" contype="0" conaffinity="0"/>
     </body>"""
+
+
+def target_mjcf(rgba: str, grow: float = 0.0) -> str:
+    return TARGET_TEMPLATE.format(bx=round(0.06 + grow, 6), by=round(0.015 + grow, 6), sx=round(0.015 + grow, 6),
+                                  sy=round(0.045 + grow, 6), rgba=rgba)
+
+
+TARGET_MJCF = target_mjcf("0.35 0.8 0.4 0.5")
 
 # Instrumentation, not physics: the two tee geoms' world positions as sensors, so
 # every backend (including mujoco.rollout, which returns only state and
