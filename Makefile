@@ -12,7 +12,7 @@ export MJX_PUSHT_JAX_CACHE ?= $(CURDIR)/.jax_cache
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[warp,gym,video,test]'
+	$(BIN)/python -m pip install -q -e '.[warp,gym,video,train,test]'
 	touch $(STAMP)
 
 run: $(STAMP)

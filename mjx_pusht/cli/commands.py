@@ -381,7 +381,16 @@ def cmd_eval(args) -> int:
     return 0
 
 
-COMMANDS = {"scene": cmd_scene, "tree": cmd_tree, "sweep": cmd_sweep, "eval": cmd_eval, "compare": cmd_compare}
+def cmd_train(args) -> int:
+    try:
+        from mjx_pusht.train.run import cmd_train as train
+    except ImportError as e:
+        raise UsageError(f"train needs the training extra ({e.name} is missing): pip install 'mjx-pusht[train]'") from None
+    return train(args)
+
+
+COMMANDS = {"scene": cmd_scene, "tree": cmd_tree, "sweep": cmd_sweep, "eval": cmd_eval, "compare": cmd_compare,
+            "train": cmd_train}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -60,6 +60,17 @@ def _fraction(text: str) -> float:
     return v
 
 
+def _widths(text: str) -> tuple[int, ...]:
+    """An argparse type: comma-separated positive layer widths."""
+    try:
+        widths = tuple(int(w) for w in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a list of integers like 256,256") from None
+    if not widths or min(widths) < 1:
+        raise argparse.ArgumentTypeError(f"layer widths must be positive, got {text!r}")
+    return widths
+
+
 def _seed(text: str) -> int:
     v = _nonneg(text)
     from mjx_pusht.task.reset import SEED_MAX
@@ -123,7 +134,8 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser("eval", help="a controller on many start states: per_episode.parquet, success rate + interval")
     _batch_args(e, "eval", "episodes", seeds="512")
     e.add_argument("--controller", default="expert",
-                   help="zero, nudge, random, expert (default), or your own as package.module:function")
+                   help="zero, nudge, random, expert (default), a trained policy as policy:PATH, or your own "
+                        "as package.module:function")
     e.add_argument("--action", choices=("velocity", "position"), default=None,
                    help="what your controller's actions mean (default velocity; built-ins command velocities)")
     e.add_argument("--reset", choices=("task", "chapter"), default="task", help="start distribution (default task)")
@@ -133,6 +145,31 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the first --video-episodes episodes as a grid of tiles, coverage on each (rendered on the CPU)")
     e.add_argument("--video-episodes", type=_positive, default=16, help="tiles in --video (default 16)")
     e.add_argument("--video-size", type=_int_at_least(32), default=128, help="pixels per tile side (default 128)")
+
+    t = sub.add_parser("train", help="train a policy by DAgger from the expert: policy.msgpack, curve, summary")
+    t.add_argument("--algo", choices=("dagger",), default="dagger", help="dagger (the only one yet; PPO: issue 22)")
+    t.add_argument("--obs", choices=("state", "keypoints"), default="state", help="what the policy sees (default state)")
+    t.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
+    t.add_argument("--out", type=Path, default=Path("outputs/train"))
+    t.add_argument("--envs", type=_positive, default=4096, help="episodes rolled out per iteration (default 4096)")
+    t.add_argument("--iterations", type=_positive, default=10, help="DAgger iterations (default 10)")
+    t.add_argument("--fit-steps", type=_positive, default=2000, help="gradient steps per iteration (default 2000)")
+    t.add_argument("--batch", type=_positive, default=4096, help="samples per gradient step (default 4096)")
+    t.add_argument("--hidden", type=_widths, default=(256, 256, 256), help="hidden widths (default 256,256,256)")
+    t.add_argument("--lr", type=_positive_float, default=1e-3, help="Adam's learning rate (default 1e-3)")
+    t.add_argument("--beta-decay", type=_fraction, default=0.7,
+                   help="the expert's share of control steps: 1, then times this each iteration (default 0.7)")
+    t.add_argument("--max-samples", type=_positive, default=8_000_000, help="dataset ring size (default 8,000,000)")
+    t.add_argument("--reset", choices=("task", "chapter"), default="task",
+                   help="start distribution trained and judged on (default task)")
+    t.add_argument("--eval-envs", type=_positive, default=4096,
+                   help="held-out task seeds judged after every iteration (default 4096)")
+    t.add_argument("--minutes", type=_positive_float, default=None, help="stop after the iteration that passes this")
+    t.add_argument("--seed", type=_nonneg, default=0, help="initialisation and sampling seed (default 0)")
+    t.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
+    t.add_argument("--record", type=_nonneg, default=4, help="held-out episodes in eval/eval.rrd (default 4)")
+    t.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip train.rrd and eval/eval.rrd")
+    t.add_argument("--no-progress", dest="progress", action="store_false")
 
     c = sub.add_parser("compare", help="CPU vs MJX fidelity report: compare.json, compare.md, compare.png")
     c.add_argument("--seeds", default="64", help="N, A:B or a,b,c (default 64)")

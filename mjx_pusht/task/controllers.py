@@ -302,13 +302,23 @@ class FromFunction(Controller):
 
 
 def load(spec: str, *, action_type: str | None = None, schedule: Schedule = Schedule(), frame_skip: int = 10) -> Controller:
-    """A built-in controller by name, or a user's function as `package.module:function`."""
+    """A built-in controller by name, a trained policy as `policy:PATH`, or a user's function as
+    `package.module:function`."""
     if spec in BUILTIN:
         if action_type not in (None, "velocity"):
             raise ControllerError(f"the built-in controller {spec!r} commands velocities; --action position is for "
                                   "your own controllers")
         return {"zero": lambda: Zero(), "nudge": lambda: Nudge(schedule=schedule, frame_skip=frame_skip),
                 "random": lambda: Random(), "expert": lambda: Expert()}[spec]()
+    if spec.startswith("policy:"):  # a checkpoint written by `mjx-pusht train`
+        if action_type not in (None, "velocity"):
+            raise ControllerError("a trained policy commands velocities; --action position is for your own controllers")
+        try:
+            from mjx_pusht.train.policy import load_policy
+        except ImportError as e:
+            raise ControllerError(f"policy:PATH needs the training extra ({e.name} is missing): "
+                                  "pip install 'mjx-pusht[train]'") from None
+        return load_policy(spec)
     if ":" not in spec:
         raise ControllerError(f"unknown controller {spec!r}: choose from {', '.join(BUILTIN)}, or give your own as "
                               "package.module:function")

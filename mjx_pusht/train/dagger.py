@@ -1,0 +1,264 @@
+"""DAgger: distil the scripted expert into a network that acts from observations alone.
+
+Each iteration the student drives a batch of fresh task episodes (mixed with the expert, with
+probability `beta` per control step, which halves every iteration from 1: the first iteration
+is the expert's own demonstrations), the expert labels every state visited, the labels join
+the dataset (kept on the device, a ring of `max_samples`), and the student is refitted to the
+whole dataset (flax + optax, warm-started). A held-out set of task seeds, never trained on,
+is rolled out by the student alone after every fit: the learning curve.
+
+The rollouts are the environment's own control step (`PushTEnv.advance_one`, the step every
+`eval` runs) inside one jitted scan per iteration on MJX, or the CPU env's batch step on MuJoCo C;
+the expert is the same `Expert.act` in both, in the env's array namespace.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from functools import partial
+
+import numpy as np
+
+from mjx_pusht.errors import ConfigError
+from mjx_pusht.task.controllers import Expert
+from mjx_pusht.train.policy import (
+    ACTIVATIONS,
+    OBS_TYPES,
+    feature_size,
+    features,
+    network,
+)
+
+# Held-out evaluation seeds start here; training seeds count up from 0 and must stay below it.
+HELD_OUT_FIRST = 1_000_000_000
+
+
+@dataclasses.dataclass(frozen=True)
+class DaggerConfig:
+    obs_type: str = "state"
+    envs: int = 4096  # episodes rolled out per iteration
+    iterations: int = 10
+    hidden: tuple[int, ...] = (256, 256, 256)
+    activation: str = "relu"
+    learning_rate: float = 1e-3
+    batch: int = 4096  # samples per gradient step
+    fit_steps: int = 2000  # gradient steps per iteration
+    beta_decay: float = 0.7  # the expert's share of control steps: 1, then times this each iteration
+    max_samples: int = 8_000_000  # the dataset's ring: the oldest student samples go first
+    reset: str = "task"  # the start distribution trained and judged on (reset.RESETS)
+    eval_envs: int = 4096  # held-out episodes after each fit
+    max_steps: int = 300
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.obs_type not in OBS_TYPES:
+            raise ConfigError(f"DAgger trains from {' or '.join(OBS_TYPES)} observations, not {self.obs_type!r} "
+                              "(pixels: not yet)")
+        if self.activation not in ACTIVATIONS:
+            raise ConfigError(f"unknown activation {self.activation!r}; choose from {', '.join(ACTIVATIONS)}")
+        for name in ("envs", "iterations", "batch", "fit_steps", "max_samples", "eval_envs", "max_steps"):
+            if int(getattr(self, name)) < 1:
+                raise ConfigError(f"--{name.replace('_', '-')} must be at least 1, got {getattr(self, name)}")
+        if self.envs * self.iterations >= HELD_OUT_FIRST:
+            raise ConfigError(f"{self.envs} envs x {self.iterations} iterations would reach the held-out seeds "
+                              f"({HELD_OUT_FIRST}+)")
+        from mjx_pusht.task.reset import RESETS
+
+        if self.reset not in RESETS[:2]:
+            raise ConfigError(f"DAgger trains on the task or chapter reset, not {self.reset!r}")
+        if not 0.0 <= self.beta_decay <= 1.0:
+            raise ConfigError(f"--beta-decay must be in [0, 1], got {self.beta_decay}")
+
+    def beta(self, iteration: int) -> float:
+        return self.beta_decay ** iteration
+
+    def train_seeds(self, iteration: int) -> np.ndarray:
+        return np.arange(iteration * self.envs, (iteration + 1) * self.envs, dtype=np.int64)
+
+    def held_out_seeds(self) -> np.ndarray:
+        return HELD_OUT_FIRST + np.arange(self.eval_envs, dtype=np.int64)
+
+
+# -- rollouts: the student (mixed with the expert) drives, the expert labels ---------------------------
+def _choose(xp, expert_action, student_action, take_expert):
+    return xp.where(take_expert[..., None], expert_action, student_action)
+
+
+class Rollouts:
+    """Rolls episodes out on one env with the student, the expert labelling: (features, labels) and outcomes."""
+
+    def __init__(self, env, cfg: DaggerConfig):
+        self.env, self.cfg, self.expert = env, cfg, Expert()
+        self._compiled = {}
+
+    def __call__(self, params, norm, seeds, beta: float, rng: int):
+        """Features and expert labels of every live control step (on the device on MJX), and per-episode
+        success. `norm` is (mean, std) of the features."""
+        if self.env.backend == "cpu":
+            return self._cpu(params, norm, seeds, beta, rng)
+        return self._mjx(params, norm, seeds, beta, rng)
+
+    def _cpu(self, params, norm, seeds, beta, rng):
+        from mjx_pusht.train.policy import apply
+
+        env, cfg = self.env, self.cfg
+        meta = {"in_mean": norm[0], "in_std": norm[1], "activation": cfg.activation}
+        params = _numpy(params)
+        gen = np.random.default_rng([cfg.seed, rng])
+        s = env.reset(seeds)
+        carry = self.expert.init(s.key)
+        last = np.zeros((len(seeds), 2), np.float32)
+        xs, ys = [], []
+        for t in range(cfg.max_steps):
+            live = ~np.asarray(s.carry["ep"]["done"])
+            if not live.any():
+                break
+            x = features(s.obs, cfg.obs_type, last)
+            label, carry = self.expert.act(carry, s.obs, s.step, s.key)
+            action = _choose(np, label, apply(params, meta, x), gen.random(len(seeds)) < beta)
+            last = action.astype(np.float32)
+            xs.append(x[live])
+            ys.append(label[live])
+            s = env.step(s, action)
+        env.check(s)
+        return np.concatenate(xs).astype(np.float32), np.concatenate(ys).astype(np.float32), _outcomes(s)
+
+    def _mjx(self, params, norm, seeds, beta, rng):
+        import jax
+        import jax.numpy as jnp
+
+        env = self.env
+        n = len(seeds)
+        s0 = env.reset(seeds)
+        if n not in self._compiled:
+            self._compiled[n] = jax.jit(jax.vmap(self._episode, in_axes=(None, None, 0, None, 0)))
+        keys = jax.random.split(jax.random.key(self.cfg.seed * 1_000_003 + rng), n)
+        s, x, y, live = self._compiled[n](params, tuple(jnp.asarray(a, jnp.float32) for a in norm), s0,
+                                          jnp.float32(beta), keys)
+        env.check(s)
+        keep = jnp.nonzero(live.reshape(-1))[0]  # only the control steps of running episodes
+        return (x.reshape(-1, x.shape[-1])[keep], y.reshape(-1, 2)[keep], _outcomes(s))
+
+    def _episode(self, params, norm, s, beta, key):
+        """One world's episode (vmapped): a scan over control steps; stacks (T, F), (T, 2), (T,)."""
+        import jax
+        import jax.numpy as jnp
+
+        from mjx_pusht.train.policy import apply
+
+        cfg = self.cfg
+        meta = {"in_mean": norm[0], "in_std": norm[1], "activation": cfg.activation}
+        carry = self.expert.init(s.key)
+
+        def body(c, t):
+            s, carry, last = c
+            live = ~s.carry["ep"]["done"]
+            x = features(s.obs, cfg.obs_type, last).astype(jnp.float32)
+            label, carry = self.expert.act(carry, s.obs, s.step, s.key)
+            student = apply(params, meta, x)
+            take = jax.random.uniform(jax.random.fold_in(key, t)) < beta
+            action = _choose(jnp, label, student.astype(label.dtype), take)
+            s = self.env.advance_one(s, action)
+            return (s, carry, action.astype(jnp.float32)), (x, label.astype(jnp.float32), live)
+
+        last = jnp.zeros((2,), jnp.float32)
+        (s, _, _), (x, y, live) = jax.lax.scan(body, (s, carry, last), jnp.arange(cfg.max_steps))
+        return s, x, y, live
+
+
+def _numpy(tree):
+    import jax
+
+    return jax.tree.map(np.asarray, tree)
+
+
+def _outcomes(s) -> dict:
+    m = s.metrics
+    return {"success": np.asarray(m["success"], bool), "coverage": np.asarray(m["coverage"], float),
+            "finite": np.asarray(m["finite"], bool)}
+
+
+# -- the fit: minibatch regression onto the expert's labels ------------------------------------------
+class Learner:
+    """The student network, its optimiser and the dataset ring, on the default JAX device."""
+
+    def __init__(self, cfg: DaggerConfig):
+        import jax
+        import jax.numpy as jnp
+        import optax
+
+        self.cfg = cfg
+        self.model = network(cfg.hidden, cfg.activation)
+        width = feature_size(cfg.obs_type)
+        self.params = self.model.init(jax.random.key(cfg.seed), jnp.zeros((1, width)))["params"]
+        self.opt = optax.adam(cfg.learning_rate)
+        self.opt_state = self.opt.init(self.params)
+        self.x = jnp.zeros((cfg.max_samples, width), jnp.float32)
+        self.y = jnp.zeros((cfg.max_samples, 2), jnp.float32)
+        self.filled, self.head, self.floor = 0, 0, 0  # samples held; where the next goes; kept below here
+        self.norm = None  # (mean, std) of the features, fixed from the first iteration's data
+        self._fit = jax.jit(partial(_fit, self.model, self.opt, cfg.batch, cfg.fit_steps))
+
+    def add(self, x, y, keep: bool = False) -> None:
+        """Append samples; when the ring is full the oldest student-visited ones go, never those added with
+        `keep` (the expert's own demonstrations, iteration 0): measured, a ring that let them go lost the
+        student what it had learned as the later, stalled episodes filled it (NOTES, change 12)."""
+        import jax.numpy as jnp
+
+        x, y = jnp.asarray(x, jnp.float32), jnp.asarray(y, jnp.float32)
+        if self.norm is None:
+            self.norm = (np.asarray(x.mean(0)), np.asarray(x.std(0)) + 1e-3)
+        room = self.cfg.max_samples - self.floor
+        if keep:
+            room = room // 2  # demonstrations take at most half the ring
+        m = min(len(x), room)
+        x, y = x[-m:], y[-m:]
+        idx = self.floor + (self.head - self.floor + jnp.arange(m)) % (self.cfg.max_samples - self.floor)
+        self.x, self.y = self.x.at[idx].set(x), self.y.at[idx].set(y)
+        self.filled = min(self.filled + m, self.cfg.max_samples)
+        if keep:
+            self.floor = self.head = self.filled
+        else:
+            self.head = self.floor + (self.head - self.floor + m) % (self.cfg.max_samples - self.floor)
+
+    def fit(self, iteration: int) -> float:
+        import jax
+        import jax.numpy as jnp
+
+        norm = tuple(jnp.asarray(a) for a in self.norm)
+        key = jax.random.fold_in(jax.random.key(self.cfg.seed + 1), iteration)
+        self.params, self.opt_state, loss = self._fit(self.params, self.opt_state, self.x, self.y,
+                                                      jnp.int32(self.filled), norm, key)
+        return float(loss)
+
+
+def _fit(model, opt, batch, steps, params, opt_state, x, y, filled, norm, key):
+    import jax
+    import jax.numpy as jnp
+    import optax
+
+    from mjx_pusht.task.rules import CTRL_LIMIT
+
+    def loss_fn(p, xb, yb):
+        pred = jnp.tanh(model.apply({"params": p}, (xb - norm[0]) / norm[1])) * CTRL_LIMIT
+        return jnp.mean(jnp.sum((pred - yb) ** 2, axis=-1))
+
+    def step(c, k):
+        p, o = c
+        idx = jax.random.randint(k, (batch,), 0, filled)
+        loss, g = jax.value_and_grad(loss_fn)(p, x[idx], y[idx])
+        updates, o = opt.update(g, o, p)
+        return (optax.apply_updates(p, updates), o), loss
+
+    (params, opt_state), losses = jax.lax.scan(step, (params, opt_state), jax.random.split(key, steps))
+    return params, opt_state, losses[-max(1, steps // 10):].mean()
+
+
+def timed(fn, *args):
+    """(result, seconds) with the device's work finished inside the timing."""
+    import jax
+
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(fn(*args))
+    return out, time.perf_counter() - t0

@@ -1,0 +1,186 @@
+"""A trained policy: its network, its checkpoint file, and the controller that runs it.
+
+The network is a flax MLP on features of the observation (`features`), its output squashed by
+tanh into the servos' ctrlrange (velocity actions, m/s). Training applies it with flax; the
+controller (`PolicyController`, what `--controller policy:PATH` loads) evaluates the same layers
+with the array namespace of its input, so one checkpoint runs inside MJX's compiled scan (JAX,
+float32) and on MuJoCo C (NumPy, float64) without flax at all. `tests/test_train.py` checks that
+both give the training process's actions.
+
+A checkpoint is one file: flax's msgpack serialisation of {"meta": ..., "params": ...}, where
+meta says how to read it (format version, obs type, activation, input normalisation) and what made it
+(method, iteration, env steps). It is written whole or not at all (temp + rename).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from mjx_pusht.task.controllers import Controller, ControllerError
+from mjx_pusht.task.rules import CTRL_LIMIT, array_namespace
+
+FORMAT = "mjx_pusht.policy/1"
+OBS_TYPES = ("state", "keypoints")
+ACTIVATIONS = ("relu", "silu")
+
+
+def feature_size(obs_type: str) -> int:
+    return {"state": 10, "keypoints": 20}[obs_type]
+
+
+def features(obs: dict, obs_type: str, last_action):
+    """The network's input from an observation dict and the policy's last action, (..., feature_size).
+
+    state: pusher (x, y), tee (x, y), cos and sin of its yaw (the yaw wraps at +-pi; its cosine and
+    sine do not), and the pusher in the tee's body frame (where a push meets the T is the question
+    a pusher answers, and it is a rotation away from the world frame). keypoints: the T's 8 corners
+    and the pusher (x, y). Both end with the last action (zeros at reset): the expert decides with
+    hysteresis (keep turning until aligned, go round the T the way it started), which the present
+    state alone leaves ambiguous, and a student without it stalls where the two choices average to
+    standing still (measured: NOTES, change 12). Diffusion Policy's observation history does the same.
+    """
+    xp = array_namespace(obs["state"])
+    s = obs["state"]
+    p = s[..., 0:2]
+    last = xp.astype(last_action, s.dtype)
+    if obs_type == "keypoints":
+        return xp.concat([obs["keypoints"], p, last], axis=-1)
+    o, th = s[..., 2:4], s[..., 4]
+    c, sn = xp.cos(th), xp.sin(th)
+    d = p - o
+    body = xp.stack([c * d[..., 0] + sn * d[..., 1], -sn * d[..., 0] + c * d[..., 1]], axis=-1)
+    return xp.concat([p, o, xp.stack([c, sn], axis=-1), body, last], axis=-1)
+
+
+def _activation(name: str, x, xp):
+    if name == "relu":
+        return xp.maximum(x, 0.0)
+    return x / (1.0 + xp.exp(-x))  # silu
+
+
+def apply(params: dict, meta: dict, x):
+    """The network on (..., feature_size) features, in x's array namespace: (..., 2) velocity actions."""
+    xp = array_namespace(x)
+    h = (x - xp.asarray(meta["in_mean"], dtype=x.dtype)) / xp.asarray(meta["in_std"], dtype=x.dtype)
+    layers = [params[f"Dense_{i}"] for i in range(len(params))]
+    for i, layer in enumerate(layers):
+        h = h @ xp.asarray(layer["kernel"], dtype=x.dtype) + xp.asarray(layer["bias"], dtype=x.dtype)
+        if i < len(layers) - 1:
+            h = _activation(meta["activation"], h, xp)
+    return xp.tanh(h[..., :2]) * CTRL_LIMIT
+
+
+def network(hidden: tuple[int, ...], activation: str = "relu"):
+    """The flax module training fits: Dense layers named Dense_0.. (what `apply` reads), 2 outputs."""
+    import flax.linen as nn
+
+    act = {"relu": nn.relu, "silu": nn.silu}[activation]
+
+    class MLP(nn.Module):
+        @nn.compact
+        def __call__(self, x):
+            for width in hidden:
+                x = act(nn.Dense(width)(x))
+            return nn.Dense(2)(x)
+
+    return MLP()
+
+
+# -- the checkpoint file ----------------------------------------------------------------------------
+def save(path: Path, params: dict, meta: dict) -> None:
+    """One file, written atomically: a reader sees the previous checkpoint or this one, never half of one."""
+    from flax import serialization
+
+    from mjx_pusht.io.outputs import atomic_write_bytes
+
+    tree = {"meta": json.dumps({"format": FORMAT, **meta}, sort_keys=True),
+            "params": _to_numpy(params)}
+    atomic_write_bytes(Path(path), serialization.msgpack_serialize(tree))
+
+
+def load_checkpoint(path) -> tuple[dict, dict]:
+    """(params, meta) of a checkpoint file; a missing, foreign or corrupt file is a one-line ControllerError."""
+    from flax import serialization
+
+    path = Path(path)
+    if not path.is_file():
+        raise ControllerError(f"policy checkpoint {path} does not exist" if not path.exists() else
+                              f"policy checkpoint {path} is not a file")
+    try:
+        tree = serialization.msgpack_restore(path.read_bytes())
+        meta = json.loads(tree["meta"])
+        params = tree["params"]
+    except Exception as e:  # noqa: BLE001 - any decoding failure means the same thing to the user
+        raise ControllerError(f"policy checkpoint {path} is not a readable mjx_pusht policy "
+                              f"({type(e).__name__}); was it cut short or written by something else?") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise ControllerError(f"policy checkpoint {path} has format {meta.get('format') if isinstance(meta, dict) else None!r}; "
+                              f"this mjx_pusht reads {FORMAT}")
+    _check(path, params, meta)
+    return params, meta
+
+
+def _check(path, params, meta) -> None:
+    """The file's layers must chain from the obs type's features to 2 actions, and be finite."""
+    if meta.get("obs_type") not in OBS_TYPES or meta.get("activation") not in ACTIVATIONS:
+        raise ControllerError(f"policy checkpoint {path}: unknown obs type {meta.get('obs_type')!r} or activation "
+                              f"{meta.get('activation')!r}")
+    width = feature_size(meta["obs_type"])
+    if np.shape(meta["in_mean"]) != (width,) or np.shape(meta["in_std"]) != (width,):
+        raise ControllerError(f"policy checkpoint {path}: input normalisation is not {width}-wide")
+    for i in range(len(params)):
+        layer = params.get(f"Dense_{i}")
+        kernel = None if layer is None else np.asarray(layer.get("kernel"))
+        if kernel is None or kernel.ndim != 2 or kernel.shape[0] != width or np.shape(layer.get("bias")) != kernel.shape[1:]:
+            raise ControllerError(f"policy checkpoint {path}: layer Dense_{i} does not take {width} inputs")
+        if not (np.isfinite(kernel).all() and np.isfinite(layer["bias"]).all()):
+            raise ControllerError(f"policy checkpoint {path}: layer Dense_{i} holds non-finite weights")
+        width = kernel.shape[1]
+    if not len(params) or width < 2:
+        raise ControllerError(f"policy checkpoint {path}: no layers ending in 2 actions")
+
+
+def _to_numpy(tree):
+    import jax
+
+    return jax.tree.map(lambda a: np.asarray(a), tree)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PolicyController(Controller):
+    """A checkpoint as a controller: velocity actions, the same layers in NumPy and in JAX; its carry is its
+    last action (an input of the network)."""
+
+    params: dict | None = None
+    meta: dict | None = None
+
+    def init(self, key):
+        xp = array_namespace(key)
+        return xp.zeros(key.shape[:-1] + (2,), dtype=xp.float32)
+
+    def act(self, carry, obs, t, key):
+        action = apply(self.params, self.meta, features(obs, self.meta["obs_type"], carry))
+        return action, xp_cast(action, carry)
+
+
+def xp_cast(a, like):
+    return array_namespace(a).astype(a, like.dtype)
+
+
+def load_policy(spec: str) -> PolicyController:
+    """`policy:PATH` -> the controller that runs the checkpoint at PATH."""
+    path = spec.partition(":")[2]
+    if not path:
+        raise ControllerError("--controller policy:PATH needs the checkpoint's path after 'policy:'")
+    params, meta = load_checkpoint(path)
+    return PolicyController(name=f"policy:{path}", params=_to_numpy(params), meta=meta)
+
+
+def describe_params(params) -> int:
+    """The number of weights (for the summary)."""
+    return int(sum(math.prod(np.shape(v)) for layer in params.values() for v in layer.values()))

@@ -1,0 +1,296 @@
+"""`mjx-pusht train`: the loop around a method, and everything a run leaves behind.
+
+    out/policy.msgpack          the latest policy (a controller: --controller policy:out/policy.msgpack)
+    out/checkpoints/            one policy per iteration, and resume.msgpack (optimiser, dataset, curve)
+    out/curve.csv, curve.png    held-out success after every iteration, by env steps and by wall-clock
+    out/summary.json            method, obs, env steps, wall-clock (simulation / learning), device,
+                                versions, the final held-out success with its 95% interval
+    out/eval/                   `mjx-pusht eval --controller policy:...` on the held-out seeds: the
+                                per-episode table, its summary and eval.rrd (a few episodes)
+    out/train.rrd               the curve, as rerun scalars
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from mjx_pusht.errors import MjxPushtError
+from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json
+from mjx_pusht.study.stats import wilson
+
+CURVE_COLUMNS = ("iteration", "beta", "env_steps", "samples", "loss", "success", "success_lo", "success_hi",
+                 "coverage", "sim_seconds", "learn_seconds", "wall_seconds")
+
+
+class TrainError(MjxPushtError, ValueError):
+    """A training run cannot start or resume as asked; the message says why."""
+
+
+def _meta(cfg, iteration: int, env_steps: int, norm) -> dict:
+    return {"obs_type": cfg.obs_type, "activation": cfg.activation, "in_mean": [float(v) for v in norm[0]],
+            "in_std": [float(v) for v in norm[1]], "method": "dagger", "iteration": iteration,
+            "env_steps": int(env_steps), "config": _config(cfg)}
+
+
+def _config(cfg) -> dict:
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(cfg).items()}
+
+
+def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes: float | None = None,
+                 progress: bool = True, rerun: bool = True) -> dict:
+    """Run DAgger on `backend` into `out`; returns the summary (also written as summary.json)."""
+    import jax
+    from flax import serialization
+    from tqdm import tqdm
+
+    from mjx_pusht.backends.cpu import default_threads
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.task.episode import Episode
+    from mjx_pusht.train.dagger import Learner, Rollouts
+    from mjx_pusht.train.policy import save
+
+    out = Path(out)
+    ckpt = out / "checkpoints"
+    ckpt.mkdir(parents=True, exist_ok=True)
+    env = PushTEnv(backend=backend, reset_kind=cfg.reset, episode=Episode(max_steps=cfg.max_steps),
+                   threads=default_threads(), keep_states=False)
+    rollouts, learner = Rollouts(env, cfg), Learner(cfg)
+    curve, start, env_steps, wall0 = [], 0, 0, 0.0
+    resume_path = ckpt / "resume.msgpack"
+    if resume:
+        start, env_steps, curve, wall0 = _restore(resume_path, cfg, learner, serialization)
+    held_out = cfg.held_out_seeds()
+    t_start = time.perf_counter() - wall0
+    bar = tqdm(range(start, cfg.iterations), desc="dagger", unit="iter", disable=not progress,
+               initial=start, total=cfg.iterations)
+    for i in bar:
+        (x, y, _), sim = _timed(rollouts, learner.params, learner.norm or _unit(cfg), cfg.train_seeds(i),
+                                cfg.beta(i), i)
+        env_steps += len(x)
+        learner.add(x, y, keep=i == 0)
+        loss, learn = _timed(learner.fit, i)
+        (_, _, held), sim_eval = _timed(rollouts, learner.params, learner.norm, held_out, 0.0, cfg.iterations + i)
+        k, n = int(held["success"].sum()), len(held_out)
+        lo, hi = wilson(k, n)
+        row = {"iteration": i, "beta": cfg.beta(i), "env_steps": env_steps, "samples": learner.filled,
+               "loss": loss, "success": k / n, "success_lo": lo, "success_hi": hi,
+               "coverage": float(held["coverage"].mean()), "sim_seconds": sim + sim_eval, "learn_seconds": learn,
+               "wall_seconds": time.perf_counter() - t_start}
+        curve.append(row)
+        meta = _meta(cfg, i, env_steps, learner.norm)
+        save(ckpt / f"policy_{i:03d}.msgpack", learner.params, meta)
+        save(out / "policy.msgpack", learner.params, meta)
+        _checkpoint(resume_path, cfg, learner, i, env_steps, curve, serialization)
+        bar.set_postfix(success=f"{k / n:.1%}", loss=f"{loss:.4f}", steps=env_steps)
+        if minutes is not None and row["wall_seconds"] > 60 * minutes:
+            bar.write(f"stopping after iteration {i}: the {minutes:g}-minute budget is spent")
+            break
+    bar.close()
+    jax.block_until_ready(learner.params)
+    return _summary(cfg, backend, env, out, curve, rerun)
+
+
+def _unit(cfg):
+    from mjx_pusht.train.policy import feature_size
+
+    w = feature_size(cfg.obs_type)
+    return np.zeros(w, np.float32), np.ones(w, np.float32)
+
+
+def _timed(fn, *args):
+    import jax
+
+    t0 = time.perf_counter()
+    result = jax.block_until_ready(fn(*args))
+    return result, time.perf_counter() - t0
+
+
+def _checkpoint(path, cfg, learner, iteration, env_steps, curve, serialization) -> None:
+    """Everything --resume needs (optimiser, dataset ring, normalisation, curve), written whole."""
+    tree = {"config": json.dumps(_config(cfg), sort_keys=True), "iteration": iteration, "env_steps": env_steps,
+            "curve": json.dumps(curve), "params": jax_numpy(learner.params),
+            "opt_state": serialization.to_state_dict(jax_numpy(learner.opt_state)),
+            "x": np.asarray(learner.x[:learner.filled]), "y": np.asarray(learner.y[:learner.filled]),
+            "head": learner.head, "floor": learner.floor, "norm_mean": learner.norm[0], "norm_std": learner.norm[1]}
+    atomic_write_bytes(path, serialization.msgpack_serialize(tree))
+
+
+def jax_numpy(tree):
+    import jax
+
+    return jax.tree.map(np.asarray, tree)
+
+
+def _restore(path, cfg, learner, serialization):
+    import jax.numpy as jnp
+
+    if not path.is_file():
+        raise TrainError(f"--resume: {path} does not exist; nothing to resume (run without --resume to start)")
+    try:
+        tree = serialization.msgpack_restore(path.read_bytes())
+        saved = json.loads(tree["config"])
+    except Exception as e:  # noqa: BLE001
+        raise TrainError(f"--resume: {path} is unreadable ({type(e).__name__}); start again without --resume") from None
+    now = _config(cfg)
+    diff = sorted(k for k in saved if saved[k] != now.get(k) and k != "iterations")  # how far to go may change
+    if diff:
+        raise TrainError(f"--resume: the run in {path.parent.parent} was started with other settings ({', '.join(diff)}); "
+                         "give the same ones, or a new --out")
+    learner.params = jax_tree(tree["params"])
+    learner.opt_state = serialization.from_state_dict(learner.opt_state, tree["opt_state"])
+    n = len(tree["x"])
+    learner.x = learner.x.at[:n].set(jnp.asarray(tree["x"]))
+    learner.y = learner.y.at[:n].set(jnp.asarray(tree["y"]))
+    learner.filled, learner.head, learner.floor = n, int(tree["head"]), int(tree["floor"])
+    learner.norm = (np.asarray(tree["norm_mean"]), np.asarray(tree["norm_std"]))
+    curve = json.loads(tree["curve"])
+    return int(tree["iteration"]) + 1, int(tree["env_steps"]), curve, curve[-1]["wall_seconds"] if curve else 0.0
+
+
+def jax_tree(tree):
+    import jax
+    import jax.numpy as jnp
+
+    return jax.tree.map(jnp.asarray, tree)
+
+
+def _summary(cfg, backend, env, out: Path, curve, rerun: bool = True) -> dict:
+    from mjx_pusht.backends.base import versions
+
+    last = curve[-1] if curve else None
+    summary = {
+        "method": "dagger", "obs_type": cfg.obs_type, "backend": backend, "device": _device(backend),
+        "versions": versions(), "config": _config(cfg), "iterations_run": len(curve),
+        "env_steps": last["env_steps"] if last else 0,
+        "wall_seconds": round(last["wall_seconds"], 3) if last else 0.0,
+        "simulation_seconds": round(sum(r["sim_seconds"] for r in curve), 3),
+        "learning_seconds": round(sum(r["learn_seconds"] for r in curve), 3),
+        "held_out": {"seeds": f"{cfg.held_out_seeds()[0]}:{cfg.held_out_seeds()[-1] + 1}", "reset": cfg.reset,
+                     "success_coverage": 0.95, "max_steps": cfg.max_steps},
+        "final_success": last["success"] if last else None,
+        "final_success_ci95": [last["success_lo"], last["success_hi"]] if last else None,
+        "policy": str(out / "policy.msgpack"),
+        "curve": curve,
+    }
+    write_curve(out, curve, f"DAgger from {cfg.obs_type}, {backend} on {summary['device']}", rerun)
+    atomic_write_json(out / "summary.json", summary)
+    return summary
+
+
+def _device(backend: str) -> str:
+    if backend == "cpu":
+        import os
+
+        return f"cpu ({os.cpu_count()} cores)"
+    import jax
+
+    return str(jax.devices()[0].device_kind)
+
+
+def write_curve(out: Path, curve: list[dict], title: str, rerun: bool = True) -> None:
+    """curve.csv, curve.png (held-out success with its 95% band, by env steps and by wall-clock), train.rrd."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lines = [",".join(CURVE_COLUMNS)] + [",".join(f"{r[c]:.6g}" if isinstance(r[c], float) else str(r[c])
+                                                  for c in CURVE_COLUMNS) for r in curve]
+    atomic_write_bytes(out / "curve.csv", ("\n".join(lines) + "\n").encode())
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
+    for ax, key, label in ((axes[0], "env_steps", "env control steps (millions)"),
+                           (axes[1], "wall_seconds", "training wall-clock (minutes)")):
+        scale = 1e6 if key == "env_steps" else 60.0
+        xs = np.array([r[key] for r in curve]) / scale
+        ax.fill_between(xs, [100 * r["success_lo"] for r in curve], [100 * r["success_hi"] for r in curve], alpha=0.3)
+        ax.plot(xs, [100 * r["success"] for r in curve], "o-", label="held-out success")
+        ax.set_xlabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("success, % (coverage >= 0.95 in 300 steps)")
+    axes[0].set_ylim(0, 100)
+    fig.suptitle(title)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    atomic_write_bytes(out / "curve.png", buf.getvalue())
+    if rerun:
+        _record_curve(out / "train.rrd", curve)
+
+
+def _record_curve(path: Path, curve: list[dict]) -> None:
+    import rerun as rr
+
+    rec = rr.RecordingStream("mjx_pusht_train")
+    tmp = path.with_name(f".{path.name}.tmp")  # written whole, then renamed: never a half recording
+    rec.save(str(tmp))
+    for r in curve:
+        rec.set_time("env_steps", sequence=int(r["env_steps"]))
+        rec.log("curve/held_out_success", rr.Scalars(r["success"]))
+        rec.log("curve/held_out_coverage", rr.Scalars(r["coverage"]))
+        rec.log("curve/loss", rr.Scalars(r["loss"]))
+    rec.flush()
+    rec.disconnect()
+    tmp.replace(path)
+
+
+def cmd_train(args) -> int:
+    """`mjx-pusht train`: check everything, train, then judge the policy with `eval` on the held-out seeds."""
+    from mjx_pusht.backends.base import resolve
+    from mjx_pusht.cli.banner import Banner
+    from mjx_pusht.io.outputs import prepare_out_dir
+    from mjx_pusht.train.dagger import DaggerConfig
+
+    name, why = resolve(args.backend)
+    cfg = DaggerConfig(obs_type=args.obs, envs=args.envs, iterations=args.iterations, hidden=tuple(args.hidden),
+                       learning_rate=args.lr, batch=args.batch, fit_steps=args.fit_steps, beta_decay=args.beta_decay,
+                       max_samples=args.max_samples, eval_envs=args.eval_envs, seed=args.seed, reset=args.reset)
+    out = prepare_out_dir(args.out)
+    started = (out / "checkpoints" / "resume.msgpack").exists()
+    if started and not args.resume:
+        raise TrainError(f"--out {out} holds a training run: --resume to continue it, or give a new --out")
+    banner = Banner("train")
+    print(f"backend: {name} ({why}); DAgger from {cfg.obs_type}: {cfg.envs} {cfg.reset} episodes an iteration, "
+          f"{cfg.iterations} iterations, held-out seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
+    summary = train_dagger(cfg, name, out, resume=args.resume, minutes=args.minutes, progress=args.progress,
+                           rerun=args.rerun)
+    summary["eval"] = _judge(args, name, out, summary)
+    atomic_write_json(out / "summary.json", summary)
+    ev = summary["eval"]
+    lo, hi = ev["success_rate_ci95"]
+    print(f"held-out success (eval, {ev['n_episodes']} task seeds): {ev['success_rate']:.1%} "
+          f"(95% interval {lo:.1%}-{hi:.1%}); training wall-clock {summary['wall_seconds']:.0f} s "
+          f"(simulation {summary['simulation_seconds']:.0f} s, learning {summary['learning_seconds']:.0f} s)")
+    print(f"policy: {out / 'policy.msgpack'} (use it as --controller policy:{out / 'policy.msgpack'})\n"
+          f"summary: {out / 'summary.json'}\ncurve: {out / 'curve.png'}")
+    banner.done()
+    return 0
+
+
+def _judge(args, backend: str, out: Path, summary: dict) -> dict:
+    """`mjx-pusht eval --controller policy:out/policy.msgpack` on the held-out seeds, into out/eval."""
+    import shutil
+
+    from mjx_pusht.cli.commands import cmd_eval
+    from mjx_pusht.cli.parser import build_parser
+
+    seeds = summary["held_out"]["seeds"]
+    # this run's own judgement of the policy it just wrote: an earlier one (before --resume) judged another policy
+    shutil.rmtree(out / "eval", ignore_errors=True)
+    argv = ["eval", "--controller", f"policy:{out / 'policy.msgpack'}", "--seeds", seeds, "--backend", backend,
+            "--reset", summary["held_out"]["reset"], "--out", str(out / "eval"), "--record", str(args.record), "--max-steps", str(summary["held_out"]["max_steps"])]
+    argv += [] if args.progress else ["--no-progress"]
+    argv += [] if args.rerun else ["--no-rerun"]
+    ev = build_parser().parse_args(argv)
+    cmd_eval(ev)
+    s = json.loads((out / "eval" / "summary.json").read_text())
+    return {k: s[k] for k in ("n_episodes", "n_success", "success_rate", "success_rate_ci95", "median_steps_to_success",
+                              "n_non_finite", "n_rigid")} | {"backend": s["backend"], "seeds": seeds,
+                                                             "table": str(out / "eval" / "per_episode.parquet")}

@@ -1,0 +1,179 @@
+"""Training (issue 22): a policy learned by `mjx-pusht train` is a controller everywhere, and learning happens.
+
+One small DAgger run on MuJoCo C (chapter starts, a few seconds) is shared by the tests; the
+learning test trains longer (marked slow).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from helpers import cli
+
+pytest.importorskip("flax")
+pytest.importorskip("optax")
+
+from mjx_pusht.task.controllers import ControllerError, load
+from mjx_pusht.train.policy import apply, feature_size, features, load_checkpoint, save
+
+TINY = ("--backend", "cpu", "--reset", "chapter", "--envs", "16", "--iterations", "2", "--fit-steps", "50",
+        "--batch", "128", "--hidden", "32,32", "--eval-envs", "8", "--max-samples", "20000", "--no-rerun",
+        "--record", "0", "--no-progress")
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("train") / "run"
+    r = cli("train", *TINY, "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+def test_a_run_leaves_policy_curve_summary_and_the_eval_of_its_held_out_seeds(run):
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["method"] == "dagger" and summary["iterations_run"] == 2 and len(summary["curve"]) == 2
+    assert summary["wall_seconds"] >= summary["simulation_seconds"] > 0 and summary["learning_seconds"] > 0
+    for name in ("policy.msgpack", "curve.csv", "curve.png", "checkpoints/policy_000.msgpack",
+                 "checkpoints/policy_001.msgpack", "checkpoints/resume.msgpack"):
+        assert (run / name).is_file(), name
+    # The curve's last point (the trainer's own rollout of the student) and `eval --controller policy:...`
+    # (the backend's episode machinery, another code path) judge the same seeds alike. Not to the bit: BLAS
+    # blocks a matrix product by the batch's size (8 rows here, 4 per eval worker), so the actions differ in
+    # the last bit and the episodes by ~1e-7 (measured 2e-7 in mean coverage).
+    rows = pq.read_table(run / "eval" / "per_episode.parquet").to_pydict()
+    assert rows["seed"] == list(range(1_000_000_000, 1_000_000_008))
+    assert summary["curve"][-1]["coverage"] == pytest.approx(np.mean(rows["final_coverage"]), abs=1e-4)
+    assert summary["eval"]["success_rate"] == summary["curve"][-1]["success"]
+
+
+def test_a_saved_policy_acts_as_the_training_process_network_in_numpy_and_in_jax(run):
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_pusht.train.policy import network
+
+    params, meta = load_checkpoint(run / "policy.msgpack")
+    x = np.random.default_rng(0).normal(0.0, 0.2, size=(64, feature_size("state"))).astype(np.float32)
+    model = network(tuple(meta["config"]["hidden"]), meta["activation"])  # what training applied (flax)
+    norm = (np.asarray(meta["in_mean"], np.float32), np.asarray(meta["in_std"], np.float32))
+    trained = np.tanh(np.asarray(model.apply({"params": jax.tree.map(jnp.asarray, params)}, (x - norm[0]) / norm[1])))
+    assert np.abs(apply(params, meta, x.astype(np.float64)) - trained).max() < 1e-5  # NumPy, on MuJoCo C's side
+    assert np.abs(np.asarray(jax.jit(lambda v: apply(params, meta, v))(jnp.asarray(x))) - trained).max() < 1e-5
+
+
+def test_policy_path_is_a_controller_whose_carry_is_its_last_action(run):
+    ctrl = load(f"policy:{run / 'policy.msgpack'}")
+    key = np.zeros((3, 2), np.uint32)
+    carry = ctrl.init(key)
+    assert carry.shape == (3, 2) and not carry.any()
+    obs = {"state": np.array([[0.1, -0.2, 0.0, 0.05, 0.3]] * 3), "keypoints": np.zeros((3, 16))}
+    a1, c1 = ctrl.act(carry, obs, 0, key)
+    a2, _ = ctrl.act(c1, obs, 1, key)
+    assert a1.shape == (3, 2) and np.abs(a1).max() <= 1.0
+    np.testing.assert_array_equal(c1, a1.astype(np.float32))
+    # the same observation after another last action is another input (the policy keeps its history)
+    x0, x1 = features(obs, "state", carry), features(obs, "state", c1)
+    assert np.abs(x1[:, -2:] - a1).max() < 1e-6 and not np.array_equal(x0, x1)
+    assert not np.array_equal(a1, a2) or np.abs(a1).max() == 0
+
+
+def test_resume_continues_where_the_run_stopped_and_a_second_run_is_refused(run, tmp_path):
+    import shutil
+
+    out = tmp_path / "run"
+    shutil.copytree(run, out)
+    r = cli("train", *TINY, "--out", str(out))
+    assert r.returncode == 1 and "holds a training run" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    args = list(TINY)
+    args[args.index("--iterations") + 1] = "3"
+    r = cli("train", *args, "--out", str(out), "--resume")
+    assert r.returncode == 0, r.stderr
+    before = json.loads((run / "summary.json").read_text())["curve"]
+    after = json.loads((out / "summary.json").read_text())["curve"]
+    assert [c["iteration"] for c in after] == [0, 1, 2]
+    assert after[:2] == before  # the first two iterations are the finished run's, not re-run
+    assert after[2]["samples"] > after[1]["samples"]
+
+
+def test_resume_with_other_settings_or_nothing_to_resume_is_one_line(run, tmp_path):
+    import shutil
+
+    out = tmp_path / "run"
+    shutil.copytree(run, out)
+    args = list(TINY)
+    args[args.index("--hidden") + 1] = "16"
+    r = cli("train", *args, "--out", str(out), "--resume")
+    assert r.returncode == 1 and "other settings (hidden)" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    r = cli("train", *TINY, "--out", str(tmp_path / "empty"), "--resume")
+    assert r.returncode == 1 and "nothing to resume" in r.stderr
+
+
+def test_bad_checkpoints_are_one_line(run, tmp_path):
+    good = (run / "policy.msgpack").read_bytes()
+    cut = tmp_path / "cut.msgpack"
+    cut.write_bytes(good[: len(good) // 2])
+    foreign = tmp_path / "foreign.msgpack"
+    from flax import serialization
+
+    foreign.write_bytes(serialization.msgpack_serialize({"weights": np.zeros(3)}))
+    params, meta = load_checkpoint(run / "policy.msgpack")
+    other_obs = tmp_path / "keypoints.msgpack"
+    save(other_obs, params, {**meta, "obs_type": "keypoints", "in_mean": [0.0] * 20, "in_std": [1.0] * 20})
+    for path, why in ((tmp_path / "missing.msgpack", "does not exist"), (cut, "not a readable"),
+                      (foreign, "not a readable"), (other_obs, "does not take 20 inputs"), (tmp_path, "not a file")):
+        with pytest.raises(ControllerError, match=why):
+            load(f"policy:{path}")
+    r = cli("eval", "--backend", "cpu", "--seeds", "2", "--controller", f"policy:{cut}", "--out", str(tmp_path / "e"))
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and "not a readable" in r.stderr
+    assert not (tmp_path / "e" / "per_episode.parquet").exists()
+
+
+@pytest.mark.slow
+def test_dagger_learns_to_imitate_the_expert_on_cpu_in_under_a_minute():
+    """What a minute of DAgger on 2 cores buys, judged against the expert itself and against random.
+
+    At this scale the student does not yet finish episodes (success stays 0, as it does for random;
+    on an H100 the same trainer reaches 10-27%: NOTES change 12), so the test asserts what did happen,
+    against independent references: on held-out episodes the student drives itself, its actions agree
+    with the expert's labels far better than the untrained network's, and it leaves the T better
+    covered than random actions do.
+    """
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.task.controllers import Random
+    from mjx_pusht.train.dagger import DaggerConfig, Learner, Rollouts
+
+    cfg = DaggerConfig(reset="chapter", envs=64, iterations=3, eval_envs=32, fit_steps=400, batch=512,
+                       hidden=(64, 64), max_samples=100_000)
+    env = PushTEnv(backend="cpu", reset_kind="chapter", threads=2, keep_states=False)
+    rollouts, learner = Rollouts(env, cfg), Learner(cfg)
+    width = feature_size("state")
+    unit = (np.zeros(width), np.ones(width))
+
+    def on_policy_error(norm):
+        x, labels, held = rollouts(learner.params, norm, cfg.held_out_seeds(), 0.0, 99)
+        meta = {"in_mean": norm[0], "in_std": norm[1], "activation": cfg.activation}
+        acted = apply(jax_numpy(learner.params), meta, x.astype(np.float64))
+        return float(np.mean(np.linalg.norm(acted - labels, axis=-1))), held
+
+    before, _ = on_policy_error(unit)
+    for i in range(cfg.iterations):
+        x, y, _ = rollouts(learner.params, learner.norm or unit, cfg.train_seeds(i), cfg.beta(i), i)
+        learner.add(x, y, keep=i == 0)
+        learner.fit(i)
+    after, held = on_policy_error(learner.norm)
+    assert after < 0.6 * before, (before, after)
+
+    s = env.reset(cfg.held_out_seeds())
+    rnd = Random()
+    for t in range(cfg.max_steps):
+        s = env.step(s, rnd.act(None, s.obs, s.step, s.key)[0])
+    assert held["coverage"].mean() > np.asarray(s.metrics["coverage"]).mean() + 0.1
+
+
+def jax_numpy(tree):
+    import jax
+
+    return jax.tree.map(np.asarray, tree)
