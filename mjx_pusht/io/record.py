@@ -160,6 +160,11 @@ def _log_frames(rr, root: str, model: mujoco.MjModel, qpos: np.ndarray, dt: floa
     _log_deviation(rr, label, poses["gap"], times)
 
 
+def partial(path: Path) -> Path:
+    """Where a recording is written before it is renamed into place."""
+    return Path(path).with_name(f".{Path(path).name}.partial")
+
+
 def record_run(path: Path, model: mujoco.MjModel, rollouts: Rollouts, *, app: str = "mjx_pusht_scene") -> Path:
     """One seed's run at the chapter's entity paths: world/objects/tee, world/objects/target, world/robot/pusher."""
     import rerun as rr
@@ -167,12 +172,13 @@ def record_run(path: Path, model: mujoco.MjModel, rollouts: Rollouts, *, app: st
     assert rollouts.trace is not None, "record_run needs a traced rollout"
     rec = rr.RecordingStream(app)
     with rec:
-        rec.save(str(path), default_blueprint=blueprint("scene"))
+        rec.save(str(partial(path)), default_blueprint=blueprint("scene"))
         _log_static_scene(rr, "world", model)
         _log_frames(rr, "world", model, rollouts.trace.qpos[0], rollouts.trace.dt, "plots/weld_gap/measured")
         _log_reference_lines(rr, (rollouts.trace.qpos.shape[1] - 1) * rollouts.trace.dt)
     rec.flush()
     rec.disconnect()
+    partial(path).replace(path)  # whole or not at all: a failed or killed recording leaves no half .rrd
     return path
 
 
@@ -183,7 +189,7 @@ def record_walk(path: Path, runs: list[tuple[str, mujoco.MjModel, Rollouts]]) ->
 
     rec = rr.RecordingStream("mjx_pusht_walk")
     with rec:
-        rec.save(str(path), default_blueprint=blueprint("walk", len(runs)))
+        rec.save(str(partial(path)), default_blueprint=blueprint("walk", len(runs)))
         for k, (label, model, r) in enumerate(runs):
             root = f"world/{label}"
             rr.log(root, rr.Transform3D(translation=[k * SEED_SPACING, 0, 0]), static=True)
@@ -193,6 +199,7 @@ def record_walk(path: Path, runs: list[tuple[str, mujoco.MjModel, Rollouts]]) ->
         _log_reference_lines(rr, (r.trace.qpos.shape[1] - 1) * r.trace.dt)
     rec.flush()
     rec.disconnect()
+    partial(path).replace(path)  # whole or not at all: a failed or killed recording leaves no half .rrd
     return path
 
 
@@ -246,7 +253,7 @@ def record_sweep(path: Path, model: mujoco.MjModel, traced: Rollouts, everyone: 
     rec = rr.RecordingStream("mjx_pusht_sweep")
     with rec:
         labels = labels or [f"seed_{int(s)}" for s in traced.seeds]
-        rec.save(str(path), default_blueprint=blueprint("sweep", len(labels)))
+        rec.save(str(partial(path)), default_blueprint=blueprint("sweep", len(labels)))
         for k, label in enumerate(labels):
             root = f"world/{label}"
             rr.log(root, rr.Transform3D(translation=[k * SEED_SPACING, 0, 0]), static=True)
@@ -256,6 +263,7 @@ def record_sweep(path: Path, model: mujoco.MjModel, traced: Rollouts, everyone: 
         _log_outcomes(rr, everyone)
     rec.flush()
     rec.disconnect()
+    partial(path).replace(path)  # whole or not at all: a failed or killed recording leaves no half .rrd
     return path
 
 
@@ -293,7 +301,7 @@ def record_episodes(path: Path, model: mujoco.MjModel, traced: Rollouts, everyon
     rec = rr.RecordingStream("mjx_pusht_eval")
     with rec:
         labels = labels or [f"seed_{int(s)}" for s in traced.seeds]
-        rec.save(str(path), default_blueprint=blueprint("eval", len(labels)))
+        rec.save(str(partial(path)), default_blueprint=blueprint("eval", len(labels)))
         rr.log("plots/coverage/success", rr.SeriesLines(colors=[[120, 120, 120]], names=["success at 0.95"]), static=True)
         for k, label in enumerate(labels):
             root = f"world/{label}"
@@ -314,4 +322,5 @@ def record_episodes(path: Path, model: mujoco.MjModel, traced: Rollouts, everyon
         _log_outcomes(rr, everyone)
     rec.flush()
     rec.disconnect()
+    partial(path).replace(path)  # whole or not at all: a failed or killed recording leaves no half .rrd
     return path

@@ -80,6 +80,21 @@ def _is_out_of_memory(e: BaseException) -> bool:
     return any(k in text for k in ("resource_exhausted", "out of memory", "failed to allocate", "oom"))
 
 
+def _stop_at_failed_write(written: list, parts: Path) -> None:
+    """Raise, in one line, at the first chunk file that failed to land (a full disk, a folder gone):
+    the chunks before it stay in `parts`, and --resume picks up from them."""
+    from mjx_pusht.io.outputs import OutputError
+
+    for f in written:
+        if f.done() and f.exception() is not None:
+            e = f.exception()
+            if not isinstance(e, OSError):
+                raise e  # not the disk: a bug, with its traceback
+            kept = len(list(parts.glob("seeds-*.parquet")))
+            raise OutputError(f"writing a chunk to {parts} failed ({e.strerror or e}); stopped there with {kept} chunk "
+                              f"files kept: make room and rerun with --resume") from None
+
+
 def run_sweep(
     backend,
     seeds: np.ndarray,
@@ -159,6 +174,7 @@ def run_sweep(
         timing["rollout_and_compile"] += t_score - t_run
         cols = rows.columns(episodes=episodes)
         tables[lo] = cols
+        _stop_at_failed_write(written, parts)  # a chunk that could not be written stops the run now, not at 100%
         written.append(writer.submit(atomic_write_table, parts / f"seeds-{lo:012d}-{hi:012d}.parquet", cols))
         timing["scoring_and_chunk_writing"] += time.perf_counter() - t_score
         done[lo:hi] = True
@@ -193,7 +209,8 @@ def run_sweep(
             pending.pop(0)
         t_wait = time.perf_counter()
         for f in written:
-            f.result()  # a chunk file that failed to write fails the sweep
+            f.exception()  # wait for the last writes
+        _stop_at_failed_write(written, parts)
         timing["scoring_and_chunk_writing"] += time.perf_counter() - t_wait
     finally:
         for *_, other in pending if pipelined else ():  # an error or ^C: nothing left running behind our back
