@@ -17,7 +17,7 @@ pytest.importorskip("flax")
 pytest.importorskip("optax")
 
 from mjx_pusht.task.controllers import ControllerError, load
-from mjx_pusht.train.policy import apply, feature_size, features, load_checkpoint, save
+from mjx_pusht.train.policy import apply, feature_size, features, load_checkpoint, save, to_numpy
 
 TINY = ("--backend", "cpu", "--reset", "chapter", "--envs", "16", "--iterations", "2", "--fit-steps", "50",
         "--batch", "128", "--hidden", "32,32", "--eval-envs", "8", "--max-samples", "20000", "--no-rerun",
@@ -155,7 +155,7 @@ def test_dagger_learns_to_imitate_the_expert_on_cpu_in_under_a_minute():
     def on_policy_error(norm):
         x, labels, held = rollouts(learner.params, norm, cfg.held_out_seeds(), 0.0, 99)
         meta = {"in_mean": norm[0], "in_std": norm[1], "activation": cfg.activation}
-        acted = apply(jax_numpy(learner.params), meta, x.astype(np.float64))
+        acted = apply(to_numpy(learner.params), meta, x.astype(np.float64))
         return float(np.mean(np.linalg.norm(acted - labels, axis=-1))), held
 
     before, _ = on_policy_error(unit)
@@ -172,8 +172,3 @@ def test_dagger_learns_to_imitate_the_expert_on_cpu_in_under_a_minute():
         s = env.step(s, rnd.act(None, s.obs, s.step, s.key)[0])
     assert held["coverage"].mean() > np.asarray(s.metrics["coverage"]).mean() + 0.1
 
-
-def jax_numpy(tree):
-    import jax
-
-    return jax.tree.map(np.asarray, tree)

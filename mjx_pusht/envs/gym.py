@@ -200,6 +200,16 @@ class _Pictures:
         return round(1 / (self._env.episode.frame_skip * self._env.model.opt.timestep))
 
 
+def one_action(state, action, what: str) -> np.ndarray:
+    """A single env's action as (2,) float64 (after reset): a wrong shape is a one-line error, never reshaped."""
+    if state is None:
+        raise RuntimeError("call reset() before step()")
+    a = np.asarray(action, np.float64)
+    if a.shape != (2,):
+        raise ConfigError(f"an action is one (x, y) {what}, shape (2,); got shape {a.shape}")
+    return a
+
+
 class PushTGymEnv(_Pictures, gym.Env):
     """One PushT episode at a time on MuJoCo C, float64 (the determinism reference)."""
 
@@ -234,11 +244,7 @@ class PushTGymEnv(_Pictures, gym.Env):
         return self._obs(), self._info()
 
     def step(self, action):
-        if self._state is None:
-            raise RuntimeError("call reset() before step()")
-        action = np.asarray(action, np.float64)
-        if action.shape != (2,):
-            raise ConfigError(f"an action is one (x, y) pair, shape (2,); got shape {action.shape}")
+        action = one_action(self._state, action, "pair")
         self._state = self._env.step(self._state, action[None])
         s = self._state
         return self._obs(), float(s.reward[0]), bool(s.terminated[0]), bool(s.truncated[0]), self._info()

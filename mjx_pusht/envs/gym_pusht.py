@@ -172,11 +172,7 @@ class GymPushTEnv(_Pictures, base.gym.Env):
         return obs, info
 
     def step(self, action):
-        if self._state is None:
-            raise RuntimeError("call reset() before step()")
-        a = np.asarray(action, np.float64)
-        if a.shape != (2,):
-            raise ConfigError(f"an action is one (x, y) target in pixels, shape (2,); got shape {a.shape}")
+        a = base.one_action(self._state, action, "target in pixels")
         self._last_action = a
         self._state = self._env.step(self._state, frame.to_world(a)[None])
         obs, info = self._view()

@@ -15,7 +15,6 @@ the expert is the same `Expert.act` in both, in the env's array namespace.
 from __future__ import annotations
 
 import dataclasses
-import time
 from functools import partial
 
 import numpy as np
@@ -28,6 +27,7 @@ from mjx_pusht.train.policy import (
     feature_size,
     features,
     network,
+    to_numpy,
 )
 
 # Held-out evaluation seeds start here; training seeds count up from 0 and must stay below it.
@@ -104,7 +104,7 @@ class Rollouts:
 
         env, cfg = self.env, self.cfg
         meta = {"in_mean": norm[0], "in_std": norm[1], "activation": cfg.activation}
-        params = _numpy(params)
+        params = to_numpy(params)
         gen = np.random.default_rng([cfg.seed, rng])
         s = env.reset(seeds)
         carry = self.expert.init(s.key)
@@ -165,12 +165,6 @@ class Rollouts:
         last = jnp.zeros((2,), jnp.float32)
         (s, _, _), (x, y, live) = jax.lax.scan(body, (s, carry, last), jnp.arange(cfg.max_steps))
         return s, x, y, live
-
-
-def _numpy(tree):
-    import jax
-
-    return jax.tree.map(np.asarray, tree)
 
 
 def _outcomes(s) -> dict:
@@ -254,11 +248,3 @@ def _fit(model, opt, batch, steps, params, opt_state, x, y, filled, norm, key):
     (params, opt_state), losses = jax.lax.scan(step, (params, opt_state), jax.random.split(key, steps))
     return params, opt_state, losses[-max(1, steps // 10):].mean()
 
-
-def timed(fn, *args):
-    """(result, seconds) with the device's work finished inside the timing."""
-    import jax
-
-    t0 = time.perf_counter()
-    out = jax.block_until_ready(fn(*args))
-    return out, time.perf_counter() - t0

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -99,7 +98,7 @@ def save(path: Path, params: dict, meta: dict) -> None:
     from mjx_pusht.io.outputs import atomic_write_bytes
 
     tree = {"meta": json.dumps({"format": FORMAT, **meta}, sort_keys=True),
-            "params": _to_numpy(params)}
+            "params": to_numpy(params)}
     atomic_write_bytes(Path(path), serialization.msgpack_serialize(tree))
 
 
@@ -145,10 +144,11 @@ def _check(path, params, meta) -> None:
         raise ControllerError(f"policy checkpoint {path}: no layers ending in 2 actions")
 
 
-def _to_numpy(tree):
+def to_numpy(tree):
+    """A pytree of device arrays as NumPy arrays (what the checkpoint and the CPU controller hold)."""
     import jax
 
-    return jax.tree.map(lambda a: np.asarray(a), tree)
+    return jax.tree.map(np.asarray, tree)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -178,9 +178,5 @@ def load_policy(spec: str) -> PolicyController:
     if not path:
         raise ControllerError("--controller policy:PATH needs the checkpoint's path after 'policy:'")
     params, meta = load_checkpoint(path)
-    return PolicyController(name=f"policy:{path}", params=_to_numpy(params), meta=meta)
+    return PolicyController(name=f"policy:{path}", params=to_numpy(params), meta=meta)
 
-
-def describe_params(params) -> int:
-    """The number of weights (for the summary)."""
-    return int(sum(math.prod(np.shape(v)) for layer in params.values() for v in layer.values()))

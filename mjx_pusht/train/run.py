@@ -45,7 +45,6 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
                  progress: bool = True, rerun: bool = True) -> dict:
     """Run DAgger on `backend` into `out`; returns the summary (also written as summary.json)."""
     import jax
-    from flax import serialization
     from tqdm import tqdm
 
     from mjx_pusht.backends.cpu import default_threads
@@ -63,7 +62,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     curve, start, env_steps, wall0 = [], 0, 0, 0.0
     resume_path = ckpt / "resume.msgpack"
     if resume:
-        start, env_steps, curve, wall0 = _restore(resume_path, cfg, learner, serialization)
+        start, env_steps, curve, wall0 = _restore(resume_path, cfg, learner)
     held_out = cfg.held_out_seeds()
     t_start = time.perf_counter() - wall0
     bar = tqdm(range(start, cfg.iterations), desc="dagger", unit="iter", disable=not progress,
@@ -85,14 +84,14 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         meta = _meta(cfg, i, env_steps, learner.norm)
         save(ckpt / f"policy_{i:03d}.msgpack", learner.params, meta)
         save(out / "policy.msgpack", learner.params, meta)
-        _checkpoint(resume_path, cfg, learner, i, env_steps, curve, serialization)
+        _checkpoint(resume_path, cfg, learner, i, env_steps, curve)
         bar.set_postfix(success=f"{k / n:.1%}", loss=f"{loss:.4f}", steps=env_steps)
         if minutes is not None and row["wall_seconds"] > 60 * minutes:
             bar.write(f"stopping after iteration {i}: the {minutes:g}-minute budget is spent")
             break
     bar.close()
     jax.block_until_ready(learner.params)
-    return _summary(cfg, backend, env, out, curve, rerun)
+    return _summary(cfg, backend, out, curve, rerun)
 
 
 def _unit(cfg):
@@ -110,24 +109,24 @@ def _timed(fn, *args):
     return result, time.perf_counter() - t0
 
 
-def _checkpoint(path, cfg, learner, iteration, env_steps, curve, serialization) -> None:
+def _checkpoint(path, cfg, learner, iteration, env_steps, curve) -> None:
     """Everything --resume needs (optimiser, dataset ring, normalisation, curve), written whole."""
+    from flax import serialization
+
+    from mjx_pusht.train.policy import to_numpy
+
     tree = {"config": json.dumps(_config(cfg), sort_keys=True), "iteration": iteration, "env_steps": env_steps,
-            "curve": json.dumps(curve), "params": jax_numpy(learner.params),
-            "opt_state": serialization.to_state_dict(jax_numpy(learner.opt_state)),
+            "curve": json.dumps(curve), "params": to_numpy(learner.params),
+            "opt_state": serialization.to_state_dict(to_numpy(learner.opt_state)),
             "x": np.asarray(learner.x[:learner.filled]), "y": np.asarray(learner.y[:learner.filled]),
             "head": learner.head, "floor": learner.floor, "norm_mean": learner.norm[0], "norm_std": learner.norm[1]}
     atomic_write_bytes(path, serialization.msgpack_serialize(tree))
 
 
-def jax_numpy(tree):
+def _restore(path, cfg, learner):
     import jax
-
-    return jax.tree.map(np.asarray, tree)
-
-
-def _restore(path, cfg, learner, serialization):
     import jax.numpy as jnp
+    from flax import serialization
 
     if not path.is_file():
         raise TrainError(f"--resume: {path} does not exist; nothing to resume (run without --resume to start)")
@@ -141,7 +140,7 @@ def _restore(path, cfg, learner, serialization):
     if diff:
         raise TrainError(f"--resume: the run in {path.parent.parent} was started with other settings ({', '.join(diff)}); "
                          "give the same ones, or a new --out")
-    learner.params = jax_tree(tree["params"])
+    learner.params = jax.tree.map(jnp.asarray, tree["params"])
     learner.opt_state = serialization.from_state_dict(learner.opt_state, tree["opt_state"])
     n = len(tree["x"])
     learner.x = learner.x.at[:n].set(jnp.asarray(tree["x"]))
@@ -152,14 +151,7 @@ def _restore(path, cfg, learner, serialization):
     return int(tree["iteration"]) + 1, int(tree["env_steps"]), curve, curve[-1]["wall_seconds"] if curve else 0.0
 
 
-def jax_tree(tree):
-    import jax
-    import jax.numpy as jnp
-
-    return jax.tree.map(jnp.asarray, tree)
-
-
-def _summary(cfg, backend, env, out: Path, curve, rerun: bool = True) -> dict:
+def _summary(cfg, backend, out: Path, curve, rerun: bool = True) -> dict:
     from mjx_pusht.backends.base import versions
 
     last = curve[-1] if curve else None
