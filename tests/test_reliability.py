@@ -9,7 +9,7 @@ from helpers import cli
 from mjx_pusht.study.seeds import SeedSpecError, parse_seeds
 
 gym = pytest.importorskip("gymnasium")
-import mjx_pusht  # noqa: E402,F401
+import mjx_pusht  # noqa: F401
 
 ENV = "mjx_pusht/PushT-v0"
 
@@ -162,3 +162,201 @@ def test_a_recording_is_written_whole_or_not_at_all(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError, match="killed mid-recording"):
         record.record_sweep(out / "sweep.rrd", backend.model, rows, rows, ["seed 0", "seed 1"])
     assert (out / "sweep.rrd").read_bytes() == good
+
+
+def test_a_model_mujoco_calls_singular_is_flagged_never_finite_and_rigid(tmp_path):
+    """Finding 7: --param tee_mass=1e-300 made MuJoCo warn "Inertia matrix ... singular"; nothing moved and
+    every row read finite and rigid. Now each row carries the warnings MuJoCo raised (its own counters,
+    mjData.warning), such a row is never counted rigid, and the summary and the console say so."""
+    import json
+
+    import mujoco
+
+    from mjx_pusht.io.outputs import read_table
+    from mjx_pusht.model.params import apply
+    from mjx_pusht.model.scene import SceneSpec, build_model
+
+    singular = apply(build_model(SceneSpec()), {"tee_mass": 1e-300})
+    d = mujoco.MjData(singular)
+    mujoco.mj_forward(singular, d)
+    assert d.warning[mujoco.mjtWarning.mjWARN_INERTIA].number > 0  # MuJoCo's own verdict on this model
+
+    out = tmp_path / "s"
+    r = cli("sweep", "--backend", "cpu", "--seeds", "3", "--param", "tee_mass=1e-300,0.105", "--no-rerun",
+            "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    t = read_table(out / "per_seed.parquet")
+    bad = t["param_tee_mass"] < 1e-200
+    inertia = 1 << int(mujoco.mjtWarning.mjWARN_INERTIA)
+    assert np.all(t["mujoco_warnings"][bad] & inertia) and not t["tee_stayed_rigid"][bad].any()
+    assert np.all(t["mujoco_warnings"][~bad] == 0) and t["tee_stayed_rigid"][~bad].all()
+    s = json.loads((out / "summary.json").read_text())
+    assert s["n_mujoco_warnings"] == 3 and s["n_rigid"] == 3 and "mjWARN_INERTIA" in s["mujoco_warnings"]
+    assert "WARNING: MuJoCo raised mjWARN_INERTIA on 3 seeds" in r.stdout
+
+
+def test_mjx_rows_carry_the_model_check_too():
+    # MJX raises no warnings of its own: its rows take MuJoCo's verdict on each parameter combination's model
+    from mjx_pusht.backends.mjx import MjxBackend
+    from mjx_pusht.scenario import Scenario
+
+    backend = MjxBackend(Scenario(params=(("tee_mass", (1e-300, 0.105)),)), "jax")
+    assert backend.runner.model_warnings[0] != 0 and backend.runner.model_warnings[1] == 0
+
+
+def _files(folder):
+    return {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")}
+
+
+def test_a_folder_with_another_commands_results_is_refused_unless_replaced(tmp_path):
+    """Finding 3: a sweep into a finished eval folder replaced its summary.json and left
+    per_episode.parquet without one. Now it is one line and the folder is as it was; --replace says go."""
+    out = tmp_path / "ev"
+    assert cli("eval", "--backend", "cpu", "--seeds", "2", "--max-steps", "3", "--no-rerun", "--out", str(out)).returncode == 0
+    before = _files(out)
+    r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--out", str(out))
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1
+    assert "another command's finished results (eval" in r.stderr and "--replace" in r.stderr
+    assert _files(out) == before
+    r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--replace", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    assert sorted(_files(out)) == ["per_seed.parquet", "summary.json"]  # no eval table left beside the sweep's
+
+
+def test_a_finished_sweep_is_not_overwritten_by_other_seeds_but_may_be_rerun(tmp_path):
+    """Finding 3: --resume on a finished sweep with other seeds overwrote it."""
+    out = tmp_path / "sw"
+    assert cli("sweep", "--backend", "cpu", "--seeds", "4", "--no-rerun", "--out", str(out)).returncode == 0
+    before = _files(out)
+    for extra in ([], ["--resume"]):
+        r = cli("sweep", "--backend", "cpu", "--seeds", "5", "--no-rerun", "--out", str(out), *extra)
+        assert r.returncode == 1 and "other seeds' or settings' finished results" in r.stderr
+        assert _files(out) == before
+    r = cli("sweep", "--backend", "cpu", "--seeds", "4", "--no-rerun", "--out", str(out))  # the same run again
+    assert r.returncode == 0, r.stderr
+    assert _files(out)["per_seed.parquet"] == before["per_seed.parquet"]
+
+
+def test_a_second_run_into_a_folder_in_use_is_one_line(tmp_path):
+    """Finding 6: two sweeps started together into one --out: the loser died with FileNotFoundError in
+    .parts. Now the folder is locked while a run holds it; the second stops before any work."""
+    from mjx_pusht.io.outputs import claim_out_dir, held_folders
+
+    out = tmp_path / "busy"
+    with held_folders():
+        claim_out_dir(out, "sweep", {"seeds": "elsewhere"})  # this test process is the first run
+        r = cli("sweep", "--backend", "cpu", "--seeds", "4", "--no-rerun", "--out", str(out))
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1
+        assert "in use by another mjx-pusht run" in r.stderr and not (out / ".parts").exists()
+    r = cli("sweep", "--backend", "cpu", "--seeds", "4", "--no-rerun", "--out", str(out))  # let go: it runs
+    assert r.returncode == 0, r.stderr
+
+
+def _descendants(pid: int) -> set[int]:
+    """Every live process under `pid`, from /proc (workers, and the resource tracker)."""
+    from pathlib import Path
+
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    out, todo = set(), [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            out.add(c)
+            todo.append(c)
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not __import__("os").path.exists("/proc"), reason="reads the process tree from /proc")
+def test_no_worker_outlives_a_killed_eval(tmp_path):
+    """Finding 4: after kill -9 of a CPU eval, its spawn workers and resource tracker lived on under PID 1."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from helpers import ENV as RUN_ENV
+
+    p = subprocess.Popen([sys.executable, "-m", "mjx_pusht", "eval", "--backend", "cpu", "--seeds", "2000",
+                          "--chunk", "200", "--no-rerun", "--no-progress", "--out", str(tmp_path / "ev")],
+                         env=RUN_ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.time() + 120
+        kids: set[int] = set()
+        while time.time() < deadline and len(kids) < 3:  # two workers and the resource tracker
+            time.sleep(0.5)
+            kids = _descendants(p.pid)
+        assert len(kids) >= 3, "the eval never started its workers"
+        time.sleep(2)  # let them get to work
+        kids = _descendants(p.pid)
+    finally:
+        os.kill(p.pid, signal.SIGKILL)
+        p.wait()
+    deadline = time.time() + 15
+    while time.time() < deadline and any(_alive(k) for k in kids):
+        time.sleep(0.2)
+    assert not [k for k in kids if _alive(k)], "processes outlived their killed parent"
+
+
+def test_workers_from_a_script_without_a_main_guard_are_one_line(tmp_path):
+    """Finding 4: workers=2 from a script without a __main__ guard: BrokenProcessPool, the script re-run by
+    the children (banner printed 3 times). Now it stops in one line, before any process is spawned."""
+    import subprocess
+    import sys
+
+    from helpers import ENV as RUN_ENV
+
+    script = tmp_path / "unguarded.py"
+    script.write_text(
+        "import numpy as np\n"
+        "from mjx_pusht.backends.base import make_backend\n"
+        "from mjx_pusht.scenario import Scenario\n"
+        "from mjx_pusht.task.controllers import load\n"
+        "print('BANNER')\n"
+        "backend = make_backend('cpu', Scenario(reset='task', controller=load('expert')), workers=2)\n"
+        "print(backend.run(np.arange(8)).finite.all())\n")
+    r = subprocess.run([sys.executable, str(script)], env=RUN_ENV, capture_output=True, text=True, timeout=300, check=False)
+    assert r.returncode != 0 and r.stdout.count("BANNER") == 1
+    assert "ConfigError" in r.stderr and 'if __name__ == "__main__":' in r.stderr.strip().splitlines()[-1]
+    assert "BrokenProcessPool" not in r.stderr
+    guarded = tmp_path / "guarded.py"
+    lines = script.read_text().splitlines()
+    guarded.write_text("\n".join(lines[:4]) + "\nif __name__ == '__main__':\n" + "\n".join("    " + s for s in lines[4:]) + "\n")
+    r = subprocess.run([sys.executable, str(guarded)], env=RUN_ENV, capture_output=True, text=True, timeout=300, check=False)
+    assert r.returncode == 0 and r.stdout.split() == ["BANNER", "True"], r.stderr[-800:]
+
+
+def test_a_video_that_cannot_be_written_is_one_line_before_the_episodes(tmp_path):
+    """Finding 6: --video into a read-only folder was an OSError after the episodes ran; --video naming a
+    folder dir.gif was IsADirectoryError and a half-written dir.gif.partial.gif beside it."""
+    import os
+
+    (tmp_path / "dir.gif").mkdir()
+    cases = [(tmp_path / "dir.gif", "is a folder")]
+    if os.geteuid() != 0:
+        ro = tmp_path / "ro"
+        ro.mkdir()
+        ro.chmod(0o500)
+        cases.append((ro / "v.gif", "cannot write the video into"))
+    elif os.path.isdir("/sys"):  # root writes through a read-only mode, but not into sysfs
+        cases.append((__import__("pathlib").Path("/sys/v.gif"), "cannot write the video into /sys"))
+    for video, needle in cases:
+        out = tmp_path / f"out-{video.parent.name}"
+        r = cli("eval", "--backend", "cpu", "--seeds", "2", "--max-steps", "3", "--no-rerun", "--video", str(video),
+                "--out", str(out))
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and needle in r.stderr, r.stderr
+        assert not (out / "per_episode.parquet").exists()  # refused before any episode ran
+    assert [p.name for p in tmp_path.iterdir() if "partial" in p.name] == []

@@ -163,18 +163,40 @@ def test_unfinished_sweep_is_not_clobbered_without_resume(tmp_path, capsys):
 
 
 def test_non_finite_seeds_are_flagged_and_counted_not_averaged(tmp_path):
+    import copy
+
+    import mujoco
+
+    from mjx_pusht.model.layout import QposLayout
+    from mjx_pusht.model.params import warning_bits
     from mjx_pusht.study.sweep import summarize
+    from mjx_pusht.task.reset import start_poses
 
     backend = CpuBackend(Scenario())
-    backend.model.dof_damping[:2] = -8.0  # anti-damping: once pushed, the tee's speed grows without bound
+    backend.model = m = copy.copy(backend.model)  # a copy: the compiled model is cached for every other test
+    m.dof_damping[:2] = -8.0  # anti-damping: once pushed, the tee's speed grows without bound
     rows = backend.run(np.arange(3))
-    # seeds 1 and 2 overflow to inf/NaN; seed 0 stays finite but is flung 1e8 m, through the walls
-    np.testing.assert_array_equal(rows.finite, [True, False, False])
-    np.testing.assert_array_equal(rows.contained, [False, False, False])
-    assert not rows.rigid[1:].any()
+    # the reference: the chapter's own mj_step loop per seed, and what MuJoCo's counters say
+    controller, episode = Scenario().driver()
+    table = controller.open_loop(episode.max_steps, 1)
+    finite, warned = [], []
+    for q0 in QposLayout.of(m).initial_qpos(m, start_poses(np.arange(3), reset="chapter")):
+        d = mujoco.MjData(m)
+        d.qpos[:] = q0
+        ok = True
+        for u in table:
+            d.ctrl[:] = u
+            mujoco.mj_step(m, d)
+            ok &= bool(np.all(np.isfinite(d.qpos)) and np.all(np.abs(d.qvel) < mujoco.mjMAXVAL))
+        finite.append(ok)
+        warned.append(warning_bits(d))
+    assert not any(finite) and all(warned)  # every seed blows up, and MuJoCo warns about it (BADQACC)
+    np.testing.assert_array_equal(rows.finite, finite)
+    np.testing.assert_array_equal(rows.warnings, warned)  # mujoco.rollout stops at a warning; the rows do not
+    assert not rows.rigid.any()
     s = summarize(rows, backend=backend, schedule=Scenario().schedule, break_it="none", compile_s=0, run_s=1)
-    assert s["n_non_finite"] == 2 and s["non_finite_seeds"] == [1, 2] and s["gap_max_dev"]["n"] == 1
-    assert s["n_escaped"] == 3
+    assert s["n_non_finite"] == 3 and s["non_finite_seeds"] == [0, 1, 2] and s["gap_max_dev"]["n"] == 0
+    assert s["n_mujoco_warnings"] == 3 and "mjWARN_BADQACC" in s["mujoco_warnings"]
     # MuJoCo itself noticed, in its log in the working folder (the test's own, conftest): QACC blew up
     log = (tmp_path / "MUJOCO_LOG.TXT").read_text()
     assert "Nan, Inf or huge value in QACC" in log

@@ -66,6 +66,13 @@ class _Replay:
         )
         self.qpos = state[:, :, 1 : 1 + model.nq]
         self.qvel = state[:, :, 1 + model.nq : 1 + model.nq + model.nv]
+        # mujoco.rollout stops a world at its first MuJoCo warning and repeats its last state to the
+        # end, without handing back which warning: its clock stops. mj_step would have carried on.
+        clock = np.arange(1, state.shape[1] + 1) * model.opt.timestep
+        self.stopped = ~np.all(np.abs(state[:, :, 0] - clock) <= 1e-9 * clock, axis=1)
+
+    def warnings(self) -> np.ndarray:
+        return np.zeros(len(self.stopped), np.int32)  # a world that raised one stopped (and was rerun by _Lockstep)
 
     def advance(self, u, live):
         if not np.array_equal(u[live], np.broadcast_to(self.ctrl[self.k], u[live].shape)):
@@ -96,7 +103,13 @@ class _Lockstep:
         self.qvel = np.zeros((frame_skip, n, model.nv))
         self.sens = np.zeros((frame_skip, n, model.nsensordata))
 
-    def copy(self) -> "_Lockstep":
+    def warnings(self) -> np.ndarray:
+        """Per world: the MuJoCo warnings its steps raised (a bitmask, see params.warning_bits)."""
+        from mjx_pusht.model.params import warning_bits
+
+        return np.array([warning_bits(d) for d in self.datas], np.int32)
+
+    def copy(self) -> _Lockstep:
         """An independent copy (each MjData copied), so an earlier state can be stepped again."""
         new = object.__new__(_Lockstep)
         new.models, new.fs, new.threads = self.models, self.fs, self.threads
@@ -106,7 +119,7 @@ class _Lockstep:
         new.qpos, new.qvel, new.sens = self.qpos.copy(), self.qvel.copy(), self.sens.copy()
         return new
 
-    def splice(self, rows, other: "_Lockstep", inplace: bool = False) -> "_Lockstep":
+    def splice(self, rows, other: _Lockstep, inplace: bool = False) -> _Lockstep:
         """This batch with `rows` taken from `other` (a batch of len(rows) worlds): a partial reset."""
         new = self if inplace else self.copy()
         for j, i in enumerate(np.asarray(rows)):
@@ -161,17 +174,19 @@ class FeedbackPool:
     holding Python's lock, so a batch on one process uses one core. Each worker runs `run_cpu` on
     a slice of the seeds; the rows are the same bits as one process (every seed is its own MjData).
 
-    Spawned processes re-import the caller's main module, so only command-line entry points and
-    callers with an `if __name__ == "__main__":` guard should make one; the library never does
-    on its own.
+    Workers are spawned, so they re-import the caller's main module: a script that makes one at
+    its top level, outside `if __name__ == "__main__":`, would start itself again in every worker,
+    and is refused in one line instead. Workers exit when their parent does, whatever killed it.
     """
 
     def __init__(self, workers: int):
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
+        _refuse_unguarded_main(workers)
         self.workers = workers
-        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                        initializer=_die_with_parent, initargs=(os.getpid(),))
 
     def run(self, scenario: Scenario, seeds, *, combos=None, poses=None) -> Rollouts:
         seeds = np.asarray(seeds, np.int64)
@@ -184,6 +199,49 @@ class FeedbackPool:
 
     def close(self) -> None:
         self.pool.shutdown(cancel_futures=True)
+
+
+def _die_with_parent(parent: int) -> None:
+    """In a worker: exit as soon as the process that made it is gone (a kill -9 leaves no handler to
+    shut the pool down, and orphaned workers lived on under PID 1 for minutes, ~94 MB each)."""
+    import threading
+    import time
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(0.2)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="die-with-parent").start()
+
+
+def _refuse_unguarded_main(workers: int) -> None:
+    """Refuse, in one line, to spawn workers from a script's top level outside its `__main__` guard:
+    each worker would run the script again (and the pool break with BrokenProcessPool)."""
+    import ast
+    import sys
+    from pathlib import Path
+
+    from mjx_pusht.errors import ConfigError
+
+    main = sys.modules.get("__main__")
+    path = getattr(main, "__file__", None)
+    frame = sys._getframe(1)
+    while frame is not None and not (frame.f_globals is getattr(main, "__dict__", None) and frame.f_code.co_name == "<module>"):
+        frame = frame.f_back
+    if frame is None or path is None or getattr(main, "__spec__", None) is not None:
+        return  # not running the script's top level (or run with -m, whose guard the module has)
+    try:
+        tree = ast.parse(Path(path).read_text())
+    except (OSError, SyntaxError):
+        return
+    line = frame.f_lineno
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.If) and "__main__" in ast.unparse(node.test) and "__name__" in ast.unparse(node.test)
+                and node.lineno <= line <= node.end_lineno):
+            return
+    raise ConfigError(f"workers={workers} spawns processes that import {path} again, and line {line} runs outside "
+                      "`if __name__ == \"__main__\":`; put the call under that guard, or pass workers=1")
 
 
 def run_cpu(
@@ -204,10 +262,10 @@ def run_cpu(
     model = model if model is not None else cpu_model(scenario)
     grid = scenario.grid()
     combos = np.zeros(len(seeds), np.int64) if combos is None else np.asarray(combos, np.int64)
-    if scenario.params:
-        from mjx_pusht.model.params import apply
+    from mjx_pusht.model.params import apply, model_warnings
 
-        models = [apply(model, g) for g in grid]
+    models = [apply(model, g) for g in grid] if scenario.params else [model]
+    model_bits = np.array([model_warnings(m) for m in models], np.int32)  # a singular model, say
     seeds = np.asarray(seeds, dtype=np.int64)
     nthread = nthread or default_threads()
     layout = QposLayout.of(model)
@@ -223,9 +281,10 @@ def run_cpu(
             qpos0 = layout.initial_qpos(model, poses[lo : lo + _CHUNK])
             n = len(qpos0)
             row_models = [models[c] for c in combos[lo : lo + n]] if scenario.params else model
-            if table is not None:
-                stepper = _Replay(pool, row_models, datas, model, qpos0, table, fs)
-            else:
+            stepper = _Replay(pool, row_models, datas, model, qpos0, table, fs) if table is not None else None
+            if stepper is None or stepper.stopped.any():
+                # feedback, or a rollout MuJoCo stopped at a warning: step MjData by MjData, as mj_step
+                # does (the same bits as the rollout where it did not stop), and read each world's warnings
                 stepper = _Lockstep(row_models, model, qpos0, fs)
             key = seed_key(seeds[lo : lo + n])
             carry = begin(layout, qpos0, key, controller, episode, np)
@@ -240,6 +299,7 @@ def run_cpu(
                 if trace:
                     frames.append(qs.swapaxes(0, 1).copy())
             parts.append(from_carry(seeds[lo : lo + n], poses[lo : lo + n], layout.pusher_xy(qpos0), carry))
+            parts[-1].warnings = stepper.warnings() | model_bits[combos[lo : lo + n]]
             if trace:
                 traces.append(np.concatenate(frames, axis=1))
     out = Rollouts.concat(parts) if parts else Rollouts.empty()

@@ -16,7 +16,7 @@ COLUMNS = (
     "tee_settled_x", "tee_settled_y", "tee_settled_yaw",
     "tee_final_x", "tee_final_y", "tee_final_yaw",
     "pusher_final_x", "pusher_final_y",
-    "tee_gap_settled", "tee_gap_max_dev", "tee_stayed_rigid", "finite", "contained",
+    "tee_gap_settled", "tee_gap_max_dev", "tee_stayed_rigid", "finite", "contained", "mujoco_warnings",
     "task_pos_err", "task_yaw_err", "task_coverage", "task_success",
 )
 
@@ -53,10 +53,17 @@ class Rollouts:
     # per row: the episode's bookkeeping (task.episode_init): done, success, steps_to_success,
     # length, return, coverage, best_coverage; final/pusher_final are the episode's end state
     episode: dict[str, np.ndarray] | None = None
+    # per row: a bitmask of the MuJoCo warnings (1 << mjtWarning) its model or its steps raised; 0: none.
+    # A row with one is never rigid: a singular model "stays rigid" because nothing in it moves.
+    warnings: np.ndarray | None = None
+
+    @property
+    def warned(self) -> np.ndarray:
+        return np.zeros(len(self.seeds), bool) if self.warnings is None else np.asarray(self.warnings) != 0
 
     @property
     def rigid(self) -> np.ndarray:
-        return stayed_rigid(self.gap_max_dev) & self.finite
+        return stayed_rigid(self.gap_max_dev) & self.finite & ~self.warned
 
     def __len__(self) -> int:
         return len(self.seeds)
@@ -74,6 +81,8 @@ class Rollouts:
         cols["tee_stayed_rigid"] = self.rigid
         cols["finite"] = self.finite.astype(bool)
         cols["contained"] = self.contained.astype(bool)
+        cols["mujoco_warnings"] = (np.zeros(len(self.seeds), np.int32) if self.warnings is None
+                                   else np.asarray(self.warnings, np.int32))
         for name, v in (self.params or {}).items():
             cols[f"param_{name}"] = np.asarray(v, np.float64)
         score = task_score(self.final)
@@ -107,6 +116,7 @@ class Rollouts:
             gap_max_dev=np.asarray(cols["tee_gap_max_dev"], np.float64),
             finite=np.asarray(cols["finite"], bool),
             contained=np.asarray(cols["contained"], bool),
+            warnings=np.asarray(cols["mujoco_warnings"], np.int32) if "mujoco_warnings" in cols else None,
             params={k.removeprefix("param_"): np.asarray(v, np.float64) for k, v in cols.items()
                     if k.startswith("param_")} or None,
             pusher_start=(np.stack([cols["pusher_start_x"], cols["pusher_start_y"]], -1).astype(np.float64)
@@ -119,9 +129,12 @@ class Rollouts:
 
     @classmethod
     def concat(cls, parts: list["Rollouts"]) -> "Rollouts":
-        optional = ("trace", "params", "pusher_start", "episode")
+        optional = ("trace", "params", "pusher_start", "episode", "warnings")
         fields = [f.name for f in dataclasses.fields(cls) if f.name not in optional]
         out = cls(**{f: np.concatenate([getattr(p, f) for p in parts]) for f in fields})
+        if parts and any(p.warnings is not None for p in parts):
+            out.warnings = np.concatenate([p.warnings if p.warnings is not None else np.zeros(len(p), np.int32)
+                                           for p in parts])
         if parts and parts[0].params:
             out.params = {k: np.concatenate([p.params[k] for p in parts]) for k in parts[0].params}
         if parts and all(p.pusher_start is not None for p in parts):
@@ -132,8 +145,9 @@ class Rollouts:
 
     def take(self, idx) -> "Rollouts":
         """Rows `idx`, in that order (the per-row extras too; the trace is not carried)."""
-        optional = ("trace", "params", "pusher_start", "episode")
+        optional = ("trace", "params", "pusher_start", "episode", "warnings")
         out = Rollouts(**{f.name: getattr(self, f.name)[idx] for f in dataclasses.fields(self) if f.name not in optional})
+        out.warnings = self.warnings[idx] if self.warnings is not None else None
         out.params = {k: v[idx] for k, v in self.params.items()} if self.params else None
         out.pusher_start = self.pusher_start[idx] if self.pusher_start is not None else None
         out.episode = {k: v[idx] for k, v in self.episode.items()} if self.episode is not None else None

@@ -38,7 +38,7 @@ class Clock:
 def cmd_compare(args) -> int:
     from mjx_pusht.backends.base import IMPL, BackendError
     from mjx_pusht.cli.banner import Banner
-    from mjx_pusht.io.outputs import prepare_out_dir
+    from mjx_pusht.io.outputs import claim_out_dir
     from mjx_pusht.study.compare import compare
     from mjx_pusht.study.seeds import parse_seeds
 
@@ -50,7 +50,9 @@ def cmd_compare(args) -> int:
         from mjx_pusht.task.controllers import load
 
         controller = load(args.controller)
-    out = prepare_out_dir(args.out)
+    out = claim_out_dir(args.out, "compare", {k: getattr(args, k) for k in (
+        "seeds", "backend", "controller", "reset", "max_steps", "root_cause", "tolerance", "iterations")},
+        replace=args.replace)
     banner = Banner("compare")
     if controller is not None:
         from mjx_pusht.backends.cpu import default_threads
@@ -99,7 +101,7 @@ def cmd_scene(args) -> int:
     from mjx_pusht.backends.cpu import CpuBackend
     from mjx_pusht.backends.results import scene_metrics
     from mjx_pusht.cli.banner import Banner
-    from mjx_pusht.io.outputs import atomic_write_json, drop_stale, prepare_out_dir
+    from mjx_pusht.io.outputs import atomic_write_json, claim_out_dir, drop_stale
     from mjx_pusht.model.scene import SceneSpec
     from mjx_pusht.model.tree import read_tree
     from mjx_pusht.scenario import Scenario
@@ -108,7 +110,8 @@ def cmd_scene(args) -> int:
     schedule = Schedule(nudge_steps=SMOKE_NUDGE_STEPS if args.smoke else args.steps)
     if args.compare_welded and args.break_it == "none":
         raise UsageError("--compare-welded compares a broken scene with the welded one: give --break split-tee or free-tee")
-    out = prepare_out_dir(args.out)
+    # one seed's look: a rerun with another seed may overwrite the last; another command's results may not
+    out = claim_out_dir(args.out, "scene", {}, replace=args.replace)
     banner = Banner("scene")
     scenario = Scenario(SceneSpec(args.break_it), schedule)
     backend = CpuBackend(scenario, nthread=1)
@@ -159,12 +162,17 @@ def cmd_sweep(args) -> int:
     params = tuple((n, tuple(v)) for n, v in (parse_param(t) for t in args.param))
     if len({n for n, _ in params}) != len(params):
         raise UsageError("each --param NAME may be given once")
-    processes = Processes(args.process_id, args.num_processes, args.coordinator)
+    processes = Processes(args.process_id, args.num_processes, args.coordinator, args.peer_timeout)
     processes.initialize()  # before anything asks JAX for its devices
     name, why = resolve(args.backend)
     schedule = Schedule(nudge_steps=args.steps)
     config = {"backend": name, "break_it": args.break_it, "steps": args.steps, "params": [[n, list(v)] for n, v in params]}
     scenario = Scenario(SceneSpec(args.break_it), schedule, params)
+    if processes.many:  # one sweep, one table: every process must have been given the same one
+        from mjx_pusht.study.sweep import fingerprint, rows_for
+
+        fp = fingerprint(rows_for(seeds, len(scenario.grid()))[0], config)
+        processes.agree({**fp.pop("config"), **fp, "out": str(Path(args.out).resolve())})
     row_seeds, combos, out, banner, clock, backend = _start_batch("sweep", args, seeds, name, why, config, scenario,
                                                                   check=processes.leader)
     print(read_tree(backend.model).describe())
@@ -211,7 +219,9 @@ def cmd_sweep(args) -> int:
         announce(summary["audit"])
     r = run.rollouts
     print(f"weld check: {summary['n_rigid']} of {len(r)} seeds RIGID ({summary['rigid_fraction']:.1%}), "
-          f"{len(r) - summary['n_rigid']} SPLIT; non-finite: {summary['n_non_finite']}")
+          f"{len(r) - summary['n_rigid'] - summary['n_mujoco_warnings']} SPLIT; non-finite: {summary['n_non_finite']}"
+          + (f"; MuJoCo warned on {summary['n_mujoco_warnings']}" if summary["n_mujoco_warnings"] else ""))
+    _warn_mujoco(summary, "seeds")
     if summary["n_non_finite"]:
         print(f"WARNING: {summary['n_non_finite']} seeds went non-finite (flagged in per_seed.parquet, "
               f"left out of the statistics): {summary['non_finite_seeds'][:10]}")
@@ -227,6 +237,13 @@ def cmd_sweep(args) -> int:
             record_sweep, summary, clock)
     banner.done()
     return 0
+
+
+def _warn_mujoco(summary: dict, rows: str) -> None:
+    if summary["n_mujoco_warnings"]:
+        print(f"WARNING: MuJoCo raised {', '.join(summary['mujoco_warnings'])} on {summary['n_mujoco_warnings']} {rows} "
+              f"(flagged in mujoco_warnings, never counted rigid; mjWARN_INERTIA: a singular model, e.g. a "
+              f"near-zero mass): {summary['mujoco_warning_seeds'][:10]}")
 
 
 def _join_processes(processes, run, out: Path, row_seeds):
@@ -252,12 +269,13 @@ def _start_batch(command: str, args, seeds, name: str, why: str, config: dict, s
     from mjx_pusht.backends.base import make_backend
     from mjx_pusht.backends.cpu import default_threads
     from mjx_pusht.cli.banner import Banner
-    from mjx_pusht.io.outputs import prepare_out_dir
-    from mjx_pusht.study.sweep import check_resumable, rows_for
+    from mjx_pusht.io.outputs import claim_out_dir, prepare_out_dir
+    from mjx_pusht.study.sweep import check_resumable, fingerprint, rows_for
 
     row_seeds, combos = rows_for(seeds, len(scenario.grid()))
     out = prepare_out_dir(args.out)
-    if check:  # with several processes, process 0 checks (and clears) the folder for all
+    if check:  # with several processes, process 0 checks, locks (and clears) the folder for all
+        claim_out_dir(out, command, fingerprint(row_seeds, config), replace=args.replace)
         check_resumable(out, row_seeds, config, args.resume)
     banner = Banner(command)
     print(f"backend: {name} ({why})")
@@ -363,13 +381,14 @@ def cmd_eval(args) -> int:
     print(f"success: {summary['n_success']} of {summary['n_finite']} episodes ({summary['success_rate']:.1%}, "
           f"95% interval {lo:.1%}-{hi:.1%}); median steps to success {summary['median_steps_to_success']}; "
           f"median final coverage {summary['final_coverage'].get('median', float('nan')):.3f}")
+    _warn_mujoco(summary, "episodes")
     if summary["n_non_finite"]:
         print(f"WARNING: {summary['n_non_finite']} episodes went non-finite (flagged, left out of the rate): "
               f"{summary['non_finite_seeds'][:10]}")
     if summary["n_escaped"] and args.break_it != "free-tee":
         print(f"WARNING: {summary['n_escaped']} episodes left the walled workspace: {summary['escaped_seeds'][:10]}")
-    if args.break_it == "none" and summary["n_rigid"] != len(r):
-        print(f"WARNING: the welded T came apart in {len(r) - summary['n_rigid']} episodes")
+    if args.break_it == "none" and summary["n_rigid"] + summary["n_mujoco_warnings"] != len(r):
+        print(f"WARNING: the welded T came apart in {len(r) - summary['n_rigid'] - summary['n_mujoco_warnings']} episodes")
     print(f"table: {out / 'per_episode.parquet'}\nsummary: {out / 'summary.json'}")
     from mjx_pusht.io.record import record_episodes
 
@@ -396,11 +415,14 @@ COMMANDS = {"scene": cmd_scene, "tree": cmd_tree, "sweep": cmd_sweep, "eval": cm
 def main(argv: list[str] | None = None) -> int:
     """Run one command. Bad input (an `MjxPushtError`) is one line and a non-zero exit; anything else is a bug
     and keeps its traceback."""
+    from mjx_pusht.io.outputs import held_folders
+
     try:
         args = build_parser().parse_args(argv)
         if args.verbose:
             os.environ["MJX_PUSHT_VERBOSE"] = "1"
-        return COMMANDS[args.command](args)
+        with held_folders():  # the --out folder is locked while the command runs
+            return COMMANDS[args.command](args)
     except UsageError as e:
         print(f"mjx-pusht: error: {e}", file=sys.stderr)
         return 2

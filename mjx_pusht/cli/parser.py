@@ -80,6 +80,9 @@ def _seed(text: str) -> int:
     return v
 
 
+REPLACE_HELP = "overwrite --out even if it holds another command's, or other seeds' or settings', finished results"
+
+
 def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str) -> None:
     """The options every batch command shares: seeds, backend, scene, output, chunks, recording, parameters."""
     p.add_argument("--seeds", default=seeds, help=f"N (0..N-1), A:B, or a,b,c (default {seeds})")
@@ -88,6 +91,7 @@ def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str)
     p.add_argument("--out", type=Path, default=Path(f"outputs/{name}"))
     p.add_argument("--chunk", type=_positive, default=None, help=f"{rows} per batch (default: by backend)")
     p.add_argument("--resume", action="store_true", help=f"finish an interrupted {name} in --out")
+    p.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     p.add_argument("--record", type=_nonneg, default=4, help=f"{rows} to show side by side in {name}.rrd (default 4)")
     p.add_argument("--no-rerun", dest="rerun", action="store_false", help=f"skip {name}.rrd")
     p.add_argument("--no-progress", dest="progress", action="store_false")
@@ -107,6 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--steps", type=_positive, default=120, help="nudge length in steps (default 120)")
     s.add_argument("--smoke", action="store_true", help="fixed 120-step run; two runs match byte for byte")
     s.add_argument("--out", type=Path, default=Path("outputs/scene"))
+    s.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     s.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip the .rrd recording")
     s.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
     s.add_argument("--compare-welded", action="store_true",
@@ -130,6 +135,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="processes sharing this sweep through jax.distributed, one a host or GPU (default 1)")
     w.add_argument("--process-id", type=_nonneg, default=0, help="this process's index, 0 .. N-1 (0 writes the table)")
     w.add_argument("--coordinator", default=None, metavar="HOST:PORT", help="where process 0 listens")
+    w.add_argument("--peer-timeout", type=_positive_float, default=300.0, metavar="SECONDS",
+                   help="how long to wait for every process to join before giving up (default 300)")
 
     e = sub.add_parser("eval", help="a controller on many start states: per_episode.parquet, success rate + interval")
     _batch_args(e, "eval", "episodes", seeds="512")
@@ -151,6 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--obs", choices=("state", "keypoints"), default="state", help="what the policy sees (default state)")
     t.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
     t.add_argument("--out", type=Path, default=Path("outputs/train"))
+    t.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     t.add_argument("--envs", type=_positive, default=4096, help="episodes rolled out per iteration (default 4096)")
     t.add_argument("--iterations", type=_positive, default=10, help="DAgger iterations (default 10)")
     t.add_argument("--fit-steps", type=_positive, default=2000, help="gradient steps per iteration (default 2000)")
@@ -175,6 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--seeds", default="64", help="N, A:B or a,b,c (default 64)")
     c.add_argument("--backend", default="mjx-jax", help="mjx-jax or mjx-warp (default mjx-jax)")
     c.add_argument("--out", type=Path, default=Path("outputs/compare"))
+    c.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     c.add_argument("--no-root-cause", dest="root_cause", action="store_false",
                    help="skip the one-change-at-a-time runs (x64, solver, contact census)")
     c.add_argument("--tolerance", type=_positive_float, default=None,

@@ -75,3 +75,77 @@ def read_table(path: Path) -> dict:
 
     table = pq.read_table(path)
     return {name: table.column(name).to_numpy() for name in table.column_names}
+
+
+# What a folder's finished results are, by the file each command writes last.
+RESULTS = {"per_seed.parquet": "sweep", "per_episode.parquet": "eval", "metrics.json": "scene",
+           "compare.json": "compare", "compare_episodes.json": "compare", "policy.msgpack": "train"}
+RUN_FILE = ".run.json"  # which command, and which seeds and settings, the folder's results are from
+_HELD: dict[Path, object] = {}  # folders this process has locked, and their open lock files
+
+
+def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool = False) -> Path:
+    """Make `path` this run's folder: writable, locked against a second run, and holding no finished
+    results of another command or of other seeds or settings unless `replace` says to drop them.
+
+    One folder holds one run: a sweep into a finished eval folder would replace its summary.json
+    and leave its table without one, and a rerun with other seeds would overwrite a finished table.
+    A rerun of the same command with the same seeds and settings may overwrite its own results."""
+    import hashlib
+
+    path = prepare_out_dir(path)
+    _lock(path)
+    mine = {"command": command,
+            "fingerprint": hashlib.sha256(json.dumps(fingerprint, sort_keys=True, default=str).encode()).hexdigest()}
+    held = [name for name in RESULTS if (path / name).exists()]
+    if held:
+        try:
+            owner = json.loads((path / RUN_FILE).read_text())
+        except (OSError, ValueError):
+            owner = {"command": RESULTS[held[0]]}  # results from before this file existed: known by their name
+        same = owner.get("command") == command and owner.get("fingerprint", mine["fingerprint"]) == mine["fingerprint"]
+        if not same and not replace:
+            what = ("another command's" if owner.get("command") != command else "other seeds' or settings'")
+            raise OutputError(f"--out {path} holds {what} finished results ({owner.get('command')}: {', '.join(held)}); "
+                              "pass --replace to overwrite them, or choose another --out")
+        if not same:
+            for f in [*(path / name for name in (*held, "summary.json")), *path.glob("*.rrd")]:
+                f.unlink(missing_ok=True)
+            print(f"--replace: removed the earlier {owner.get('command')} results in {path} ({', '.join(held)})")
+    atomic_write_json(path / RUN_FILE, mine)
+    return path
+
+
+def _lock(path: Path) -> None:
+    """Hold an exclusive lock on `path` until `release` (or this process's end): a second run into the
+    same folder stops in one line instead of racing this one for its chunk files."""
+    import fcntl
+
+    key = path.resolve()
+    if key in _HELD:
+        return
+    f = open(path / ".lock", "a+")  # noqa: SIM115 - held open for the run's length
+    try:
+        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        f.seek(0)
+        pid = f.read().strip() or "?"
+        f.close()
+        raise OutputError(f"--out {path} is in use by another mjx-pusht run (pid {pid}); wait for it to finish "
+                          "or choose another --out") from None
+    f.truncate(0)
+    f.write(str(os.getpid()))
+    f.flush()
+    _HELD[key] = f
+
+
+class held_folders:
+    """`with held_folders():` around a command: the folders it locked are let go when it ends (a command
+    run inside another, as train runs eval, lets go of its own only)."""
+
+    def __enter__(self):
+        self.before = set(_HELD)
+
+    def __exit__(self, *exc):
+        for key in set(_HELD) - self.before:
+            _HELD.pop(key).close()

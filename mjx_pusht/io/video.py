@@ -36,6 +36,15 @@ def check_path(path: Path) -> Path:
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
         raise VideoError(f"cannot write the video: folder {parent} does not exist")
+    if path.is_dir():
+        raise VideoError(f"--video {path} is a folder; give a file name such as {path / 'episodes'}{path.suffix}")
+    try:  # the folder must take a new file now, not after the episodes have run
+        import tempfile
+
+        with tempfile.NamedTemporaryFile(dir=parent, prefix=".probe-"):
+            pass
+    except OSError as e:
+        raise VideoError(f"cannot write the video into {parent}: {e.strerror or e}") from None
     return path
 
 
@@ -90,7 +99,15 @@ def episode_grid(model, qpos: np.ndarray, layout, seeds, frame_skip: int, succes
 def write(path: Path, frames: np.ndarray, fps: float) -> None:
     """GIF through Pillow, MP4 through imageio's ffmpeg; written to a temporary name, then moved into place."""
     path = check_path(path)
-    tmp = path.with_name(path.name + ".partial" + path.suffix)
+    tmp = path.with_name("." + path.name + ".partial" + path.suffix)  # hidden until whole, as record.py's
+    try:
+        _encode(tmp, path, frames, fps)
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _encode(tmp: Path, path: Path, frames: np.ndarray, fps: float) -> None:
     if path.suffix.lower() == ".gif":
         from PIL import Image
 
@@ -107,7 +124,6 @@ def write(path: Path, frames: np.ndarray, fps: float) -> None:
             # a multithreaded process is for children that go on running Python, which this one never does
             warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
             iio.imwrite(tmp, even, fps=fps, codec="libx264", plugin="pyav" if _has_pyav() else None)
-    tmp.replace(path)
 
 
 def _has_pyav() -> bool:

@@ -93,6 +93,11 @@ def grid(params: dict[str, list[float]]) -> list[dict[str, float]]:
     return [dict(zip(names, combo)) for combo in itertools.product(*(params[n] for n in names))]
 
 
+def grid_warnings(model: mujoco.MjModel, combos: list[dict[str, float]]) -> np.ndarray:
+    """`model_warnings` of each parameter combination's model, (n_combos,) int32."""
+    return np.array([model_warnings(apply(model, g) if g else model) for g in combos], np.int32)
+
+
 def apply(model: mujoco.MjModel, values: dict[str, float]) -> mujoco.MjModel:
     """A copy of `model` with the parameters set and MuJoCo's derived constants recomputed."""
     import copy
@@ -102,3 +107,25 @@ def apply(model: mujoco.MjModel, values: dict[str, float]) -> mujoco.MjModel:
         PARAMS[name][0](m, float(v))
     mujoco.mj_setConst(m, mujoco.MjData(m))
     return m
+
+
+def warning_bits(data: mujoco.MjData) -> int:
+    """The MuJoCo warnings `data` has raised since it was made, as a bitmask of 1 << mjtWarning."""
+    return sum(1 << i for i, n in enumerate(data.warning.number) if n > 0)
+
+
+def warning_names(bits: int) -> list[str]:
+    """mjWARN_INERTIA-style names of a warning bitmask, for summaries and messages."""
+    return [mujoco.mjtWarning(i).name for i in range(int(mujoco.mjtWarning.mjNWARNING)) if bits >> i & 1]
+
+
+def model_warnings(model: mujoco.MjModel) -> int:
+    """The warnings MuJoCo raises on this model before anything moves (mj_forward at its rest pose).
+
+    A parameter can make a model MuJoCo cannot trust: a tee of 1e-300 kg gives a singular inertia
+    matrix, MuJoCo prints a warning and carries on, the pusher never moves and every row would
+    read finite and rigid. Every backend compiles from this model, so this check covers MJX too
+    (which raises no warnings of its own)."""
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    return warning_bits(data)

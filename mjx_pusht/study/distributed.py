@@ -11,6 +11,12 @@ or a shared filesystem.
 from __future__ import annotations
 
 import dataclasses
+import errno
+import json
+import os
+import socket
+import sys
+import threading
 
 import numpy as np
 
@@ -30,6 +36,7 @@ class Processes:
     process_id: int = 0
     num_processes: int = 1
     coordinator: str | None = None
+    peer_timeout: float = 300.0  # seconds to wait for every process to join, and to agree
 
     def __post_init__(self) -> None:
         if self.num_processes < 1:
@@ -50,17 +57,69 @@ class Processes:
         return self.process_id == 0
 
     def initialize(self) -> None:
-        """Join the other processes (before JAX touches a device). Each then sees only its own devices."""
+        """Join the other processes (before JAX touches a device). Each then sees only its own devices.
+
+        Two of JAX's failures here kill the process from C++ instead of raising: a coordinator port
+        another program holds (a segfault) and a process that never arrives (an abort after the
+        timeout). The first is checked here before JAX binds; the second is cut short, in one line,
+        by a watchdog that fires before JAX's own deadline."""
         if not self.many:
             return
         import jax
 
+        if self.leader:
+            self._check_port_free()
+        joined = threading.Event()
+        threading.Thread(target=self._watchdog, args=(joined,), daemon=True, name="join-watchdog").start()
         try:
             jax.distributed.initialize(coordinator_address=self.coordinator, num_processes=self.num_processes,
-                                       process_id=self.process_id, initialization_timeout=300)
+                                       process_id=self.process_id,
+                                       initialization_timeout=int(self.peer_timeout) + 60)  # ours fires first
         except Exception as e:  # noqa: BLE001 - the coordinator's errors are long; one line says enough
             raise DistributedError(f"could not join {self.num_processes} processes at {self.coordinator}: "
                                    f"{str(e).splitlines()[0]}") from None
+        finally:
+            joined.set()
+
+    def _check_port_free(self) -> None:
+        port = int(self.coordinator.rsplit(":", 1)[1])
+        for family, addr in ((socket.AF_INET6, "::"), (socket.AF_INET, "")):
+            try:
+                with socket.socket(family, socket.SOCK_STREAM) as s:
+                    s.bind((addr, port))
+                return
+            except OSError as e:
+                if e.errno == errno.EADDRINUSE:
+                    raise DistributedError(f"--coordinator {self.coordinator}: port {port} is in use by another "
+                                           "program; choose another port") from None
+                # no IPv6 here: try IPv4
+
+    def _watchdog(self, joined: threading.Event) -> None:
+        if not joined.wait(self.peer_timeout):
+            print(f"mjx-pusht: error: not all {self.num_processes} processes joined at {self.coordinator} within "
+                  f"{self.peer_timeout:g} s (--peer-timeout): start the missing ones with the same --coordinator",
+                  file=sys.stderr, flush=True)
+            os._exit(1)
+
+    def agree(self, settings: dict) -> None:
+        """Raise in every process, before any row is written, if any two were given other settings
+        (seeds, scene, steps, parameters, --out): their rows would be mixed into one table."""
+        if not self.many:
+            return
+        from jax._src import distributed
+
+        client = distributed.global_state.client
+        mine = json.dumps(settings, sort_keys=True, default=str)
+        settings = json.loads(mine)  # compared as every process sees it: through JSON
+        client.key_value_set(f"mjx_pusht:settings:{self.process_id}", mine)
+        timeout = int(self.peer_timeout * 1000)
+        for i in range(self.num_processes):
+            theirs = json.loads(client.blocking_key_value_get(f"mjx_pusht:settings:{i}", timeout))
+            if theirs != settings:
+                diff = "; ".join(f"{k} {settings.get(k)} here, {theirs.get(k)} there"
+                                 for k in sorted({*theirs, *settings}) if theirs.get(k) != settings.get(k))
+                raise DistributedError(f"process {i} was given other settings than process {self.process_id} "
+                                       f"({diff}): give every process the same options; nothing was written")
 
     def block(self, n_rows: int) -> tuple[int, int]:
         """This process's rows [lo, hi) of n_rows: contiguous blocks, as even as they can be."""

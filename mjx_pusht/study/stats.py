@@ -37,6 +37,16 @@ def distribution(x) -> dict:
             "mean": float(x.mean()), "p75": float(q[3]), "p95": float(q[4]), "p99": float(q[5]), "max": float(x.max())}
 
 
+def warning_summary(r: Rollouts) -> dict:
+    """The rows MuJoCo warned about (a singular model, a world it reset): how many, which, and what it said."""
+    from mjx_pusht.model.params import warning_names
+
+    warned = r.warned
+    bits = int(np.bitwise_or.reduce(r.warnings[warned])) if warned.any() else 0
+    return {"n_mujoco_warnings": int(warned.sum()), "mujoco_warning_seeds": [int(s) for s in r.seeds[warned][:100]],
+            "mujoco_warnings": warning_names(bits)}
+
+
 def summarize_episodes(r: Rollouts) -> dict:
     """The episode outcomes: success rate and interval over finite episodes, steps to success, coverage, return."""
     ep = r.episode
@@ -63,4 +73,5 @@ def summarize_episodes(r: Rollouts) -> dict:
         "non_finite_seeds": [int(s) for s in r.seeds[~finite][:100]],
         "n_escaped": int((~r.contained).sum()),
         "escaped_seeds": [int(s) for s in r.seeds[~r.contained][:100]],
+        **warning_summary(r),
     }

@@ -21,7 +21,7 @@ import numpy as np
 from mjx_pusht.backends.results import Rollouts
 from mjx_pusht.errors import MjxPushtError
 from mjx_pusht.io.outputs import atomic_write_json, atomic_write_table, read_table
-from mjx_pusht.study.stats import distribution
+from mjx_pusht.study.stats import distribution, warning_summary
 
 PARTS = ".parts"
 
@@ -45,7 +45,7 @@ def rows_for(seeds: np.ndarray, n_combos: int) -> tuple[np.ndarray, np.ndarray]:
     return np.tile(seeds, n_combos), np.repeat(np.arange(n_combos), len(seeds))
 
 
-def _fingerprint(seeds: np.ndarray, config: dict) -> dict:
+def fingerprint(seeds: np.ndarray, config: dict) -> dict:
     return {"config": config, "n_seeds": int(len(seeds)), "seeds_sha256": hashlib.sha256(seeds.tobytes()).hexdigest()}
 
 
@@ -71,7 +71,7 @@ def check_resumable(out: Path, seeds: np.ndarray, config: dict, resume: bool) ->
                 "pass --resume to finish it, or choose another --out"
             )
         return
-    if json.loads(manifest.read_text()) != _fingerprint(seeds, config):
+    if json.loads(manifest.read_text()) != fingerprint(seeds, config):
         raise ResumeError(f"--resume: the unfinished sweep in {out} used other seeds or settings; choose another --out")
 
 
@@ -122,7 +122,7 @@ def run_sweep(
         if not resume and parts.exists():
             shutil.rmtree(parts)
         parts.mkdir(parents=True, exist_ok=True)
-        atomic_write_json(parts / "manifest.json", _fingerprint(seeds, config))
+        atomic_write_json(parts / "manifest.json", fingerprint(seeds, config))
     processes.barrier("parts-ready")
     first, last = processes.block(len(seeds))  # this process's rows; all of them for one process
     if not chunk and len(seeds):
@@ -287,6 +287,7 @@ def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s
         "non_finite_seeds": [int(s) for s in rollouts.seeds[~finite][:100]],
         "n_escaped": int((~rollouts.contained).sum()),
         "escaped_seeds": [int(s) for s in rollouts.seeds[~rollouts.contained][:100]],
+        **warning_summary(rollouts),
         "gap_max_dev": distribution(rollouts.gap_max_dev[finite]),
         "tee_gap_settled": distribution(rollouts.gap_settled[finite]),
         "tee_final_y": distribution(rollouts.final[finite, 1]),

@@ -237,17 +237,23 @@ def cmd_train(args) -> int:
     """`mjx-pusht train`: check everything, train, then judge the policy with `eval` on the held-out seeds."""
     from mjx_pusht.backends.base import resolve
     from mjx_pusht.cli.banner import Banner
-    from mjx_pusht.io.outputs import prepare_out_dir
+    from mjx_pusht.io.outputs import claim_out_dir
     from mjx_pusht.train.dagger import DaggerConfig
 
     name, why = resolve(args.backend)
     cfg = DaggerConfig(obs_type=args.obs, envs=args.envs, iterations=args.iterations, hidden=tuple(args.hidden),
                        learning_rate=args.lr, batch=args.batch, fit_steps=args.fit_steps, beta_decay=args.beta_decay,
                        max_samples=args.max_samples, eval_envs=args.eval_envs, seed=args.seed, reset=args.reset)
-    out = prepare_out_dir(args.out)
+    out = claim_out_dir(args.out, "train", {}, replace=args.replace)  # the run's settings: checked on --resume
     started = (out / "checkpoints" / "resume.msgpack").exists()
-    if started and not args.resume:
-        raise TrainError(f"--out {out} holds a training run: --resume to continue it, or give a new --out")
+    if started and args.replace and not args.resume:
+        import shutil
+
+        shutil.rmtree(out / "checkpoints")
+        print(f"--replace: removed the earlier training run's checkpoints in {out}")
+    elif started and not args.resume:
+        raise TrainError(f"--out {out} holds a training run: --resume to continue it, --replace to start over, "
+                         "or give a new --out")
     banner = Banner("train")
     print(f"backend: {name} ({why}); DAgger from {cfg.obs_type}: {cfg.envs} {cfg.reset} episodes an iteration, "
           f"{cfg.iterations} iterations, held-out seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
