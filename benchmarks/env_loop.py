@@ -65,6 +65,7 @@ def attempt(name, fn):
         print(json.dumps({name: row[name]}), file=sys.stderr, flush=True)
 
 env = PushTEnv(backend="mjx-warp", pixels=pixels)
+row["graph_mode"] = env.graph_mode or "MJX default"  # the mode the env resolved (MJX_PUSHT_ENV_GRAPH_MODE overrides)
 W = jax.random.normal(jax.random.PRNGKey(0), (5, 2)) * 0.5
 
 def raw():

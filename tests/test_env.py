@@ -130,3 +130,11 @@ def test_an_undersized_warp_buffer_is_caught_loudly_never_handed_on_as_physics()
     for _ in range(30):
         state = env.check(env.step(state, np.tile([0.0, 1.0], (4, 1))))
     assert not np.asarray(state.dropped).any()
+
+
+def test_an_unknown_warp_graph_mode_is_one_line():
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="unknown graph mode 'BOGUS'; choose from NONE, JAX, WARP, WARP_STAGED"):
+        PushTEnv(backend="mjx-warp", graph_mode="BOGUS")

@@ -73,6 +73,13 @@ def _check_actions(action, n: int):
     return action
 
 
+# The env steps one control step per call, from buffers XLA hands it anew each call: staged, Warp replays
+# one graph whatever the addresses. Measured on an H100 (NOTES change 13): the gymnasium vector env,
+# torch output, 237k / 650k / 1.17 M control steps/s at 4,096 / 16,384 / 65,536 envs, against 114k /
+# 431k / out of memory with "WARP".
+ENV_GRAPH_MODE = "WARP_STAGED"
+
+
 class _Stateless(Controller):
     """The environment takes actions from outside; its episode carry needs no controller state."""
 
@@ -93,7 +100,9 @@ class PushTEnv:
     # MJX-Warp: contacts and constraint rows per world; None: the sweep's start sizes (backends/warp.py)
     contacts_per_world: int | None = None
     rows_per_world: int | None = None
-    # MJX-Warp's CUDA-graph mode (None: MJX's default, Warp capturing per call; "JAX": XLA captures, see NOTES)
+    # MJX-Warp's CUDA-graph mode, a name of warp.JaxCallableGraphMode. None: "WARP_STAGED" (Warp copies the
+    # step's inputs into buffers of its own and replays one captured graph), the env's measured best
+    # (NOTES change 13); "WARP" is MJX's default, which the sweep keeps
     graph_mode: str | None = None
 
     def __post_init__(self) -> None:
@@ -130,7 +139,19 @@ class PushTEnv:
             # overflow bits are kept in the state (`dropped`), and `check` raises on them: a step that
             # dropped a contact is never handed on as physics.
             # MJX_PUSHT_ENV_GRAPH_MODE: the benchmarks' knob to compare CUDA-graph modes (benchmarks/env_loop.py)
-            self.graph_mode = self.graph_mode or os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE") or None
+            self.graph_mode = self.graph_mode or os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE")
+            if impl == "warp" and self.graph_mode is None:
+                from mjx_pusht.backends.base import has_gpu
+
+                self.graph_mode = ENV_GRAPH_MODE if has_gpu() else None  # Warp captures graphs on CUDA only
+            if impl == "warp" and self.graph_mode is not None:
+                import warp as wp
+
+                modes = list(wp.JaxCallableGraphMode.__members__)
+                if self.graph_mode not in modes:
+                    raise ConfigError(f"unknown graph mode {self.graph_mode!r}; choose from {', '.join(modes)}")
+            else:
+                self.graph_mode = None  # MJX-JAX has no FFI call to capture
             from mjx_pusht.backends.warp import (
                 ENV_ROWS_PER_WORLD,
                 START_CONTACTS_PER_WORLD,

@@ -1,0 +1,72 @@
+"""Where the env step's time goes on the GPU: the same step scanned in one jitted program or called once a step.
+
+    python benchmarks/env_bisect.py N STEPS physics_only,plain,full,percall_plain,percall_full
+
+One process, one N, MJX-Warp (MJX_PUSHT_ENV_GRAPH_MODE picks the CUDA-graph mode). Variants:
+`physics_only` (the env's mjx.Data, frame_skip mjx.steps at the action's ctrl, nothing else),
+`plain` (the env's control step: physics, invariants, task score), `full` (plus the autoreset);
+each in a `lax.scan` of STEPS steps, and `percall_*` the same step jitted once and called STEPS
+times from Python. Figures are N x STEPS / seconds of the second call. Results: NOTES change 13.
+"""
+import json
+import sys
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from mujoco import mjx
+
+from mjx_pusht.envs.functional import PushTEnv
+from mjx_pusht.envs.wrappers import AutoReset
+
+n, steps = int(sys.argv[1]), int(sys.argv[2])
+variants = sys.argv[3].split(",")
+env = PushTEnv(backend="mjx-warp")
+ar = AutoReset(env, mode="same_step")
+s = ar.reset(np.arange(n))
+W = jax.random.normal(jax.random.PRNGKey(0), (5, 2)) * 0.5
+d0 = env.template(n)
+out = {"n": n, "steps": steps, "device": str(jax.devices()[0])}
+
+def plain(s):
+    a = jnp.tanh(s.obs["state"] @ W)
+    st = jax.vmap(env.advance_one)(s._replace(info=None), a)
+    return st._replace(info=s.info)
+
+def full(s):
+    return ar._step_batch(d0, s, jnp.tanh(s.obs["state"] @ W))
+
+def physics_only(s):  # the env's data, its frame_skip mjx.steps at the action's ctrl, nothing else
+    a = jnp.tanh(s.obs["state"] @ W)
+    def one(d, u):
+        return jax.lax.scan(lambda d, _: (mjx.step(env._mx, d.replace(ctrl=u)), None), d, None, env.episode.frame_skip)[0]
+    return s._replace(data=jax.vmap(one)(s.data, a))
+
+def scan_of(fn):
+    @jax.jit
+    def run(s):
+        return jax.lax.scan(lambda s, _: (fn(s), None), s, None, steps)[0]
+    return run
+
+def timed(name, run, s):
+    try:
+        t0 = time.perf_counter(); s1 = jax.block_until_ready(run(s)); c = time.perf_counter() - t0
+        t0 = time.perf_counter(); jax.block_until_ready(run(s1)); dt = time.perf_counter() - t0
+        out[name] = {"steps_per_s": n * steps / dt, "ms_per_step": 1000 * dt / steps, "first_call_s": c}
+    except Exception as e:  # noqa: BLE001 - a failed variant is recorded, the rest still run
+        out[name] = {"error": f"{type(e).__name__}: {str(e).splitlines()[0][:200]}"}
+    print(json.dumps({name: out[name]}), flush=True)
+
+for v in variants:
+    if v.startswith("percall_"):
+        fn = {"percall_plain": plain, "percall_full": full}[v]
+        j = jax.jit(fn)
+        def run(s, j=j):
+            for _ in range(steps):
+                s = j(s)
+            return s
+        timed(v, run, s)
+    else:
+        timed(v, scan_of({"plain": plain, "full": full, "physics_only": physics_only}[v]), s)
+print("RESULT " + json.dumps(out), flush=True)
