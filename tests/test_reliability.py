@@ -201,7 +201,7 @@ def test_mjx_rows_carry_the_model_check_too():
     from mjx_pusht.scenario import Scenario
 
     backend = MjxBackend(Scenario(params=(("tee_mass", (1e-300, 0.105)),)), "jax")
-    assert backend.runner.model_warnings[0] != 0 and backend.runner.model_warnings[1] == 0
+    assert backend.runner.models.warnings[0] != 0 and backend.runner.models.warnings[1] == 0
 
 
 def _files(folder):

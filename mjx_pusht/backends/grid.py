@@ -18,9 +18,11 @@ class ModelGrid:
         import jax.numpy as jnp
         from mujoco import mjx
 
-        from mjx_pusht.model.params import apply
+        from mjx_pusht.model.params import apply, model_warnings
 
         models = [apply(model, g) for g in grid] if any(grid) else [model]
+        # MuJoCo's verdict on each combination's model (a singular one, say): MJX raises no warnings itself
+        self.warnings = np.array([model_warnings(m) for m in models], np.int32)
         kw = {}
         if graph_mode is not None:
             import warp as wp

@@ -160,9 +160,6 @@ class MjxRunner:
             self.warp_kernels = warp_kernels.precompile(self.model, self.devices)
             self.compile_seconds += self.warp_kernels.get("find_seconds", 0.0) + self.warp_kernels.get("compile_seconds", 0.0)
         self.grid = scenario.grid()
-        from mjx_pusht.model.params import grid_warnings
-
-        self.model_warnings = grid_warnings(self.model, self.grid)
         self.models = ModelGrid(self.model, self.grid, impl=cfg.impl, device=self.devices[0], graph_mode=cfg.graph_mode)
         # x64 is process-wide in JAX: once on, every later runner computes in float64 too
         self.dtype = np.float64 if jax.config.jax_enable_x64 else np.float32
@@ -267,7 +264,7 @@ class MjxRunner:
         carry = jax.tree.map(lambda a: np.asarray(a)[:n], carry)
         q0 = np.asarray(qpos0, np.float64)[:n]
         out = from_carry(seeds, poses, self.layout.pusher_xy(q0), carry)
-        out.warnings = self.model_warnings[combos]  # MJX raises none of its own; a singular model is still one
+        out.warnings = self.models.warnings[combos]  # MJX raises none of its own; a singular model is still one
         if self.scenario.params:
             out.params = {name: np.array([self.grid[c][name] for c in combos]) for name, _ in self.scenario.params}
         if trace:

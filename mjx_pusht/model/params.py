@@ -93,11 +93,6 @@ def grid(params: dict[str, list[float]]) -> list[dict[str, float]]:
     return [dict(zip(names, combo)) for combo in itertools.product(*(params[n] for n in names))]
 
 
-def grid_warnings(model: mujoco.MjModel, combos: list[dict[str, float]]) -> np.ndarray:
-    """`model_warnings` of each parameter combination's model, (n_combos,) int32."""
-    return np.array([model_warnings(apply(model, g) if g else model) for g in combos], np.int32)
-
-
 def apply(model: mujoco.MjModel, values: dict[str, float]) -> mujoco.MjModel:
     """A copy of `model` with the parameters set and MuJoCo's derived constants recomputed."""
     import copy
