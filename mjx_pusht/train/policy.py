@@ -1,7 +1,13 @@
 """A trained policy: its network, its checkpoint file, and the controller that runs it.
 
-The network is a flax MLP on features of the observation (`features`), its output squashed by
-tanh into the servos' ctrlrange (velocity actions, m/s). Training applies it with flax; the
+The network is a flax MLP on features of the observation and of the policy's memory (`features`).
+It has two heads: the action, squashed by tanh into the servos' ctrlrange (velocity actions, m/s),
+and the next memory. The memory is a small discrete state in the expert's own carry format (which
+move it is on, and its "near" and "go the long way round" latches, `Expert.act`): the expert
+decides with hysteresis, so the present observation alone does not fix its action, and a network
+asked to regress it from the observation averages the two choices where they meet (left or right
+round the T) into standing still (NOTES, changes 12 and 14). With a memory of its own, trained to
+take the expert's next carry, the policy is a function again. Training applies it with flax; the
 controller (`PolicyController`, what `--controller policy:PATH` loads) evaluates the same layers
 with the array namespace of its input, so one checkpoint runs inside MJX's compiled scan (JAX,
 float32) and on MuJoCo C (NumPy, float64) without flax at all. `tests/test_train.py` checks that
@@ -20,40 +26,57 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pusht.task.controllers import Controller, ControllerError
+from mjx_pusht.task.controllers import NEAR, REVERSE, Controller, ControllerError
 from mjx_pusht.task.rules import CTRL_LIMIT, array_namespace
 
-FORMAT = "mjx_pusht.policy/1"
+FORMAT = "mjx_pusht.policy/2"  # /1: one head, the last action as memory (NOTES, change 12)
 OBS_TYPES = ("state", "keypoints")
 ACTIVATIONS = ("relu", "silu")
 
 
+# The memory: the expert's carry (move in the low bits, 0 before the first act; two latch bits).
+MOVES = 4  # 0 (none yet), ROTATE, PUSH_X, PUSH_Y
+LATCHES = (NEAR, REVERSE)
+MEMORY_SIZE = MOVES + len(LATCHES)  # its one-hot / bit encoding in the features
+OUTPUTS = 2 + MOVES + len(LATCHES)  # action, move logits, latch logits
+
+
 def feature_size(obs_type: str) -> int:
-    return {"state": 10, "keypoints": 20}[obs_type]
+    return {"state": 8, "keypoints": 18}[obs_type] + MEMORY_SIZE
 
 
-def features(obs: dict, obs_type: str, last_action):
-    """The network's input from an observation dict and the policy's last action, (..., feature_size).
+def features(obs: dict, obs_type: str, memory):
+    """The network's input from an observation dict and the policy's memory, (..., feature_size).
 
     state: pusher (x, y), tee (x, y), cos and sin of its yaw (the yaw wraps at +-pi; its cosine and
     sine do not), and the pusher in the tee's body frame (where a push meets the T is the question
     a pusher answers, and it is a rotation away from the world frame). keypoints: the T's 8 corners
-    and the pusher (x, y). Both end with the last action (zeros at reset): the expert decides with
-    hysteresis (keep turning until aligned, go round the T the way it started), which the present
-    state alone leaves ambiguous, and a student without it stalls where the two choices average to
-    standing still (measured: NOTES, change 12). Diffusion Policy's observation history does the same.
+    and the pusher (x, y). Both end with the memory: its move one-hot, then its two latch bits.
     """
     xp = array_namespace(obs["state"])
     s = obs["state"]
     p = s[..., 0:2]
-    last = xp.astype(last_action, s.dtype)
+    memory = xp.astype(memory, xp.int32)
+    move = memory & (NEAR - 1)
+    mem = [xp.astype(move == k, s.dtype) for k in range(MOVES)] + [xp.astype((memory & b) != 0, s.dtype) for b in LATCHES]
+    mem = xp.stack(mem, axis=-1)
     if obs_type == "keypoints":
-        return xp.concat([obs["keypoints"], p, last], axis=-1)
+        return xp.concat([obs["keypoints"], p, mem], axis=-1)
     o, th = s[..., 2:4], s[..., 4]
     c, sn = xp.cos(th), xp.sin(th)
     d = p - o
     body = xp.stack([c * d[..., 0] + sn * d[..., 1], -sn * d[..., 0] + c * d[..., 1]], axis=-1)
-    return xp.concat([p, o, xp.stack([c, sn], axis=-1), body, last], axis=-1)
+    return xp.concat([p, o, xp.stack([c, sn], axis=-1), body, mem], axis=-1)
+
+
+def decode(head):
+    """The network's raw outputs (..., OUTPUTS) -> (velocity action (..., 2), next memory (...,) int32)."""
+    xp = array_namespace(head)
+    action = xp.tanh(head[..., :2]) * CTRL_LIMIT
+    move = xp.astype(xp.argmax(head[..., 2:2 + MOVES], axis=-1), xp.int32)
+    for i, bit in enumerate(LATCHES):
+        move = move | xp.where(head[..., 2 + MOVES + i] > 0, bit, 0)
+    return action, xp.astype(move, xp.int32)
 
 
 def _activation(name: str, x, xp):
@@ -63,7 +86,7 @@ def _activation(name: str, x, xp):
 
 
 def apply(params: dict, meta: dict, x):
-    """The network on (..., feature_size) features, in x's array namespace: (..., 2) velocity actions."""
+    """The network on (..., feature_size) features, in x's array namespace: (action (..., 2), memory (...,))."""
     xp = array_namespace(x)
     h = (x - xp.asarray(meta["in_mean"], dtype=x.dtype)) / xp.asarray(meta["in_std"], dtype=x.dtype)
     layers = [params[f"Dense_{i}"] for i in range(len(params))]
@@ -71,11 +94,11 @@ def apply(params: dict, meta: dict, x):
         h = h @ xp.asarray(layer["kernel"], dtype=x.dtype) + xp.asarray(layer["bias"], dtype=x.dtype)
         if i < len(layers) - 1:
             h = _activation(meta["activation"], h, xp)
-    return xp.tanh(h[..., :2]) * CTRL_LIMIT
+    return decode(h)
 
 
 def network(hidden: tuple[int, ...], activation: str = "relu"):
-    """The flax module training fits: Dense layers named Dense_0.. (what `apply` reads), 2 outputs."""
+    """The flax module training fits: Dense layers named Dense_0.. (what `apply` reads), OUTPUTS outputs."""
     import flax.linen as nn
 
     act = {"relu": nn.relu, "silu": nn.silu}[activation]
@@ -85,7 +108,7 @@ def network(hidden: tuple[int, ...], activation: str = "relu"):
         def __call__(self, x):
             for width in hidden:
                 x = act(nn.Dense(width)(x))
-            return nn.Dense(2)(x)
+            return nn.Dense(OUTPUTS)(x)
 
     return MLP()
 
@@ -125,7 +148,7 @@ def load_checkpoint(path) -> tuple[dict, dict]:
 
 
 def _check(path, params, meta) -> None:
-    """The file's layers must chain from the obs type's features to 2 actions, and be finite."""
+    """The file's layers must chain from the obs type's features to the two heads, and be finite."""
     if meta.get("obs_type") not in OBS_TYPES or meta.get("activation") not in ACTIVATIONS:
         raise ControllerError(f"policy checkpoint {path}: unknown obs type {meta.get('obs_type')!r} or activation "
                               f"{meta.get('activation')!r}")
@@ -140,8 +163,9 @@ def _check(path, params, meta) -> None:
         if not (np.isfinite(kernel).all() and np.isfinite(layer["bias"]).all()):
             raise ControllerError(f"policy checkpoint {path}: layer Dense_{i} holds non-finite weights")
         width = kernel.shape[1]
-    if not len(params) or width < 2:
-        raise ControllerError(f"policy checkpoint {path}: no layers ending in 2 actions")
+    if not len(params) or width != OUTPUTS:
+        raise ControllerError(f"policy checkpoint {path}: its layers end in {width} outputs, not {OUTPUTS} "
+                              "(an action and a memory)")
 
 
 def to_numpy(tree):
@@ -154,22 +178,14 @@ def to_numpy(tree):
 @dataclasses.dataclass(frozen=True, eq=False)
 class PolicyController(Controller):
     """A checkpoint as a controller: velocity actions, the same layers in NumPy and in JAX; its carry is its
-    last action (an input of the network)."""
+    memory (int32, 0 at reset, as the expert's)."""
 
     params: dict | None = None
     meta: dict | None = None
 
-    def init(self, key):
-        xp = array_namespace(key)
-        return xp.zeros(key.shape[:-1] + (2,), dtype=xp.float32)
-
     def act(self, carry, obs, t, key):
-        action = apply(self.params, self.meta, features(obs, self.meta["obs_type"], carry))
-        return action, xp_cast(action, carry)
-
-
-def xp_cast(a, like):
-    return array_namespace(a).astype(a, like.dtype)
+        action, memory = apply(self.params, self.meta, features(obs, self.meta["obs_type"], carry))
+        return action, memory
 
 
 def load_policy(spec: str) -> PolicyController:

@@ -27,6 +27,12 @@ CURVE_COLUMNS = ("iteration", "beta", "env_steps", "samples", "loss", "success",
                  "coverage", "sim_seconds", "learn_seconds", "wall_seconds")
 
 
+# The resume checkpoint holds the whole dataset (8 M samples: ~0.5 GB, ~4 s to write, measured on the H100
+# run of NOTES change 14), so it is written at most this often, and at the last iteration; a run killed
+# between two repeats at most this much work on --resume (the per-iteration policies are written every time).
+RESUME_EVERY_S = 60.0
+
+
 class TrainError(MjxPushtError, ValueError):
     """A training run cannot start or resume as asked; the message says why."""
 
@@ -65,6 +71,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         start, env_steps, curve, wall0 = _restore(resume_path, cfg, learner)
     held_out = cfg.held_out_seeds()
     t_start = time.perf_counter() - wall0
+    saved = time.perf_counter()
     bar = tqdm(range(start, cfg.iterations), desc="dagger", unit="iter", disable=not progress,
                initial=start, total=cfg.iterations)
     for i in bar:
@@ -84,9 +91,12 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         meta = _meta(cfg, i, env_steps, learner.norm)
         save(ckpt / f"policy_{i:03d}.msgpack", learner.params, meta)
         save(out / "policy.msgpack", learner.params, meta)
-        _checkpoint(resume_path, cfg, learner, i, env_steps, curve)
+        stop = minutes is not None and row["wall_seconds"] > 60 * minutes
+        if stop or i == cfg.iterations - 1 or time.perf_counter() - saved > RESUME_EVERY_S:
+            _checkpoint(resume_path, cfg, learner, i, env_steps, curve)
+            saved = time.perf_counter()
         bar.set_postfix(success=f"{k / n:.1%}", loss=f"{loss:.4f}", steps=env_steps)
-        if minutes is not None and row["wall_seconds"] > 60 * minutes:
+        if stop:
             bar.write(f"stopping after iteration {i}: the {minutes:g}-minute budget is spent")
             break
     bar.close()
@@ -254,6 +264,12 @@ def cmd_train(args) -> int:
     elif started and not args.resume:
         raise TrainError(f"--out {out} holds a training run: --resume to continue it, --replace to start over, "
                          "or give a new --out")
+    if args.rerun:  # found out now, not after the training it would otherwise end
+        try:
+            import rerun  # noqa: F401
+        except ImportError:
+            raise TrainError("train writes train.rrd and eval.rrd with rerun, which is not installed here: "
+                             "pip install rerun-sdk, or pass --no-rerun") from None
     banner = Banner("train")
     print(f"backend: {name} ({why}); DAgger from {cfg.obs_type}: {cfg.envs} {cfg.reset} episodes an iteration, "
           f"{cfg.iterations} iterations, held-out seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
