@@ -226,3 +226,60 @@ def test_cpu_workers_start_with_one_blas_thread_each():
     finally:
         pool.close()
     assert seen == (preset or "1")
+
+
+# -- PPO: Brax's own trainer; its policy saved as a policy:PATH controller --------------------------
+def test_a_ppo_checkpoint_acts_as_braxs_own_deterministic_policy(tmp_path):
+    """The saved policy (NumPy on MuJoCo C's side, JAX in MJX's scan) against Brax's make_policy(deterministic)."""
+    pytest.importorskip("brax")
+    import jax
+    import jax.numpy as jnp
+    from brax.training.acme import running_statistics, specs
+    from brax.training.agents.ppo import networks as ppo_networks
+
+    from mjx_pusht.train.policy import apply_ppo
+    from mjx_pusht.train.ppo import to_checkpoint
+
+    nets = ppo_networks.make_ppo_networks(5, 2, preprocess_observations_fn=running_statistics.normalize,
+                                          policy_hidden_layer_sizes=(16, 16))
+    rng = np.random.default_rng(0)
+    seen = jnp.asarray(rng.normal([0.1, -0.1, 0.0, 0.05, 1.0], [0.2, 0.2, 0.1, 0.1, 2.0], size=(256, 5)), jnp.float32)
+    normalizer = running_statistics.update(running_statistics.init_state(specs.Array((5,), jnp.float32)), seen)
+    params = (normalizer, nets.policy_network.init(jax.random.key(1)), nets.value_network.init(jax.random.key(2)))
+    obs = np.asarray(seen[:32])
+    brax_action, _ = ppo_networks.make_inference_fn(nets)(params, deterministic=True)(jnp.asarray(obs), jax.random.key(3))
+    dense, meta = to_checkpoint(params, "state")
+    assert np.abs(apply_ppo(dense, meta, obs.astype(np.float64)) - np.asarray(brax_action)).max() < 1e-5
+    assert np.abs(np.asarray(jax.jit(lambda o: apply_ppo(dense, meta, o))(jnp.asarray(obs))) - brax_action).max() < 1e-5
+    save(tmp_path / "ppo.msgpack", dense, {**meta, "iteration": 0})
+    ctrl = load(f"policy:{tmp_path / 'ppo.msgpack'}")
+    key = np.zeros((32, 2), np.uint32)
+    action, carry = ctrl.act(ctrl.init(key), {"state": obs.astype(np.float64)}, 0, key)
+    assert np.abs(action - np.asarray(brax_action)).max() < 1e-5 and not carry.any()
+
+
+def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
+    for extra, why in ((("--backend", "cpu"), "Brax's jitted JAX"), (("--backend", "mjx-jax", "--resume"), "--resume"),
+                       (("--backend", "mjx-jax", "--minutes", "1"), "--minutes")):
+        r = cli("train", "--algo", "ppo", *extra, "--out", str(tmp_path / "p"), "--no-rerun")
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and why in r.stderr, r.stderr
+        assert not (tmp_path / "p" / "checkpoints").exists()
+
+
+@pytest.mark.slow
+def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp_path):
+    pytest.importorskip("brax")
+    out = tmp_path / "ppo"
+    r = cli("train", "--algo", "ppo", "--backend", "mjx-jax", "--envs", "8", "--batch", "8", "--timesteps", "10240",
+            "--iterations", "1", "--eval-envs", "4", "--hidden", "32,32", "--no-rerun", "--record", "0",
+            "--no-progress", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["method"] == "ppo" and [c["env_steps"] for c in summary["curve"]] == [0, 10240]
+    for name in ("policy.msgpack", "checkpoints/policy_000.msgpack", "checkpoints/policy_001.msgpack", "curve.png"):
+        assert (out / name).is_file(), name
+    # the trainer's judge (its own jitted scan) and `eval --controller policy:...` (the backend's episode
+    # machinery) on the same held-out seeds: MJX-JAX on the CPU is deterministic, so they agree
+    rows = pq.read_table(out / "eval" / "per_episode.parquet").to_pydict()
+    assert summary["eval"]["success_rate"] == summary["curve"][-1]["success"]
+    assert summary["curve"][-1]["coverage"] == pytest.approx(np.mean(rows["final_coverage"]), abs=1e-5)

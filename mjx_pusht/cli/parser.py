@@ -153,18 +153,22 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--video-episodes", type=_positive, default=16, help="tiles in --video (default 16)")
     e.add_argument("--video-size", type=_int_at_least(32), default=128, help="pixels per tile side (default 128)")
 
-    t = sub.add_parser("train", help="train a policy by DAgger from the expert: policy.msgpack, curve, summary")
-    t.add_argument("--algo", choices=("dagger",), default="dagger", help="dagger (the only one yet; PPO: issue 22)")
+    t = sub.add_parser("train", help="train a policy (DAgger from the expert, or Brax PPO): policy.msgpack, curve, summary")
+    t.add_argument("--algo", choices=("dagger", "ppo"), default="dagger",
+                   help="dagger (distil the expert) or ppo (Brax's PPO on a shaped reward; mjx backends only)")
     t.add_argument("--obs", choices=("state", "keypoints"), default="state", help="what the policy sees (default state)")
     t.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
     t.add_argument("--out", type=Path, default=Path("outputs/train"))
     t.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     t.add_argument("--envs", type=_positive, default=4096, help="episodes rolled out per iteration (default 4096)")
-    t.add_argument("--iterations", type=_positive, default=10, help="DAgger iterations (default 10)")
+    t.add_argument("--iterations", type=_positive, default=10,
+                   help="DAgger iterations, or PPO's held-out judgements over the run (default 10)")
+    t.add_argument("--timesteps", type=_positive, default=50_000_000, help="PPO: env control steps in all (default 50M)")
     t.add_argument("--fit-steps", type=_positive, default=2000, help="gradient steps per iteration (default 2000)")
-    t.add_argument("--batch", type=_positive, default=4096, help="samples per gradient step (default 4096)")
+    t.add_argument("--batch", type=_positive, default=None,
+                   help="DAgger: samples per gradient step (default 4096); PPO: Brax's batch_size (default 256)")
     t.add_argument("--hidden", type=_widths, default=(256, 256, 256), help="hidden widths (default 256,256,256)")
-    t.add_argument("--lr", type=_positive_float, default=1e-3, help="Adam's learning rate (default 1e-3)")
+    t.add_argument("--lr", type=_positive_float, default=None, help="Adam's learning rate (default 1e-3; PPO 3e-4)")
     t.add_argument("--beta-decay", type=_fraction, default=0.7,
                    help="the expert's share of control steps: 1, then times this each iteration (default 0.7)")
     t.add_argument("--max-samples", type=_positive, default=8_000_000, help="dataset ring size (default 8,000,000)")

@@ -97,6 +97,19 @@ def apply(params: dict, meta: dict, x):
     return decode(h)
 
 
+def apply_ppo(params: dict, meta: dict, obs):
+    """A PPO policy (ppo.py) on raw observations (..., obs size): Brax's normalisation, its MLP (silu between
+    layers), and its deterministic action, tanh of the Gaussian's location (the first 2 outputs)."""
+    xp = array_namespace(obs)
+    h = (obs - xp.asarray(meta["in_mean"], dtype=obs.dtype)) / xp.asarray(meta["in_std"], dtype=obs.dtype)
+    for i in range(len(params)):
+        layer = params[f"Dense_{i}"]
+        h = h @ xp.asarray(layer["kernel"], dtype=obs.dtype) + xp.asarray(layer["bias"], dtype=obs.dtype)
+        if i < len(params) - 1:
+            h = _activation("silu", h, xp)
+    return xp.tanh(h[..., :2]) * CTRL_LIMIT
+
+
 def network(hidden: tuple[int, ...], activation: str = "relu"):
     """The flax module training fits: Dense layers named Dense_0.. (what `apply` reads), OUTPUTS outputs."""
     import flax.linen as nn
@@ -152,7 +165,8 @@ def _check(path, params, meta) -> None:
     if meta.get("obs_type") not in OBS_TYPES or meta.get("activation") not in ACTIVATIONS:
         raise ControllerError(f"policy checkpoint {path}: unknown obs type {meta.get('obs_type')!r} or activation "
                               f"{meta.get('activation')!r}")
-    width = feature_size(meta["obs_type"])
+    ppo = meta.get("method") == "ppo"  # Brax's policy: raw observations in, (loc[, scale]) out, no memory
+    width = {"state": 5, "keypoints": 16}[meta["obs_type"]] if ppo else feature_size(meta["obs_type"])
     if np.shape(meta["in_mean"]) != (width,) or np.shape(meta["in_std"]) != (width,):
         raise ControllerError(f"policy checkpoint {path}: input normalisation is not {width}-wide")
     for i in range(len(params)):
@@ -163,6 +177,8 @@ def _check(path, params, meta) -> None:
         if not (np.isfinite(kernel).all() and np.isfinite(layer["bias"]).all()):
             raise ControllerError(f"policy checkpoint {path}: layer Dense_{i} holds non-finite weights")
         width = kernel.shape[1]
+    if ppo and len(params) and width in (2, 4):
+        return
     if not len(params) or width != OUTPUTS:
         raise ControllerError(f"policy checkpoint {path}: its layers end in {width} outputs, not {OUTPUTS} "
                               "(an action and a memory)")
@@ -184,6 +200,8 @@ class PolicyController(Controller):
     meta: dict | None = None
 
     def act(self, carry, obs, t, key):
+        if self.meta.get("method") == "ppo":
+            return apply_ppo(self.params, self.meta, obs[self.meta["obs_type"]]), carry
         action, memory = apply(self.params, self.meta, features(obs, self.meta["obs_type"], carry))
         return action, memory
 

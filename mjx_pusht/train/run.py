@@ -161,12 +161,12 @@ def _restore(path, cfg, learner):
     return int(tree["iteration"]) + 1, int(tree["env_steps"]), curve, curve[-1]["wall_seconds"] if curve else 0.0
 
 
-def _summary(cfg, backend, out: Path, curve, rerun: bool = True) -> dict:
+def _summary(cfg, backend, out: Path, curve, rerun: bool = True, method: str = "dagger") -> dict:
     from mjx_pusht.backends.base import versions
 
     last = curve[-1] if curve else None
     summary = {
-        "method": "dagger", "obs_type": cfg.obs_type, "backend": backend, "device": _device(backend),
+        "method": method, "obs_type": cfg.obs_type, "backend": backend, "device": _device(backend),
         "versions": versions(), "config": _config(cfg), "iterations_run": len(curve),
         "env_steps": last["env_steps"] if last else 0,
         "wall_seconds": round(last["wall_seconds"], 3) if last else 0.0,
@@ -179,7 +179,11 @@ def _summary(cfg, backend, out: Path, curve, rerun: bool = True) -> dict:
         "policy": str(out / "policy.msgpack"),
         "curve": curve,
     }
-    write_curve(out, curve, f"DAgger from {cfg.obs_type}, {backend} on {summary['device']}", rerun)
+    if method == "ppo":
+        summary["wall_clock_note"] = ("simulation_seconds is the held-out judging; learning_seconds is Brax's training "
+                                      "epochs, whose rollouts (simulation) and updates run in one program")
+    title = {"dagger": "DAgger", "ppo": "Brax PPO"}[method]
+    write_curve(out, curve, f"{title} from {cfg.obs_type}, {backend} on {summary['device']}", rerun)
     atomic_write_json(out / "summary.json", summary)
     return summary
 
@@ -203,7 +207,8 @@ def write_curve(out: Path, curve: list[dict], title: str, rerun: bool = True) ->
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    lines = [",".join(CURVE_COLUMNS)] + [",".join(f"{r[c]:.6g}" if isinstance(r[c], float) else str(r[c])
+    lines = [",".join(CURVE_COLUMNS)] + [",".join(f"{r[c]:.6g}" if isinstance(r[c], float) else
+                                                  "" if r[c] is None else str(r[c])
                                                   for c in CURVE_COLUMNS) for r in curve]
     atomic_write_bytes(out / "curve.csv", ("\n".join(lines) + "\n").encode())
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
@@ -237,7 +242,8 @@ def _record_curve(path: Path, curve: list[dict]) -> None:
         rec.set_time("env_steps", sequence=int(r["env_steps"]))
         rec.log("curve/held_out_success", rr.Scalars(r["success"]))
         rec.log("curve/held_out_coverage", rr.Scalars(r["coverage"]))
-        rec.log("curve/loss", rr.Scalars(r["loss"]))
+        if r["loss"] is not None:  # PPO's curve has no fit loss of ours
+            rec.log("curve/loss", rr.Scalars(r["loss"]))
     rec.flush()
     rec.disconnect()
     tmp.replace(path)
@@ -251,9 +257,12 @@ def cmd_train(args) -> int:
     from mjx_pusht.train.dagger import DaggerConfig
 
     name, why = resolve(args.backend)
+    if args.algo == "ppo":
+        return _cmd_ppo(args, name, why)
     cfg = DaggerConfig(obs_type=args.obs, envs=args.envs, iterations=args.iterations, hidden=tuple(args.hidden),
-                       learning_rate=args.lr, batch=args.batch, fit_steps=args.fit_steps, beta_decay=args.beta_decay,
-                       max_samples=args.max_samples, eval_envs=args.eval_envs, seed=args.seed, reset=args.reset)
+                       learning_rate=args.lr or 1e-3, batch=args.batch or 4096, fit_steps=args.fit_steps,
+                       beta_decay=args.beta_decay, max_samples=args.max_samples, eval_envs=args.eval_envs,
+                       seed=args.seed, reset=args.reset)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)  # the run's settings: checked on --resume
     started = (out / "checkpoints" / "resume.msgpack").exists()
     if started and args.replace and not args.resume:
@@ -264,17 +273,59 @@ def cmd_train(args) -> int:
     elif started and not args.resume:
         raise TrainError(f"--out {out} holds a training run: --resume to continue it, --replace to start over, "
                          "or give a new --out")
+    _check_rerun(args)
+    banner = Banner("train")
+    print(f"backend: {name} ({why}); DAgger from {cfg.obs_type}: {cfg.envs} {cfg.reset} episodes an iteration, "
+          f"{cfg.iterations} iterations, held-out seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
+    summary = train_dagger(cfg, name, out, resume=args.resume, minutes=args.minutes, progress=args.progress,
+                           rerun=args.rerun)
+    return _finish(args, name, out, summary, banner)
+
+
+def _check_rerun(args) -> None:
     if args.rerun:  # found out now, not after the training it would otherwise end
         try:
             import rerun  # noqa: F401
         except ImportError:
             raise TrainError("train writes train.rrd and eval.rrd with rerun, which is not installed here: "
                              "pip install rerun-sdk, or pass --no-rerun") from None
+
+
+def _cmd_ppo(args, name: str, why: str) -> int:
+    """`train --algo ppo`: Brax's PPO (train/ppo.py), then the same judgement and files as DAgger's."""
+    from mjx_pusht.cli.banner import Banner
+    from mjx_pusht.io.outputs import claim_out_dir
+
+    if name == "cpu":
+        raise TrainError("--algo ppo runs in Brax's jitted JAX: use --backend mjx-warp or mjx-jax "
+                         "(cpu is MuJoCo C on the host)")
+    for flag, given in (("--resume", args.resume), ("--minutes", args.minutes is not None)):
+        if given:
+            raise TrainError(f"{flag} is not supported with --algo ppo yet (Brax's trainer runs --timesteps to the end)")
+    try:
+        from mjx_pusht.train.ppo import PPOConfig, train_ppo
+    except ImportError as e:
+        raise TrainError(f"--algo ppo needs Brax ({e.name} is missing): pip install 'mjx-pusht[train]'") from None
+    cfg = PPOConfig(obs_type=args.obs, envs=args.envs, timesteps=args.timesteps, evals=args.iterations,
+                    hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
+                    eval_envs=args.eval_envs, seed=args.seed, reset=args.reset)
+    out = claim_out_dir(args.out, "train", {}, replace=args.replace)
+    if (out / "checkpoints").exists():
+        if not args.replace:
+            raise TrainError(f"--out {out} holds a training run: --replace to start over, or give a new --out")
+        import shutil
+
+        shutil.rmtree(out / "checkpoints")
+    _check_rerun(args)
     banner = Banner("train")
-    print(f"backend: {name} ({why}); DAgger from {cfg.obs_type}: {cfg.envs} {cfg.reset} episodes an iteration, "
-          f"{cfg.iterations} iterations, held-out seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
-    summary = train_dagger(cfg, name, out, resume=args.resume, minutes=args.minutes, progress=args.progress,
-                           rerun=args.rerun)
+    print(f"backend: {name} ({why}); Brax PPO from {cfg.obs_type}: {cfg.envs} envs, {cfg.timesteps:,} env steps, "
+          f"held-out judgement {cfg.evals} times on seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
+    curve = train_ppo(cfg, name, out, progress=args.progress)
+    summary = _summary(cfg, name, out, curve, args.rerun, method="ppo")
+    return _finish(args, name, out, summary, banner)
+
+
+def _finish(args, name: str, out: Path, summary: dict, banner) -> int:
     summary["eval"] = _judge(args, name, out, summary)
     atomic_write_json(out / "summary.json", summary)
     ev = summary["eval"]

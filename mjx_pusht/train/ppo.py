@@ -1,0 +1,195 @@
+"""PPO from observations with Brax's own trainer (`brax.training.agents.ppo.train`), unchanged.
+
+The environment is the Brax adapter (`envs/brax.py`): the env's own control step, fresh task
+starts on every reset (`wrap_for_training`). Brax trains on a reward designed for learning;
+success is never judged by it, only by the task's rule (coverage >= 0.95 within the episode's
+control steps) on held-out seeds, by the same code the `policy:PATH` controller runs.
+
+The training reward, per control step (`training_reward`):
+
+    r = coverage(s') + SUCCESS_BONUS * success(s') + SHAPING * (phi(s') - phi(s))
+    phi(s) = -(|tee position error| / 0.1 m + |tee yaw error| / 1 rad + |pusher to the T| / 0.1 m) / 3
+
+The coverage is the env's own reward (what gym-pusht pays); the bonus marks the end the task asks
+for; the shaping term is potential-based (Ng et al., 1999), so it changes how fast PPO finds the
+task, not which policy is best: it pays for moving the T toward its target pose and the pusher
+toward the T, the two things a random policy almost never does on its own.
+
+The policy Brax learns (an MLP on Brax's running observation normalisation, tanh-squashed
+Gaussian) is saved as a `policy:PATH` checkpoint (policy.py): the normaliser's mean and std, the
+layers, and its deterministic action tanh(loc), which is Brax's own `make_policy(...,
+deterministic=True)`; a test checks the two agree.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+
+from mjx_pusht.errors import ConfigError
+
+SUCCESS_BONUS = 10.0
+SHAPING = 10.0
+HELD_OUT_FIRST = 1_000_000_000  # the same held-out task seeds as DAgger's
+
+
+@dataclasses.dataclass(frozen=True)
+class PPOConfig:
+    obs_type: str = "state"
+    envs: int = 4096  # parallel training envs
+    timesteps: int = 50_000_000  # env control steps in all
+    evals: int = 20  # held-out judgements (and checkpoints) over the run
+    hidden: tuple[int, ...] = (256, 256, 256)  # the policy's hidden widths (the value net: Brax's default)
+    learning_rate: float = 3e-4
+    entropy_cost: float = 1e-2
+    discounting: float = 0.97
+    unroll_length: int = 20
+    batch_size: int = 256  # Brax's: unrolls per minibatch
+    num_minibatches: int = 32
+    updates_per_batch: int = 4
+    reward_scaling: float = 0.1
+    reset: str = "task"
+    eval_envs: int = 4096
+    max_steps: int = 300
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.obs_type not in ("state", "keypoints"):
+            raise ConfigError(f"PPO trains from state or keypoints observations, not {self.obs_type!r}")
+        for name in ("envs", "timesteps", "evals", "eval_envs", "max_steps", "unroll_length", "batch_size"):
+            if int(getattr(self, name)) < 1:
+                raise ConfigError(f"--{name.replace('_', '-')} must be at least 1, got {getattr(self, name)}")
+        per_epoch = self.batch_size * self.num_minibatches * self.unroll_length  # Brax's env steps per update round
+        if (self.batch_size * self.num_minibatches) % self.envs:
+            raise ConfigError(f"PPO: --batch x minibatches ({self.batch_size} x {self.num_minibatches}) must be a "
+                              f"multiple of --envs ({self.envs}), as Brax requires")
+        if self.timesteps < per_epoch * self.evals:
+            raise ConfigError(f"PPO: --timesteps {self.timesteps} is fewer than one round of {per_epoch} env steps "
+                              f"(--batch x {self.num_minibatches} minibatches x unroll {self.unroll_length}) per "
+                              f"judgement ({self.evals})")
+
+    def held_out_seeds(self) -> np.ndarray:
+        return HELD_OUT_FIRST + np.arange(self.eval_envs, dtype=np.int64)
+
+
+def training_reward(prev, s):
+    """The reward PPO is trained on (module docstring), from one world's env states before and after a step."""
+    import jax.numpy as jnp
+
+    from mjx_pusht.task.rules import distance_to_tee, wrap_angle
+
+    def phi(state):
+        x = state.obs["state"]
+        pose = x[2:5]
+        far = jnp.linalg.norm(pose[:2]) / 0.1 + jnp.abs(wrap_angle(pose[2])) / 1.0
+        reach = distance_to_tee(x[0:2], pose) / 0.1
+        return -(far + reach) / 3.0
+
+    m = s.metrics
+    return m["coverage"] + SUCCESS_BONUS * m["success"].astype(m["coverage"].dtype) + SHAPING * (phi(s) - phi(prev))
+
+
+def to_checkpoint(params, obs_type: str) -> tuple[dict, dict]:
+    """Brax's (normaliser, policy, value) params -> (layers, meta) of a policy.py checkpoint."""
+    normalizer, policy = params[0], params[1]
+    layers = policy["params"]
+    names = sorted((k for k in layers if k.startswith("hidden_")), key=lambda k: int(k.split("_")[1]))
+    dense = {f"Dense_{i}": {"kernel": np.asarray(layers[k]["kernel"]), "bias": np.asarray(layers[k]["bias"])}
+             for i, k in enumerate(names)}
+    meta = {"method": "ppo", "obs_type": obs_type, "activation": "silu",
+            "in_mean": [float(v) for v in np.asarray(normalizer.mean)],
+            "in_std": [float(v) for v in np.asarray(normalizer.std)]}
+    return dense, meta
+
+
+def _held_out(env, cfg: PPOConfig):
+    """A jitted judge: checkpoint layers and meta -> per-episode success and final coverage on the held-out seeds."""
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_pusht.train.policy import apply_ppo
+
+    s0 = env.reset(cfg.held_out_seeds())
+
+    def episode(dense, mean, std, s):
+        meta = {"in_mean": mean, "in_std": std, "activation": "silu"}
+
+        def body(s, _):
+            return env.advance_one(s, apply_ppo(dense, meta, s.obs[cfg.obs_type])), None
+
+        s, _ = jax.lax.scan(body, s, None, cfg.max_steps)
+        return s.metrics["success"], s.metrics["coverage"]
+
+    run = jax.jit(jax.vmap(episode, in_axes=(None, None, None, 0)))
+
+    def judge(dense, meta):
+        success, cov = run(dense, jnp.asarray(meta["in_mean"], jnp.float32), jnp.asarray(meta["in_std"], jnp.float32), s0)
+        return np.asarray(success, bool), np.asarray(cov, float)
+
+    return judge
+
+
+def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, progress: bool = True) -> list[dict]:
+    """Brax PPO on the adapter, judged on the held-out seeds at every evaluation; returns the curve."""
+    import functools
+
+    from brax.training.agents.ppo import networks as ppo_networks
+    from brax.training.agents.ppo import train as brax_ppo
+    from tqdm import tqdm
+
+    from mjx_pusht.envs.brax import BraxPushT, wrap_for_training
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.study.stats import wilson
+    from mjx_pusht.task.episode import Episode
+    from mjx_pusht.train.policy import save
+    from mjx_pusht.train.run import write_curve
+
+    episode = Episode(max_steps=cfg.max_steps)
+    env = BraxPushT(backend=backend, obs_type=cfg.obs_type, reset_kind=cfg.reset, episode=episode,
+                    max_worlds=max(cfg.envs, 128), reward_fn=training_reward)
+    judge_env = PushTEnv(backend=backend, reset_kind=cfg.reset, episode=episode, keep_states=False)
+    judge = _held_out(judge_env, cfg)
+    ckpt = out / "checkpoints"
+    ckpt.mkdir(parents=True, exist_ok=True)
+    curve: list[dict] = []
+    t0 = time.perf_counter()
+    last = {"t": t0, "judged": 0.0}
+    bar = tqdm(total=cfg.evals + 1, desc="ppo", unit="eval", disable=not progress)
+
+    def on_params(step, make_policy, params):
+        t_judge = time.perf_counter()
+        dense, meta = to_checkpoint(params, cfg.obs_type)
+        meta |= {"iteration": len(curve), "env_steps": int(step), "config": _config(cfg)}
+        success, cov = judge(dense, meta)
+        k, n = int(success.sum()), len(success)
+        lo, hi = wilson(k, n)
+        now = time.perf_counter()
+        judged = now - t_judge
+        curve.append({"iteration": len(curve), "beta": 0.0, "env_steps": int(step), "samples": int(step),
+                      "loss": None, "success": k / n, "success_lo": lo, "success_hi": hi,
+                      "coverage": float(cov.mean()), "sim_seconds": judged,
+                      "learn_seconds": now - last["t"] - judged if curve else 0.0, "wall_seconds": now - t0})
+        last["t"] = now
+        save(ckpt / f"policy_{len(curve) - 1:03d}.msgpack", dense, meta)
+        save(out / "policy.msgpack", dense, meta)
+        write_curve(out, curve, f"Brax PPO from {cfg.obs_type} (running)", rerun=False)  # a killed run keeps its curve
+        bar.update(1)
+        bar.set_postfix(success=f"{k / n:.1%}", steps=int(step))
+
+    brax_ppo.train(
+        environment=env, num_timesteps=cfg.timesteps, num_envs=cfg.envs, episode_length=cfg.max_steps,
+        wrap_env_fn=wrap_for_training, learning_rate=cfg.learning_rate, entropy_cost=cfg.entropy_cost,
+        discounting=cfg.discounting, unroll_length=cfg.unroll_length, batch_size=cfg.batch_size,
+        num_minibatches=cfg.num_minibatches, num_updates_per_batch=cfg.updates_per_batch,
+        reward_scaling=cfg.reward_scaling, normalize_observations=True, seed=cfg.seed, num_evals=cfg.evals + 1,
+        run_evals=False, policy_params_fn=on_params,
+        network_factory=functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=cfg.hidden))
+    bar.close()
+    return curve
+
+
+def _config(cfg) -> dict:
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(cfg).items()}
