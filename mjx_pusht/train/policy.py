@@ -87,27 +87,25 @@ def _activation(name: str, x, xp):
 
 def apply(params: dict, meta: dict, x):
     """The network on (..., feature_size) features, in x's array namespace: (action (..., 2), memory (...,))."""
-    xp = array_namespace(x)
-    h = (x - xp.asarray(meta["in_mean"], dtype=x.dtype)) / xp.asarray(meta["in_std"], dtype=x.dtype)
-    layers = [params[f"Dense_{i}"] for i in range(len(params))]
-    for i, layer in enumerate(layers):
-        h = h @ xp.asarray(layer["kernel"], dtype=x.dtype) + xp.asarray(layer["bias"], dtype=x.dtype)
-        if i < len(layers) - 1:
-            h = _activation(meta["activation"], h, xp)
-    return decode(h)
+    return decode(_mlp(params, meta, meta["activation"], x))
 
 
 def apply_ppo(params: dict, meta: dict, obs):
     """A PPO policy (ppo.py) on raw observations (..., obs size): Brax's normalisation, its MLP (silu between
     layers), and its deterministic action, tanh of the Gaussian's location (the first 2 outputs)."""
-    xp = array_namespace(obs)
-    h = (obs - xp.asarray(meta["in_mean"], dtype=obs.dtype)) / xp.asarray(meta["in_std"], dtype=obs.dtype)
+    return array_namespace(obs).tanh(_mlp(params, meta, "silu", obs)[..., :2]) * CTRL_LIMIT
+
+
+def _mlp(params: dict, meta: dict, activation: str, x):
+    """Normalise by the checkpoint's mean and std, then the Dense layers, in x's array namespace and dtype."""
+    xp = array_namespace(x)
+    h = (x - xp.asarray(meta["in_mean"], dtype=x.dtype)) / xp.asarray(meta["in_std"], dtype=x.dtype)
     for i in range(len(params)):
         layer = params[f"Dense_{i}"]
-        h = h @ xp.asarray(layer["kernel"], dtype=obs.dtype) + xp.asarray(layer["bias"], dtype=obs.dtype)
+        h = h @ xp.asarray(layer["kernel"], dtype=x.dtype) + xp.asarray(layer["bias"], dtype=x.dtype)
         if i < len(params) - 1:
-            h = _activation("silu", h, xp)
-    return xp.tanh(h[..., :2]) * CTRL_LIMIT
+            h = _activation(activation, h, xp)
+    return h
 
 
 def network(hidden: tuple[int, ...], activation: str = "relu"):
