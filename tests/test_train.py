@@ -259,7 +259,7 @@ def test_a_ppo_checkpoint_acts_as_braxs_own_deterministic_policy(tmp_path):
 
 
 def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
-    for extra, why in ((("--backend", "cpu"), "Brax's jitted JAX"), (("--backend", "mjx-jax", "--resume"), "--resume"),
+    for extra, why in ((("--backend", "cpu"), "Brax's jitted JAX"), (("--backend", "mjx-jax", "--resume"), "nothing to resume"),
                        (("--backend", "mjx-jax", "--minutes", "1"), "--minutes")):
         r = cli("train", "--algo", "ppo", *extra, "--out", str(tmp_path / "p"), "--no-rerun")
         assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and why in r.stderr, r.stderr
@@ -270,9 +270,10 @@ def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
 def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp_path):
     pytest.importorskip("brax")
     out = tmp_path / "ppo"
-    r = cli("train", "--algo", "ppo", "--backend", "mjx-jax", "--envs", "8", "--batch", "8", "--timesteps", "10240",
+    args = ["train", "--algo", "ppo", "--backend", "mjx-jax", "--envs", "8", "--batch", "8", "--timesteps", "10240",
             "--iterations", "1", "--eval-envs", "4", "--hidden", "32,32", "--no-rerun", "--record", "0",
-            "--no-progress", "--out", str(out))
+            "--no-progress", "--out", str(out)]
+    r = cli(*args)
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["method"] == "ppo" and [c["env_steps"] for c in summary["curve"]] == [0, 10240]
@@ -283,3 +284,12 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp
     rows = pq.read_table(out / "eval" / "per_episode.parquet").to_pydict()
     assert summary["eval"]["success_rate"] == summary["curve"][-1]["success"]
     assert summary["curve"][-1]["coverage"] == pytest.approx(np.mean(rows["final_coverage"]), abs=1e-5)
+    # --resume goes on from the last judged policy: the finished judgements stay, one more is added
+    args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "20480", "2"
+    r = cli(*args, "--resume")
+    assert r.returncode == 0, r.stderr
+    after = json.loads((out / "summary.json").read_text())["curve"]
+    assert after[:2] == summary["curve"] and [c["env_steps"] for c in after] == [0, 10240, 20480]
+    assert (out / "checkpoints" / "policy_002.msgpack").is_file()
+    r = cli(*args, "--resume")  # nothing left to do is one line, not a crash inside Brax
+    assert r.returncode == 1 and "already reached 20,480 env steps" in r.stderr and len(r.stderr.strip().splitlines()) == 1

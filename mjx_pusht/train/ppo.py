@@ -24,16 +24,20 @@ deterministic=True)`; a test checks the two agree.
 from __future__ import annotations
 
 import dataclasses
+import json
 import time
 from pathlib import Path
 
 import numpy as np
 
 from mjx_pusht.errors import ConfigError
+from mjx_pusht.io.outputs import atomic_write_bytes
+from mjx_pusht.train.run import TrainError
 
 SUCCESS_BONUS = 10.0
 SHAPING = 10.0
 HELD_OUT_FIRST = 1_000_000_000  # the same held-out task seeds as DAgger's
+RESUME = "resume.msgpack"  # in checkpoints/: Brax's params and the curve after the last judgement
 
 
 @dataclasses.dataclass(frozen=True)
@@ -132,8 +136,11 @@ def _held_out(env, cfg: PPOConfig):
     return judge
 
 
-def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, progress: bool = True) -> list[dict]:
-    """Brax PPO on the adapter, judged on the held-out seeds at every evaluation; returns the curve."""
+def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, progress: bool = True) -> list[dict]:
+    """Brax PPO on the adapter, judged on the held-out seeds at every evaluation; returns the curve.
+
+    `resume`: go on from the last judged policy in `out` (Brax's `restore_params`: the normaliser, policy and
+    value networks; Brax restores no optimiser state, so Adam starts afresh) up to `cfg.timesteps`."""
     import functools
 
     from brax.training.agents.ppo import networks as ppo_networks
@@ -147,19 +154,28 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, progress: bool = True)
     from mjx_pusht.train.policy import save
     from mjx_pusht.train.run import write_curve
 
+    ckpt = out / "checkpoints"
+    restored, curve = _load_resume(ckpt / RESUME, cfg) if resume else (None, [])
+    done = curve[-1]["env_steps"] if curve else 0
+    evals_left = cfg.evals - (len(curve) - 1) if curve else cfg.evals
+    if resume and (cfg.timesteps <= done or evals_left < 1):
+        raise TrainError(f"--resume: the run in {out} already reached {done:,} env steps and {len(curve) - 1} "
+                         "judgements; raise --timesteps and --iterations to go on")
     episode = Episode(max_steps=cfg.max_steps)
     env = BraxPushT(backend=backend, obs_type=cfg.obs_type, reset_kind=cfg.reset, episode=episode,
                     max_worlds=max(cfg.envs, 128), reward_fn=training_reward)
     judge_env = PushTEnv(backend=backend, reset_kind=cfg.reset, episode=episode, keep_states=False)
     judge = _held_out(judge_env, cfg)
-    ckpt = out / "checkpoints"
     ckpt.mkdir(parents=True, exist_ok=True)
-    curve: list[dict] = []
-    t0 = time.perf_counter()
-    last = {"t": t0, "judged": 0.0}
-    bar = tqdm(total=cfg.evals + 1, desc="ppo", unit="eval", disable=not progress)
+    t0 = time.perf_counter() - (curve[-1]["wall_seconds"] if curve else 0.0)
+    last = {"t": time.perf_counter(), "skip": resume}
+    bar = tqdm(total=cfg.evals + 1, initial=len(curve), desc="ppo", unit="eval", disable=not progress)
 
     def on_params(step, make_policy, params):
+        if last["skip"]:  # a resumed run's first call: the restored policy, judged already
+            last["skip"] = False
+            return
+        step = int(step) + done
         t_judge = time.perf_counter()
         dense, meta = to_checkpoint(params, cfg.obs_type)
         meta |= {"iteration": len(curve), "env_steps": int(step), "config": _config(cfg)}
@@ -176,16 +192,17 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, progress: bool = True)
         save(ckpt / f"policy_{len(curve) - 1:03d}.msgpack", dense, meta)
         save(out / "policy.msgpack", dense, meta)
         write_curve(out, curve, f"Brax PPO from {cfg.obs_type} (running)", rerun=False)  # a killed run keeps its curve
+        _save_resume(ckpt / RESUME, cfg, params, curve)
         bar.update(1)
         bar.set_postfix(success=f"{k / n:.1%}", steps=int(step))
 
     brax_ppo.train(
-        environment=env, num_timesteps=cfg.timesteps, num_envs=cfg.envs, episode_length=cfg.max_steps,
+        environment=env, num_timesteps=cfg.timesteps - done, num_envs=cfg.envs, episode_length=cfg.max_steps,
         wrap_env_fn=wrap_for_training, learning_rate=cfg.learning_rate, entropy_cost=cfg.entropy_cost,
         discounting=cfg.discounting, unroll_length=cfg.unroll_length, batch_size=cfg.batch_size,
         num_minibatches=cfg.num_minibatches, num_updates_per_batch=cfg.updates_per_batch,
-        reward_scaling=cfg.reward_scaling, normalize_observations=True, seed=cfg.seed, num_evals=cfg.evals + 1,
-        run_evals=False, policy_params_fn=on_params,
+        reward_scaling=cfg.reward_scaling, normalize_observations=True, seed=cfg.seed + len(curve),
+        num_evals=evals_left + 1, run_evals=False, policy_params_fn=on_params, restore_params=restored,
         network_factory=functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=cfg.hidden))
     bar.close()
     return curve
@@ -193,3 +210,43 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, progress: bool = True)
 
 def _config(cfg) -> dict:
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(cfg).items()}
+
+
+def _save_resume(path: Path, cfg: PPOConfig, params, curve: list[dict]) -> None:
+    """Brax's (normaliser, policy, value) params and the curve, written whole: what --resume starts from."""
+    import jax
+    from flax import serialization
+
+    tree = {"config": json.dumps(_config(cfg), sort_keys=True), "curve": json.dumps(curve),
+            "normalizer": serialization.to_state_dict(jax.tree.map(np.asarray, params[0])),
+            "policy": jax.tree.map(np.asarray, params[1]), "value": jax.tree.map(np.asarray, params[2])}
+    atomic_write_bytes(path, serialization.msgpack_serialize(tree))
+
+
+def _load_resume(path: Path, cfg: PPOConfig):
+    import jax
+    import jax.numpy as jnp
+    from brax.training.acme import running_statistics, specs
+    from flax import serialization
+
+    if not path.is_file():
+        raise TrainError(f"--resume: {path} does not exist; nothing to resume (run without --resume to start)")
+    unreadable = TrainError(f"--resume: {path} is unreadable; start again without --resume")
+    try:
+        tree = serialization.msgpack_restore(path.read_bytes())
+        saved, curve = json.loads(tree["config"]), json.loads(tree["curve"])
+    except Exception:  # noqa: BLE001 - any decoding failure means the same thing to the user
+        raise unreadable from None
+    now = _config(cfg)
+    diff = sorted(k for k in set(saved) | set(now) if saved.get(k) != now.get(k) and k not in ("timesteps", "evals"))
+    if diff:  # (a DAgger run's settings differ in their names: it says so here too)
+        raise TrainError(f"--resume: the run in {path.parent.parent} was started with other settings "
+                         f"({', '.join(diff[:6])}); give the same ones, or a new --out")
+    try:
+        size = {"state": 5, "keypoints": 16}[cfg.obs_type]
+        template = running_statistics.init_state(specs.Array((size,), jnp.float32))
+        normalizer = serialization.from_state_dict(template, jax.tree.map(jnp.asarray, tree["normalizer"]))
+        params = (normalizer, jax.tree.map(jnp.asarray, tree["policy"]), jax.tree.map(jnp.asarray, tree["value"]))
+    except Exception:  # noqa: BLE001
+        raise unreadable from None
+    return params, curve

@@ -264,6 +264,18 @@ def cmd_train(args) -> int:
                        beta_decay=args.beta_decay, max_samples=args.max_samples, eval_envs=args.eval_envs,
                        seed=args.seed, reset=args.reset)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)  # the run's settings: checked on --resume
+    _restart(out, args)
+    _check_rerun(args)
+    banner = Banner("train")
+    print(f"backend: {name} ({why}); DAgger from {cfg.obs_type}: {cfg.envs} {cfg.reset} episodes an iteration, "
+          f"{cfg.iterations} iterations, held-out seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
+    summary = train_dagger(cfg, name, out, resume=args.resume, minutes=args.minutes, progress=args.progress,
+                           rerun=args.rerun)
+    return _finish(args, name, out, summary, banner)
+
+
+def _restart(out: Path, args) -> None:
+    """A folder holding a training run is continued (--resume) or started over (--replace), never mixed."""
     started = (out / "checkpoints" / "resume.msgpack").exists()
     if started and args.replace and not args.resume:
         import shutil
@@ -273,13 +285,6 @@ def cmd_train(args) -> int:
     elif started and not args.resume:
         raise TrainError(f"--out {out} holds a training run: --resume to continue it, --replace to start over, "
                          "or give a new --out")
-    _check_rerun(args)
-    banner = Banner("train")
-    print(f"backend: {name} ({why}); DAgger from {cfg.obs_type}: {cfg.envs} {cfg.reset} episodes an iteration, "
-          f"{cfg.iterations} iterations, held-out seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
-    summary = train_dagger(cfg, name, out, resume=args.resume, minutes=args.minutes, progress=args.progress,
-                           rerun=args.rerun)
-    return _finish(args, name, out, summary, banner)
 
 
 def _check_rerun(args) -> None:
@@ -299,9 +304,8 @@ def _cmd_ppo(args, name: str, why: str) -> int:
     if name == "cpu":
         raise TrainError("--algo ppo runs in Brax's jitted JAX: use --backend mjx-warp or mjx-jax "
                          "(cpu is MuJoCo C on the host)")
-    for flag, given in (("--resume", args.resume), ("--minutes", args.minutes is not None)):
-        if given:
-            raise TrainError(f"{flag} is not supported with --algo ppo yet (Brax's trainer runs --timesteps to the end)")
+    if args.minutes is not None:
+        raise TrainError("--minutes is not supported with --algo ppo (Brax's trainer runs --timesteps to the end)")
     try:
         from mjx_pusht.train.ppo import PPOConfig, train_ppo
     except ImportError as e:
@@ -310,17 +314,12 @@ def _cmd_ppo(args, name: str, why: str) -> int:
                     hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
                     eval_envs=args.eval_envs, seed=args.seed, reset=args.reset)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)
-    if (out / "checkpoints").exists():
-        if not args.replace:
-            raise TrainError(f"--out {out} holds a training run: --replace to start over, or give a new --out")
-        import shutil
-
-        shutil.rmtree(out / "checkpoints")
+    _restart(out, args)
     _check_rerun(args)
     banner = Banner("train")
     print(f"backend: {name} ({why}); Brax PPO from {cfg.obs_type}: {cfg.envs} envs, {cfg.timesteps:,} env steps, "
           f"held-out judgement {cfg.evals} times on seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
-    curve = train_ppo(cfg, name, out, progress=args.progress)
+    curve = train_ppo(cfg, name, out, resume=args.resume, progress=args.progress)
     summary = _summary(cfg, name, out, curve, args.rerun, method="ppo")
     return _finish(args, name, out, summary, banner)
 
