@@ -85,7 +85,12 @@ class DaggerConfig:
         return np.arange(iteration * self.envs, (iteration + 1) * self.envs, dtype=np.int64)
 
     def held_out_seeds(self) -> np.ndarray:
-        return HELD_OUT_FIRST + np.arange(self.eval_envs, dtype=np.int64)
+        return held_out_seeds(self.eval_envs)
+
+
+def held_out_seeds(n: int) -> np.ndarray:
+    """The first `n` held-out task seeds: never trained on, by either method."""
+    return HELD_OUT_FIRST + np.arange(n, dtype=np.int64)
 
 
 # -- rollouts: the student (mixed with the expert) drives, the expert labels ---------------------------
@@ -129,10 +134,10 @@ class Rollouts:
             if not live.any():
                 break
             x = features(s.obs, cfg.obs_type, memory)
-            label, keep = self.expert.act(memory, s.obs, s.step, s.key)
-            action, memory = _choose(np, (label, keep), apply(params, meta, x), gen.random(len(seeds)) < beta)
+            label, label_memory = self.expert.act(memory, s.obs, s.step, s.key)
+            action, memory = _choose(np, (label, label_memory), apply(params, meta, x), gen.random(len(seeds)) < beta)
             xs.append(x[live])
-            ys.append(_label(np, label, keep)[live])
+            ys.append(_label(np, label, label_memory)[live])
             s = env.step(s, action)
         env.check(s)
         return np.concatenate(xs).astype(np.float32), np.concatenate(ys).astype(np.float32), _outcomes(s)
@@ -167,11 +172,11 @@ class Rollouts:
             s, memory = c
             live = ~s.carry["ep"]["done"]
             x = features(s.obs, cfg.obs_type, memory).astype(jnp.float32)
-            label, keep = self.expert.act(memory, s.obs, s.step, s.key)
+            label, label_memory = self.expert.act(memory, s.obs, s.step, s.key)
             take = jax.random.uniform(jax.random.fold_in(key, t)) < beta
-            action, memory = _choose(jnp, (label, keep), apply(params, meta, x), take)
+            action, memory = _choose(jnp, (label, label_memory), apply(params, meta, x), take)
             s = self.env.advance_one(s, action)
-            return (s, memory), (x, _label(jnp, label, keep), live)
+            return (s, memory), (x, _label(jnp, label, label_memory), live)
 
         (s, _), (x, y, live) = jax.lax.scan(body, (s, self.expert.init(s.key)), jnp.arange(cfg.max_steps))
         return s, x, y, live

@@ -31,6 +31,7 @@ from mjx_pusht.task.rules import CTRL_LIMIT, array_namespace
 
 FORMAT = "mjx_pusht.policy/2"  # /1: one head, the last action as memory (NOTES, change 12)
 OBS_TYPES = ("state", "keypoints")
+OBS_SIZE = {"state": 5, "keypoints": 16}  # the observations' own widths (what a PPO policy reads)
 ACTIVATIONS = ("relu", "silu")
 
 
@@ -164,7 +165,7 @@ def _check(path, params, meta) -> None:
         raise ControllerError(f"policy checkpoint {path}: unknown obs type {meta.get('obs_type')!r} or activation "
                               f"{meta.get('activation')!r}")
     ppo = meta.get("method") == "ppo"  # Brax's policy: raw observations in, (loc[, scale]) out, no memory
-    width = {"state": 5, "keypoints": 16}[meta["obs_type"]] if ppo else feature_size(meta["obs_type"])
+    width = OBS_SIZE[meta["obs_type"]] if ppo else feature_size(meta["obs_type"])
     if np.shape(meta["in_mean"]) != (width,) or np.shape(meta["in_std"]) != (width,):
         raise ControllerError(f"policy checkpoint {path}: input normalisation is not {width}-wide")
     for i in range(len(params)):

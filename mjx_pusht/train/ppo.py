@@ -32,11 +32,12 @@ import numpy as np
 
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.io.outputs import atomic_write_bytes
-from mjx_pusht.train.run import TrainError
+from mjx_pusht.train.dagger import held_out_seeds
+from mjx_pusht.train.policy import OBS_SIZE
+from mjx_pusht.train.run import TrainError, config_dict, resume_tree
 
 SUCCESS_BONUS = 10.0
 SHAPING = 10.0
-HELD_OUT_FIRST = 1_000_000_000  # the same held-out task seeds as DAgger's
 RESUME = "resume.msgpack"  # in checkpoints/: Brax's params and the curve after the last judgement
 
 
@@ -76,7 +77,7 @@ class PPOConfig:
                               f"judgement ({self.evals})")
 
     def held_out_seeds(self) -> np.ndarray:
-        return HELD_OUT_FIRST + np.arange(self.eval_envs, dtype=np.int64)
+        return held_out_seeds(self.eval_envs)  # the same held-out task seeds as DAgger's
 
 
 def training_reward(prev, s):
@@ -178,7 +179,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
         step = int(step) + done
         t_judge = time.perf_counter()
         dense, meta = to_checkpoint(params, cfg.obs_type)
-        meta |= {"iteration": len(curve), "env_steps": int(step), "config": _config(cfg)}
+        meta |= {"iteration": len(curve), "env_steps": int(step), "config": config_dict(cfg)}
         success, cov = judge(dense, meta)
         k, n = int(success.sum()), len(success)
         lo, hi = wilson(k, n)
@@ -208,16 +209,12 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     return curve
 
 
-def _config(cfg) -> dict:
-    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(cfg).items()}
-
-
 def _save_resume(path: Path, cfg: PPOConfig, params, curve: list[dict]) -> None:
     """Brax's (normaliser, policy, value) params and the curve, written whole: what --resume starts from."""
     import jax
     from flax import serialization
 
-    tree = {"config": json.dumps(_config(cfg), sort_keys=True), "curve": json.dumps(curve),
+    tree = {"config": json.dumps(config_dict(cfg), sort_keys=True), "curve": json.dumps(curve),
             "normalizer": serialization.to_state_dict(jax.tree.map(np.asarray, params[0])),
             "policy": jax.tree.map(np.asarray, params[1]), "value": jax.tree.map(np.asarray, params[2])}
     atomic_write_bytes(path, serialization.msgpack_serialize(tree))
@@ -229,24 +226,12 @@ def _load_resume(path: Path, cfg: PPOConfig):
     from brax.training.acme import running_statistics, specs
     from flax import serialization
 
-    if not path.is_file():
-        raise TrainError(f"--resume: {path} does not exist; nothing to resume (run without --resume to start)")
-    unreadable = TrainError(f"--resume: {path} is unreadable; start again without --resume")
+    tree = resume_tree(path, cfg, ("timesteps", "evals"))
     try:
-        tree = serialization.msgpack_restore(path.read_bytes())
-        saved, curve = json.loads(tree["config"]), json.loads(tree["curve"])
-    except Exception:  # noqa: BLE001 - any decoding failure means the same thing to the user
-        raise unreadable from None
-    now = _config(cfg)
-    diff = sorted(k for k in set(saved) | set(now) if saved.get(k) != now.get(k) and k not in ("timesteps", "evals"))
-    if diff:  # (a DAgger run's settings differ in their names: it says so here too)
-        raise TrainError(f"--resume: the run in {path.parent.parent} was started with other settings "
-                         f"({', '.join(diff[:6])}); give the same ones, or a new --out")
-    try:
-        size = {"state": 5, "keypoints": 16}[cfg.obs_type]
-        template = running_statistics.init_state(specs.Array((size,), jnp.float32))
+        curve = json.loads(tree["curve"])
+        template = running_statistics.init_state(specs.Array((OBS_SIZE[cfg.obs_type],), jnp.float32))
         normalizer = serialization.from_state_dict(template, jax.tree.map(jnp.asarray, tree["normalizer"]))
         params = (normalizer, jax.tree.map(jnp.asarray, tree["policy"]), jax.tree.map(jnp.asarray, tree["value"]))
-    except Exception:  # noqa: BLE001
-        raise unreadable from None
+    except Exception as e:  # noqa: BLE001 - any decoding failure means the same thing to the user
+        raise TrainError(f"--resume: {path} is unreadable ({type(e).__name__}); start again without --resume") from None
     return params, curve

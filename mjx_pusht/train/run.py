@@ -40,10 +40,11 @@ class TrainError(MjxPushtError, ValueError):
 def _meta(cfg, iteration: int, env_steps: int, norm) -> dict:
     return {"obs_type": cfg.obs_type, "activation": cfg.activation, "in_mean": [float(v) for v in norm[0]],
             "in_std": [float(v) for v in norm[1]], "method": "dagger", "iteration": iteration,
-            "env_steps": int(env_steps), "config": _config(cfg)}
+            "env_steps": int(env_steps), "config": config_dict(cfg)}
 
 
-def _config(cfg) -> dict:
+def config_dict(cfg) -> dict:
+    """A method's config (DaggerConfig, PPOConfig) as JSON-ready values: what checkpoints and --resume compare."""
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(cfg).items()}
 
 
@@ -125,7 +126,7 @@ def _checkpoint(path, cfg, learner, iteration, env_steps, curve) -> None:
 
     from mjx_pusht.train.policy import to_numpy
 
-    tree = {"config": json.dumps(_config(cfg), sort_keys=True), "iteration": iteration, "env_steps": env_steps,
+    tree = {"config": json.dumps(config_dict(cfg), sort_keys=True), "iteration": iteration, "env_steps": env_steps,
             "curve": json.dumps(curve), "params": to_numpy(learner.params),
             "opt_state": serialization.to_state_dict(to_numpy(learner.opt_state)),
             "x": np.asarray(learner.x[:learner.filled]), "y": np.asarray(learner.y[:learner.filled]),
@@ -133,9 +134,9 @@ def _checkpoint(path, cfg, learner, iteration, env_steps, curve) -> None:
     atomic_write_bytes(path, serialization.msgpack_serialize(tree))
 
 
-def _restore(path, cfg, learner):
-    import jax
-    import jax.numpy as jnp
+def resume_tree(path: Path, cfg, may_change: tuple[str, ...]) -> dict:
+    """The resume checkpoint at `path` (either method's), refused in one line if it is missing, unreadable,
+    or from a run with other settings than `cfg` (those in `may_change`, how far to go, excepted)."""
     from flax import serialization
 
     if not path.is_file():
@@ -143,13 +144,23 @@ def _restore(path, cfg, learner):
     try:
         tree = serialization.msgpack_restore(path.read_bytes())
         saved = json.loads(tree["config"])
-    except Exception as e:  # noqa: BLE001
+    except Exception as e:  # noqa: BLE001 - any decoding failure means the same thing to the user
         raise TrainError(f"--resume: {path} is unreadable ({type(e).__name__}); start again without --resume") from None
-    now = _config(cfg)
-    diff = sorted(k for k in saved if saved[k] != now.get(k) and k != "iterations")  # how far to go may change
+    now = config_dict(cfg)
+    # both keys' sides: another method's run differs in the names of its settings too
+    diff = sorted(k for k in set(saved) | set(now) if saved.get(k) != now.get(k) and k not in may_change)
     if diff:
-        raise TrainError(f"--resume: the run in {path.parent.parent} was started with other settings ({', '.join(diff)}); "
-                         "give the same ones, or a new --out")
+        raise TrainError(f"--resume: the run in {path.parent.parent} was started with other settings "
+                         f"({', '.join(diff[:6])}); give the same ones, or a new --out")
+    return tree
+
+
+def _restore(path, cfg, learner):
+    import jax
+    import jax.numpy as jnp
+    from flax import serialization
+
+    tree = resume_tree(path, cfg, ("iterations",))
     learner.params = jax.tree.map(jnp.asarray, tree["params"])
     learner.opt_state = serialization.from_state_dict(learner.opt_state, tree["opt_state"])
     n = len(tree["x"])
@@ -167,7 +178,7 @@ def _summary(cfg, backend, out: Path, curve, rerun: bool = True, method: str = "
     last = curve[-1] if curve else None
     summary = {
         "method": method, "obs_type": cfg.obs_type, "backend": backend, "device": _device(backend),
-        "versions": versions(), "config": _config(cfg), "iterations_run": len(curve),
+        "versions": versions(), "config": config_dict(cfg), "iterations_run": len(curve),
         "env_steps": last["env_steps"] if last else 0,
         "wall_seconds": round(last["wall_seconds"], 3) if last else 0.0,
         "simulation_seconds": round(sum(r["sim_seconds"] for r in curve), 3),
