@@ -53,7 +53,8 @@ def timed(name, run, s):
     try:
         t0 = time.perf_counter(); s1 = jax.block_until_ready(run(s)); c = time.perf_counter() - t0
         t0 = time.perf_counter(); jax.block_until_ready(run(s1)); dt = time.perf_counter() - t0
-        out[name] = {"steps_per_s": n * steps / dt, "ms_per_step": 1000 * dt / steps, "first_call_s": c}
+        out[name] = {"steps_per_s": n * steps / dt, "ms_per_step": 1000 * dt / steps, "first_call_s": c,
+                     "compiles": getattr(run, "_cache_size", lambda: None)()}  # 1: the timed call compiled nothing
     except Exception as e:  # noqa: BLE001 - a failed variant is recorded, the rest still run
         out[name] = {"error": f"{type(e).__name__}: {str(e).splitlines()[0][:200]}"}
     print(json.dumps({name: out[name]}), flush=True)

@@ -118,6 +118,9 @@ def test_device_autoreset_follows_gymnasiums_sync_vector_env(mode):
                                        else i1["final_obs"][u2], np.stack(i2["final_obs"][u2]), atol=2e-3)
         resets += int(u2.sum())
     assert resets >= 6
+    # one compiled step for the whole run: the arrays a reset or a refill hands the step are placed on the
+    # device as the step's own outputs are (an uncommitted array makes jit compile the step again)
+    assert batch.unwrapped._ar._jitted[3]._cache_size() == 1
 
 
 @pytest.mark.slow

@@ -125,6 +125,14 @@ class AutoReset:
         info.setdefault("broken", xp.zeros(len(used), dtype=bool))
         if self.mode == "same_step" and "final" not in info:
             info["final"] = self._final(state)
+        if xp is not np:
+            import jax
+
+            # Placed on the state's device as the step's own outputs are: jit keys its compiled programs on
+            # whether an input is committed to a device, and arrays made from NumPy are not, so the first step
+            # after every reset or refill compiled the whole step (or the user's scan of it) a second time:
+            # seconds that change 13's scan benchmark timed as stepping (NOTES change 16).
+            info = jax.device_put(info, state.step.sharding)
         return state._replace(info=info)
 
     def refill(self, state):
