@@ -64,6 +64,24 @@ def test_a_run_leaves_policy_curve_summary_and_the_eval_of_its_held_out_seeds(ru
     assert summary["eval"]["success_rate"] == summary["curve"][-1]["success"]
 
 
+def test_a_fits_judgement_riding_in_the_next_training_batch_is_its_judgement_alone(run):
+    """Each fit's held-out episodes run in the next iteration's training batch (beta 0, never learned from).
+    Rolled out alone by the same student, the held-out seeds end alike (to BLAS's batch-size rounding)."""
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.task.episode import Episode
+    from mjx_pusht.train.dagger import DaggerConfig, Rollouts
+
+    summary = json.loads((run / "summary.json").read_text())
+    cfg = DaggerConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in summary["config"].items()})
+    params, meta = load_checkpoint(run / "checkpoints" / "policy_000.msgpack")
+    env = PushTEnv(backend="cpu", reset_kind=cfg.reset, episode=Episode(max_steps=cfg.max_steps), keep_states=False)
+    x, _, alone = Rollouts(env, cfg)(params, (np.asarray(meta["in_mean"]), np.asarray(meta["in_std"])),
+                                     cfg.held_out_seeds(), 0.0, 99, learn=0)
+    first = summary["curve"][0]  # judged inside iteration 1's rollout of 16 training + 8 held-out episodes
+    assert len(x) == 0 and first["success"] == alone["success"].mean()
+    assert first["coverage"] == pytest.approx(alone["coverage"].mean(), abs=1e-4)
+
+
 def test_a_saved_policy_acts_as_the_training_process_network_in_numpy_and_in_jax(run):
     import jax
     import jax.numpy as jnp

@@ -112,14 +112,17 @@ class Rollouts:
         self.env, self.cfg, self.expert = env, cfg, Expert()
         self._compiled = {}
 
-    def __call__(self, params, norm, seeds, beta: float, rng: int):
-        """Features and expert labels of every live control step (on the device on MJX), and per-episode
-        success. `norm` is (mean, std) of the features."""
+    def __call__(self, params, norm, seeds, beta, rng: int, learn: int | None = None):
+        """Features and expert labels of every live control step of the first `learn` episodes (all if None;
+        on the device on MJX), and every episode's outcome. `norm` is (mean, std) of the features; `beta`, the
+        expert's share, is one number or one per seed (0 for held-out episodes judged in the same batch)."""
+        beta = np.broadcast_to(np.asarray(beta, np.float32), (len(seeds),))
+        learn = len(seeds) if learn is None else learn
         if self.env.backend == "cpu":
-            return self._cpu(params, norm, seeds, beta, rng)
-        return self._mjx(params, norm, seeds, beta, rng)
+            return self._cpu(params, norm, seeds, beta, rng, learn)
+        return self._mjx(params, norm, seeds, beta, rng, learn)
 
-    def _cpu(self, params, norm, seeds, beta, rng):
+    def _cpu(self, params, norm, seeds, beta, rng, learn):
         from mjx_pusht.train.policy import apply
 
         env, cfg = self.env, self.cfg
@@ -130,9 +133,11 @@ class Rollouts:
         memory = self.expert.init(s.key)
         xs, ys = [], []
         for t in range(cfg.max_steps):
-            live = ~np.asarray(s.carry["ep"]["done"])
-            if not live.any():
+            done = np.asarray(s.carry["ep"]["done"])
+            if done.all():
                 break
+            live = ~done
+            live[learn:] = False  # judged only: their samples are not learned from
             x = features(s.obs, cfg.obs_type, memory)
             label, label_memory = self.expert.act(memory, s.obs, s.step, s.key)
             action, memory = _choose(np, (label, label_memory), apply(params, meta, x), gen.random(len(seeds)) < beta)
@@ -142,7 +147,7 @@ class Rollouts:
         env.check(s)
         return np.concatenate(xs).astype(np.float32), np.concatenate(ys).astype(np.float32), _outcomes(s)
 
-    def _mjx(self, params, norm, seeds, beta, rng):
+    def _mjx(self, params, norm, seeds, beta, rng, learn):
         import jax
         import jax.numpy as jnp
 
@@ -150,11 +155,12 @@ class Rollouts:
         n = len(seeds)
         s0 = env.reset(seeds)
         if n not in self._compiled:
-            self._compiled[n] = jax.jit(jax.vmap(self._episode, in_axes=(None, None, 0, None, 0)))
+            self._compiled[n] = jax.jit(jax.vmap(self._episode, in_axes=(None, None, 0, 0, 0)))
         keys = jax.random.split(jax.random.key(self.cfg.seed * 1_000_003 + rng), n)
         s, x, y, live = self._compiled[n](params, tuple(jnp.asarray(a, jnp.float32) for a in norm), s0,
-                                          jnp.float32(beta), keys)
+                                          jnp.asarray(beta), keys)
         env.check(s)
+        x, y, live = x[:learn], y[:learn], live[:learn]
         keep = jnp.nonzero(live.reshape(-1))[0]  # only the control steps of running episodes
         return (x.reshape(-1, x.shape[-1])[keep], y.reshape(-1, y.shape[-1])[keep], _outcomes(s))
 
