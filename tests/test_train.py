@@ -276,9 +276,34 @@ def test_a_ppo_checkpoint_acts_as_braxs_own_deterministic_policy(tmp_path):
     assert np.abs(action - np.asarray(brax_action)).max() < 1e-5 and not carry.any()
 
 
+def test_ppos_training_reward_makes_succeeding_the_best_outcome():
+    """Success ends the episode, so at PPO's discount, ending it now with success must be worth more than
+    staying just short of it forever (with the coverage itself as the reward, it was not: PPO learned to
+    park the T at 0.8 coverage, NOTES change 18)."""
+    from types import SimpleNamespace
+
+    import jax.numpy as jnp
+
+    from mjx_pusht.train.ppo import PPOConfig, training_reward
+
+    at = jnp.asarray([0.0, 0.05, 0.0, 0.0, 0.0])  # pusher above the T at the target pose: no shaping change
+
+    def state(cov, success):
+        return SimpleNamespace(obs={"state": at}, metrics={"coverage": jnp.float32(cov), "success": jnp.bool_(success)})
+
+    gamma = PPOConfig().discounting
+    short = state(0.94, False)
+    stay = float(training_reward(short, short)) / (1 - gamma)  # forever at 0.94: never ends
+    finish = float(training_reward(short, state(0.95, True)))  # then nothing: the episode is over
+    assert finish > stay
+    # and the shaping pays for bringing the T toward its pose: at the same coverage, a step from 1 cm off to
+    # the target is worth more than the step back
+    off = SimpleNamespace(obs={"state": at.at[2].set(0.01)}, metrics=short.metrics)
+    assert float(training_reward(off, short)) > float(training_reward(short, off))
+
+
 def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
-    for extra, why in ((("--backend", "cpu"), "Brax's jitted JAX"), (("--backend", "mjx-jax", "--resume"), "nothing to resume"),
-                       (("--backend", "mjx-jax", "--minutes", "1"), "--minutes")):
+    for extra, why in ((("--backend", "cpu"), "Brax's jitted JAX"), (("--backend", "mjx-jax", "--resume"), "nothing to resume")):
         r = cli("train", "--algo", "ppo", *extra, "--out", str(tmp_path / "p"), "--no-rerun")
         assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and why in r.stderr, r.stderr
         assert not (tmp_path / "p" / "checkpoints").exists()
@@ -302,12 +327,15 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp
     rows = pq.read_table(out / "eval" / "per_episode.parquet").to_pydict()
     assert summary["eval"]["success_rate"] == summary["curve"][-1]["success"]
     assert summary["curve"][-1]["coverage"] == pytest.approx(np.mean(rows["final_coverage"]), abs=1e-5)
-    # --resume goes on from the last judged policy: the finished judgements stay, one more is added
-    args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "20480", "2"
-    r = cli(*args, "--resume")
+    # --resume goes on from the last judged policy: the finished judgements stay, more are added; --minutes
+    # (spent at once here) stops it at the first judgement past the budget, 20,480 of the 30,720 steps asked
+    args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "30720", "3"
+    r = cli(*args, "--resume", "--minutes", "0.0001")
     assert r.returncode == 0, r.stderr
+    assert "the 0.0001-minute budget is spent" in r.stdout + r.stderr
     after = json.loads((out / "summary.json").read_text())["curve"]
     assert after[:2] == summary["curve"] and [c["env_steps"] for c in after] == [0, 10240, 20480]
     assert (out / "checkpoints" / "policy_002.msgpack").is_file()
+    args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "20480", "2"
     r = cli(*args, "--resume")  # nothing left to do is one line, not a crash inside Brax
     assert r.returncode == 1 and "already reached 20,480 env steps" in r.stderr and len(r.stderr.strip().splitlines()) == 1

@@ -366,8 +366,6 @@ def _cmd_ppo(args, name: str, why: str) -> int:
     if name == "cpu":
         raise TrainError("--algo ppo runs in Brax's jitted JAX: use --backend mjx-warp or mjx-jax "
                          "(cpu is MuJoCo C on the host)")
-    if args.minutes is not None:
-        raise TrainError("--minutes is not supported with --algo ppo (Brax's trainer runs --timesteps to the end)")
     try:
         from mjx_pusht.train.ppo import PPOConfig, train_ppo
     except ImportError as e:
@@ -381,7 +379,7 @@ def _cmd_ppo(args, name: str, why: str) -> int:
     banner = Banner("train")
     print(f"backend: {name} ({why}); Brax PPO from {cfg.obs_type}: {cfg.envs} envs, {cfg.timesteps:,} env steps, "
           f"held-out judgement {cfg.evals} times on seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
-    curve = train_ppo(cfg, name, out, resume=args.resume, progress=args.progress)
+    curve = train_ppo(cfg, name, out, resume=args.resume, progress=args.progress, minutes=args.minutes)
     summary = _summary(cfg, name, out, curve, args.rerun, method="ppo")
     return _finish(args, name, out, summary, banner)
 
