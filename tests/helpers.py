@@ -20,6 +20,14 @@ def cli(*args, cwd=None, env=None) -> subprocess.CompletedProcess:
                           cwd=cwd, env=env or ENV)
 
 
+def train_run(tmp_path_factory, *args):
+    """`mjx-pusht train ARGS --out DIR` in a fresh temporary folder, as a user runs it; DIR when it succeeded."""
+    out = tmp_path_factory.mktemp("train") / "run"
+    r = cli("train", *args, "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    return out
+
+
 def assert_matches_cpu(mjx, cpu) -> None:
     """MJX rows against the CPU's: the same starts, the contact-free settle to float32, every verdict equal."""
     np.testing.assert_array_equal(mjx.start, cpu.start)

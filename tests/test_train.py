@@ -11,7 +11,7 @@ import json
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from helpers import cli
+from helpers import cli, train_run
 
 pytest.importorskip("flax")
 pytest.importorskip("optax")
@@ -41,10 +41,7 @@ TINY = ("--backend", "cpu", "--reset", "chapter", "--envs", "16", "--iterations"
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("train") / "run"
-    r = cli("train", *TINY, "--out", str(out))
-    assert r.returncode == 0, r.stderr
-    return out
+    return train_run(tmp_path_factory, *TINY)
 
 
 def test_a_run_leaves_policy_curve_summary_and_the_eval_of_its_held_out_seeds(run):
@@ -169,51 +166,58 @@ def test_bad_checkpoints_are_one_line(run, tmp_path):
 
 
 @pytest.mark.slow
-def test_dagger_learns_to_imitate_the_expert_on_cpu_in_under_a_minute():
-    """What a minute of DAgger on 2 cores buys, judged against the expert itself and against random.
+def test_dagger_learns_to_finish_episodes_on_cpu_in_about_a_minute():
+    """A minute of DAgger on 2 cores takes held-out success from the untrained network's to a stated level.
 
-    At this scale the student does not yet finish episodes (success stays 0, as it does for random;
-    measured on this machine: 0 of 64 held-out chapter starts after 4 iterations of 64 episodes, 0 of 64
-    task starts after 5 of 128; on an H100 the same trainer reaches 80% in 5 minutes: NOTES change 14),
-    so the test asserts what did happen, against independent references: on held-out episodes the
-    student drives itself, its actions agree with the expert's labels far better than the untrained
-    network's, its memory keeps the expert's (move and latches) on most steps, and it leaves the T
-    better covered than random actions do.
+    Four iterations of 256 chapter episodes (the first the expert's own demonstrations), judged on 64
+    held-out starts never trained on, the student driving alone. Measured on this machine (2 cores,
+    NOTES change 20): the untrained network and `random` finish 0 of 64, the student 31 of 64 (48%) after
+    ~60 s of training. The test asserts a quarter, far above both references, and, on the same held-out
+    episodes, what the student learned beside success: its actions agree with the expert's labels far
+    better than the untrained network's and its memory keeps the expert's (move and latches).
     """
+    import time
+
     from mjx_pusht.envs.functional import PushTEnv
     from mjx_pusht.task.controllers import Random
     from mjx_pusht.train.dagger import DaggerConfig, Learner, Rollouts
 
-    cfg = DaggerConfig(reset="chapter", envs=64, iterations=3, eval_envs=32, fit_steps=400, batch=512,
-                       hidden=(64, 64), max_samples=100_000)
+    cfg = DaggerConfig(reset="chapter", envs=256, iterations=4, eval_envs=64, fit_steps=1500, batch=1024,
+                       hidden=(256, 256), max_samples=400_000)
     env = PushTEnv(backend="cpu", reset_kind="chapter", threads=2, keep_states=False)
     rollouts, learner = Rollouts(env, cfg), Learner(cfg)
     width = feature_size("state")
     unit = (np.zeros(width), np.ones(width))
 
-    def on_policy_error(norm):
+    def judge(norm):
+        """The student alone on the held-out starts: its success, its action error and memory agreement."""
         x, labels, held = rollouts(learner.params, norm, cfg.held_out_seeds(), 0.0, 99)
         meta = {"in_mean": norm[0], "in_std": norm[1], "activation": cfg.activation}
         acted, memory = apply(to_numpy(learner.params), meta, x.astype(np.float64))
         error = float(np.mean(np.linalg.norm(acted - labels[:, :2], axis=-1)))
-        return error, float(np.mean(memory == labels[:, 2].astype(np.int32))), held
+        return held["success"].mean(), error, float(np.mean(memory == labels[:, 2].astype(np.int32)))
 
-    before, memory_before, _ = on_policy_error(unit)
+    success_before, error_before, memory_before = judge(unit)
+    t0 = time.perf_counter()
     for i in range(cfg.iterations):
         x, y, _ = rollouts(learner.params, learner.norm or unit, cfg.train_seeds(i), cfg.beta(i), i)
         learner.add(x, y, keep=i == 0)
         learner.fit(i)
-    after, memory_after, held = on_policy_error(learner.norm)
-    assert after < 0.6 * before, (before, after)
-    # the memory head keeps the expert's move and latches (measured: 97% of steps; untrained: 24%)
-    assert memory_after > 0.8 and memory_after > memory_before + 0.3, (memory_before, memory_after)
+    seconds = time.perf_counter() - t0
+    success, error, memory = judge(learner.norm)
 
     s = env.reset(cfg.held_out_seeds())
     rnd = Random()
-    for t in range(cfg.max_steps):
+    for _ in range(cfg.max_steps):
         s = env.step(s, rnd.act(None, s.obs, s.step, s.key)[0])
-    assert held["coverage"].mean() > np.asarray(s.metrics["coverage"]).mean() + 0.1
+    success_random = np.asarray(s.metrics["success"]).mean()
 
+    assert success >= 0.25 and success >= success_before + 0.2 and success >= success_random + 0.2, \
+        (success_before, success_random, success, seconds)
+    assert error < 0.6 * error_before, (error_before, error)
+    assert memory > 0.6 and memory > memory_before + 0.3, (memory_before, memory)
+    print(f"success {success_before:.3f} -> {success:.3f} (random {success_random:.3f}) in {seconds:.0f} s; "
+          f"action error {error_before:.3f} -> {error:.3f}; memory {memory_before:.3f} -> {memory:.3f}")
 
 
 def test_train_without_rerun_says_so_in_one_line_before_training(tmp_path):
