@@ -282,6 +282,11 @@ def run_cpu(
     poses = start_poses(seeds, reset=scenario.reset) if poses is None else poses  # a sweep draws them once
     parts, traces = [], []
     datas = [mujoco.MjData(model) for _ in range(nthread)]
+    renderer = None
+    if controller.pixels:  # a controller that looks: the top camera's image of every control step's pose
+        from mjx_pusht.envs.pixels import CpuRenderer
+
+        renderer = CpuRenderer(model, controller.pixels)
     with mj_rollout.Rollout(nthread=nthread) as pool:
         for lo in range(0, len(seeds), _CHUNK):
             qpos0 = layout.initial_qpos(model, poses[lo : lo + _CHUNK])
@@ -299,7 +304,8 @@ def run_cpu(
             for k in range(episode.max_steps):
                 if table is None and carry["ep"]["done"].all() and not trace:
                     break  # every episode has ended: the rest would change nothing
-                action, carry = act(carry, qpos, k, key, controller, layout, np)
+                image = None if renderer is None else renderer(qpos)
+                action, carry = act(carry, qpos, k, key, controller, layout, np, image)
                 qpos, carry, (_, qs) = control_step((stepper, None), carry, qpos, k, action, controller.action_type,
                                                     physics, layout, episode, np)
                 if trace:

@@ -147,6 +147,7 @@ class MjxRunner:
         self.devices = list(devices) if devices else jax.local_devices()
         self.compile_seconds = 0.0
         self._fns: dict = {}
+        self._renderers: dict = {}  # kept alive with the programs that call them: Warp frees a renderer's buffers with it
         self.buffers = Buffers(self.model, cfg.contacts_per_world, cfg.constraints_per_world,
                                fixed=cfg.contacts_per_world is not None or cfg.constraints_per_world is not None)
         self.warp_kernels: dict = {}
@@ -191,24 +192,54 @@ class MjxRunner:
         warp = self.cfg.impl == "warp"
         fs, settle_step = episode.frame_skip, self.scenario.schedule.settle_steps - 1
 
-        def one_seed(leaves, d0, qpos0, key, combo):
-            physics = physics_for(grid.row(leaves, combo), fs, settle_step, layout, warp)
+        n_dev = len(self.devices)
 
-            def step(outer, k):
-                sim, carry = outer
-                action, carry = act(carry, sim[0].qpos, k, key, controller, layout, jnp)
-                _, carry, sim = control_step(sim, carry, sim[0].qpos, k, action, controller.action_type, physics,
-                                             layout, episode, jnp)
-                return (sim, carry), None
-
+        def start(d0, qpos0, key):
             carry = begin(layout, qpos0, key, controller, episode, jnp)
             qs0 = jnp.zeros((episode.physics_steps, model.nq), qpos0.dtype) if trace else None
-            sim = (d0.replace(qpos=qpos0), jnp.zeros((), jnp.int32), qs0)
-            ((_, ovf, qs), carry), _ = jax.lax.scan(step, (sim, carry), jnp.arange(episode.max_steps))
-            return carry, ovf, (qs if trace else jnp.zeros((0, model.nq), qpos0.dtype))
+            return (d0.replace(qpos=qpos0), jnp.zeros((), jnp.int32), qs0), carry
 
-        batched = jax.vmap(one_seed, in_axes=(None, None, 0, 0, 0))
-        n_dev = len(self.devices)
+        def advance(leaves, combo, key, sim, carry, k, image=None):
+            physics = physics_for(grid.row(leaves, combo), fs, settle_step, layout, warp)
+            action, carry = act(carry, sim[0].qpos, k, key, controller, layout, jnp, image)
+            _, carry, sim = control_step(sim, carry, sim[0].qpos, k, action, controller.action_type, physics,
+                                         layout, episode, jnp)
+            return sim, carry
+
+        def finish(sim, carry):
+            _, ovf, qs = sim
+            return carry, ovf, (qs if trace else jnp.zeros((0, model.nq), sim[0].qpos.dtype))
+
+        def one_seed(leaves, d0, qpos0, key, combo):  # vmapped over the batch: each world's scan
+            def step(outer, k):
+                return advance(leaves, combo, key, *outer, k), None
+
+            outer, _ = jax.lax.scan(step, start(d0, qpos0, key), jnp.arange(episode.max_steps))
+            return finish(*outer)
+
+        if not controller.pixels:
+            batched = jax.vmap(one_seed, in_axes=(None, None, 0, 0, 0))
+        else:
+            # A controller that looks: MJX-Warp's ray tracer renders the batch each control step. Its call is one
+            # for the whole batch (custom_vmap): traced inside a vmapped scan's body it would be traced unbatched
+            # first and return every world's image to each, so this rollout scans the vmapped step instead.
+            from mjx_pusht.envs.pixels import PixelsError, WarpRenderer
+
+            if not warp or n_dev > 1:
+                raise PixelsError(f"{controller.name} looks at pixels, which MJX renders with MJX-Warp on one GPU: "
+                                  "use --backend mjx-warp on one device (or cpu)")
+            renderer = self._renderers[batch] = WarpRenderer(model, batch, controller.pixels)
+
+            def batched(leaves, d0, qpos0, key, combo):
+                def step(outer, k):
+                    image = jax.vmap(renderer)(outer[0][0])
+                    return jax.vmap(advance, in_axes=(None, 0, 0, 0, 0, None, 0))(leaves, combo, key, *outer, k,
+                                                                                   image), None
+
+                outer = jax.vmap(start, in_axes=(None, 0, 0))(d0, qpos0, key)
+                outer, _ = jax.lax.scan(step, outer, jnp.arange(episode.max_steps))
+                return jax.vmap(finish)(*outer)
+
         if n_dev > 1 and batch % n_dev:
             raise BackendError(f"a batch of {batch} does not divide over {n_dev} devices")
         per_dev = batch // n_dev

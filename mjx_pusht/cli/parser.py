@@ -156,7 +156,9 @@ def build_parser() -> argparse.ArgumentParser:
     t = sub.add_parser("train", help="train a policy (DAgger from the expert, or Brax PPO): policy.msgpack, curve, summary")
     t.add_argument("--algo", choices=("dagger", "ppo"), default="dagger",
                    help="dagger (distil the expert) or ppo (Brax's PPO on a shaped reward; mjx backends only)")
-    t.add_argument("--obs", choices=("state", "keypoints"), default="state", help="what the policy sees (default state)")
+    t.add_argument("--obs", choices=("state", "keypoints", "pixels_agent_pos"), default="state",
+                   help="what the policy sees (default state; pixels_agent_pos: the 96 x 96 top camera and the "
+                        "pusher's position, DAgger only)")
     t.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
     t.add_argument("--out", type=Path, default=Path("outputs/train"))
     t.add_argument("--replace", action="store_true", help=REPLACE_HELP)

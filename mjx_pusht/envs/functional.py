@@ -240,6 +240,44 @@ class PushTEnv:
             return state
         return state._replace(obs={**state.obs, "pixels": self._renderer(state.data)})
 
+    def images(self, n: int):
+        """A jittable function: (n, 5) observation states (pusher x, y, tee x, y, yaw) -> the (n, size, size, 3)
+        uint8 images `obs["pixels"]` shows of them, on this env's renderer (a learner renders its minibatches
+        again from the states, rather than keeping their images: train/dagger.py)."""
+        import jax
+        import jax.numpy as jnp
+
+        if not self.pixels or self.layout.tee is None:
+            raise ConfigError("images() needs an env with pixels and the tee on slide and hinge joints")
+        # qpos column c is the state's column source[c] (the tee's x, y, yaw are state 2..4, the pusher's 0..1),
+        # or qpos0's value where the state says nothing: built by stacking, exact in either namespace
+        source = {**{c: 2 + i for i, c in enumerate(self.layout.tee)}, **{c: i for i, c in enumerate(self.layout.pusher)}}
+        q0 = np.asarray(self.model.qpos0, np.float64)
+
+        def qpos(states, xp):
+            return xp.stack([states[..., source[c]] if c in source else xp.full(states.shape[:-1], q0[c], dtype=states.dtype)
+                             for c in range(len(q0))], axis=-1)
+
+        shape = jax.ShapeDtypeStruct((n, self.pixels, self.pixels, 3), jnp.uint8)
+        if self.backend == "cpu":  # MuJoCo C's OpenGL renderer, on the host
+            from concurrent.futures import ThreadPoolExecutor
+
+            from mjx_pusht.envs.pixels import CpuRenderer
+
+            # JAX calls back on threads of its own, where a GL context cannot be made current (EGL_BAD_ACCESS, or a
+            # crash): the images are rendered on one thread of ours, with a renderer of its own
+            pool = ThreadPoolExecutor(1, thread_name_prefix="images")
+            renderer = pool.submit(CpuRenderer, self.model, self.pixels).result()
+
+            def render(st):
+                return pool.submit(renderer, qpos(np.asarray(st, np.float64), np)).result()
+
+            return lambda states: jax.pure_callback(render, shape, states)
+        from mjx_pusht.envs.pixels import WarpRenderer
+
+        renderer, d0 = WarpRenderer(self.model, n, self.pixels), self.template(n)
+        return lambda states: jax.vmap(lambda q: renderer(d0.replace(qpos=q)))(qpos(states.astype(self.runner.dtype), jnp))
+
     def advance_one(self, state: State, action) -> State:
         """One world's control step without the image (pure)."""
         import jax.numpy as jnp

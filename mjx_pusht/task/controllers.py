@@ -17,6 +17,7 @@ import dataclasses
 import importlib
 import math
 from collections.abc import Callable
+from typing import ClassVar
 
 import numpy as np
 
@@ -70,6 +71,9 @@ class Controller:
 
     name: str = "zero"
     action_type: str = "velocity"
+    # The side of the top-camera image the controller looks at, in obs["pixels"] (each backend renders it for
+    # every control step; envs/pixels.py); 0: it reads the state alone, and nothing is rendered.
+    pixels: ClassVar[int] = 0
 
     def __post_init__(self) -> None:
         if self.action_type not in ACTION_TYPES:

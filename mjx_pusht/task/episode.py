@@ -79,9 +79,12 @@ def begin(layout, qpos0, key, controller, episode: Episode, xp, coverage0=None):
     }
 
 
-def act(carry, qpos, k, key, controller, layout, xp):
-    """A controller's action for control step k from the observation of `qpos`, and its next state."""
+def act(carry, qpos, k, key, controller, layout, xp, image=None):
+    """A controller's action for control step k from the observation of `qpos` (and `image`, the top camera's
+    view of it, for a controller that looks: `controller.pixels`), and its next state."""
     obs = observe(layout.pusher_xy(qpos), layout.tee_pose(qpos))
+    if image is not None:
+        obs["pixels"] = image
     action, cstate = controller.act(carry["ctrl"], obs, k, key)
     return action, {**carry, "ctrl": cstate}
 

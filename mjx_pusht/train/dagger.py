@@ -11,6 +11,15 @@ The rollouts are the environment's own control step (`PushTEnv.advance_one`, the
 `eval` runs) inside one jitted scan per iteration on MJX, or the CPU env's batch step on MuJoCo C;
 the expert is the same `Expert.act` in both, in the env's array namespace.
 
+From pixels (`pixels_agent_pos`: the top camera's 96 x 96 image and the pusher's position) the student
+sees the image the env renders in its step (MJX-Warp's ray tracer on the device, MuJoCo C's OpenGL on
+the CPU: the same bytes, envs/pixels.py), and the expert still labels from the state. The dataset keeps
+no images: a sample holds the 5 numbers of the state that the image is a function of (`RENDER_KEY`
+columns, ahead of the features), and each minibatch is rendered again from them inside the fit (on one
+H100 a fit step of 512 samples, their render, the CNN's forward and backward pass and Adam's update, took
+2.3 ms: NOTES change 21), so a ring of millions of samples costs megabytes, not the tens of GB its images
+would.
+
 The student has a memory (policy.py): the expert's carry format, which it carries itself. DAgger's
 state is then (observation, memory): the expert labels each visited pair by acting *from the
 student's memory* (its `act` is a function of (carry, observation)), giving the action to take and
@@ -41,6 +50,9 @@ MEMORY_WEIGHT = 0.01  # the memory heads' cross-entropy against the actions' squ
 # Held-out evaluation seeds start here; training seeds count up from 0 and must stay below it.
 HELD_OUT_FIRST = 1_000_000_000
 
+# A pixel student's sample starts with the observation's state (pusher x, y, tee x, y, yaw): its image's key
+RENDER_KEY = 5
+
 
 @dataclasses.dataclass(frozen=True)
 class DaggerConfig:
@@ -61,8 +73,7 @@ class DaggerConfig:
 
     def __post_init__(self) -> None:
         if self.obs_type not in OBS_TYPES:
-            raise ConfigError(f"DAgger trains from {' or '.join(OBS_TYPES)} observations, not {self.obs_type!r} "
-                              "(pixels: not yet)")
+            raise ConfigError(f"DAgger trains from {', '.join(OBS_TYPES)} observations, not {self.obs_type!r}")
         if self.activation not in ACTIVATIONS:
             raise ConfigError(f"unknown activation {self.activation!r}; choose from {', '.join(ACTIVATIONS)}")
         for name in ("envs", "iterations", "batch", "fit_steps", "max_samples", "eval_envs", "max_steps"):
@@ -77,6 +88,18 @@ class DaggerConfig:
             raise ConfigError(f"DAgger trains on the task or chapter reset, not {self.reset!r}")
         if not 0.0 <= self.beta_decay <= 1.0:
             raise ConfigError(f"--beta-decay must be in [0, 1], got {self.beta_decay}")
+
+    @property
+    def image(self) -> int:
+        """The side of the image the student sees (0: none)."""
+        from mjx_pusht.envs.pixels import IMAGE_SIZE
+
+        return IMAGE_SIZE if self.obs_type.startswith("pixels") else 0
+
+    @property
+    def sample_width(self) -> int:
+        """A dataset row's width: the features, after the image's key for a pixel student."""
+        return feature_size(self.obs_type) + (RENDER_KEY if self.image else 0)
 
     def beta(self, iteration: int) -> float:
         return self.beta_decay ** iteration
@@ -105,6 +128,11 @@ def _label(xp, action, memory):
     return xp.concat([xp.astype(action, xp.float32), xp.astype(memory, xp.float32)[..., None]], axis=-1)
 
 
+def _sample(xp, obs, x, image: int):
+    """A dataset row from the features the student read: with its image's key first, for a pixel student."""
+    return xp.concat([xp.astype(obs["state"], x.dtype), x], axis=-1) if image else x
+
+
 class Rollouts:
     """Rolls episodes out on one env with the student, the expert labelling: (features, labels) and outcomes."""
 
@@ -126,7 +154,7 @@ class Rollouts:
         from mjx_pusht.train.policy import apply
 
         env, cfg = self.env, self.cfg
-        meta = {"in_mean": norm[0], "in_std": norm[1], "activation": cfg.activation}
+        meta = {"in_mean": norm[0], "in_std": norm[1], "activation": cfg.activation, "image": cfg.image}
         params = to_numpy(params)
         gen = np.random.default_rng([cfg.seed, rng])
         s = env.reset(seeds)
@@ -140,8 +168,9 @@ class Rollouts:
             live[learn:] = False  # judged only: their samples are not learned from
             x = features(s.obs, cfg.obs_type, memory)
             label, label_memory = self.expert.act(memory, s.obs, s.step, s.key)
-            action, memory = _choose(np, (label, label_memory), apply(params, meta, x), gen.random(len(seeds)) < beta)
-            xs.append(x[live])
+            student = apply(params, meta, x, s.obs.get("pixels"))
+            action, memory = _choose(np, (label, label_memory), student, gen.random(len(seeds)) < beta)
+            xs.append(_sample(np, s.obs, x, cfg.image)[live])
             ys.append(_label(np, label, label_memory)[live])
             s = env.step(s, action)
         env.check(s)
@@ -155,34 +184,40 @@ class Rollouts:
         n = len(seeds)
         s0 = env.reset(seeds)
         if n not in self._compiled:
-            self._compiled[n] = jax.jit(jax.vmap(self._episode, in_axes=(None, None, 0, 0, 0)))
+            self._compiled[n] = jax.jit(self._episodes)
         keys = jax.random.split(jax.random.key(self.cfg.seed * 1_000_003 + rng), n)
         s, x, y, live = self._compiled[n](params, tuple(jnp.asarray(a, jnp.float32) for a in norm), s0,
                                           jnp.asarray(beta), keys)
         env.check(s)
-        x, y, live = x[:learn], y[:learn], live[:learn]
+        # (T, N, ...) -> the first `learn` worlds' episodes, one after another
+        x, y, live = (jnp.swapaxes(a[:, :learn], 0, 1) for a in (x, y, live))
         keep = jnp.nonzero(live.reshape(-1))[0]  # only the control steps of running episodes
         return (x.reshape(-1, x.shape[-1])[keep], y.reshape(-1, y.shape[-1])[keep], _outcomes(s))
 
-    def _episode(self, params, norm, s, beta, key):
-        """One world's episode (vmapped): a scan over control steps; stacks (T, F), (T, 3), (T,)."""
+    def _episodes(self, params, norm, s, beta, keys):
+        """The batch's episodes: a scan over control steps of the vmapped control step (as the env's own jitted
+        step; MJX-Warp's renderer is called per step on the whole batch); stacks (T, N, F), (T, N, 3), (T, N)."""
         import jax
         import jax.numpy as jnp
 
         from mjx_pusht.train.policy import apply
 
         cfg = self.cfg
-        meta = {"in_mean": norm[0], "in_std": norm[1], "activation": cfg.activation}
+        meta = {"in_mean": norm[0], "in_std": norm[1], "activation": cfg.activation, "image": cfg.image}
+        advance = self.env.step_one if cfg.image else self.env.advance_one  # step_one renders the next image
 
-        def body(c, t):
-            s, memory = c
+        def one(s, memory, beta, key, t):
             live = ~s.carry["ep"]["done"]
             x = features(s.obs, cfg.obs_type, memory).astype(jnp.float32)
             label, label_memory = self.expert.act(memory, s.obs, s.step, s.key)
             take = jax.random.uniform(jax.random.fold_in(key, t)) < beta
-            action, memory = _choose(jnp, (label, label_memory), apply(params, meta, x), take)
-            s = self.env.advance_one(s, action)
-            return (s, memory), (x, _label(jnp, label, label_memory), live)
+            action, memory = _choose(jnp, (label, label_memory), apply(params, meta, x, s.obs.get("pixels")), take)
+            sample = _sample(jnp, s.obs, x, cfg.image)
+            return advance(s, action), memory, (sample, _label(jnp, label, label_memory), live)
+
+        def body(c, t):
+            s, memory, out = jax.vmap(one, in_axes=(0, 0, 0, 0, None))(*c, beta, keys, t)
+            return (s, memory), out
 
         (s, _), (x, y, live) = jax.lax.scan(body, (s, self.expert.init(s.key)), jnp.arange(cfg.max_steps))
         return s, x, y, live
@@ -196,28 +231,33 @@ def _outcomes(s) -> dict:
 
 # -- the fit: minibatch regression onto the expert's labels ------------------------------------------
 class Learner:
-    """The student network, its optimiser and the dataset ring, on the default JAX device."""
+    """The student network, its optimiser and the dataset ring, on the default JAX device. A pixel student needs
+    `render`: a jittable (n, RENDER_KEY) states -> (n, H, W, 3) uint8 images for n = cfg.batch
+    (`PushTEnv.images`), the same images its rollouts showed it."""
 
-    def __init__(self, cfg: DaggerConfig):
+    def __init__(self, cfg: DaggerConfig, render=None):
         import jax
         import jax.numpy as jnp
         import optax
 
+        if cfg.image and render is None:
+            raise ConfigError("a pixel student's Learner needs the env's renderer (PushTEnv.images)")
         self.cfg = cfg
-        self.model = network(cfg.hidden, cfg.activation)
+        self.model = network(cfg.hidden, cfg.activation, cfg.image)
         width = feature_size(cfg.obs_type)
-        self.params = self.model.init(jax.random.key(cfg.seed), jnp.zeros((1, width)))["params"]
+        image = (jnp.zeros((1, cfg.image, cfg.image, 3), jnp.uint8),) if cfg.image else ()
+        self.params = self.model.init(jax.random.key(cfg.seed), jnp.zeros((1, width)), *image)["params"]
         # Each fit anneals the learning rate from its value to 5% (cosine, restarted every iteration): the
         # policy judged after a fit is then a settled one, not a snapshot of Adam at full step size (measured
         # with a constant rate: held-out success swinging 36-78% between neighbouring iterations, NOTES change 14).
         decay = optax.cosine_decay_schedule(cfg.learning_rate, cfg.fit_steps, alpha=0.05)
         self.opt = optax.adam(lambda count: decay(count % cfg.fit_steps))
         self.opt_state = self.opt.init(self.params)
-        self.x = jnp.zeros((cfg.max_samples, width), jnp.float32)
+        self.x = jnp.zeros((cfg.max_samples, cfg.sample_width), jnp.float32)
         self.y = jnp.zeros((cfg.max_samples, 3), jnp.float32)  # _label: action, memory
         self.filled, self.head, self.floor = 0, 0, 0  # samples held; where the next goes; kept below here
         self.norm = None  # (mean, std) of the features, fixed from the first iteration's data
-        self._fit = jax.jit(partial(_fit, self.model, self.opt, cfg.batch, cfg.fit_steps))
+        self._fit = jax.jit(partial(_fit, self.model, self.opt, cfg.batch, cfg.fit_steps, render))
 
     def add(self, x, y, keep: bool = False) -> None:
         """Append samples; when the ring is full the oldest student-visited ones go, never those added with
@@ -226,8 +266,9 @@ class Learner:
         import jax.numpy as jnp
 
         x, y = jnp.asarray(x, jnp.float32), jnp.asarray(y, jnp.float32)
-        if self.norm is None:
-            self.norm = (np.asarray(x.mean(0)), np.asarray(x.std(0)) + 1e-3)
+        if self.norm is None:  # of the features (not of a pixel student's image keys)
+            f = x[:, self.cfg.sample_width - feature_size(self.cfg.obs_type):]
+            self.norm = (np.asarray(f.mean(0)), np.asarray(f.std(0)) + 1e-3)
         room = self.cfg.max_samples - self.floor
         if keep:
             room = room // 2  # demonstrations take at most half the ring
@@ -252,7 +293,7 @@ class Learner:
         return float(loss)
 
 
-def _fit(model, opt, batch, steps, params, opt_state, x, y, filled, norm, key):
+def _fit(model, opt, batch, steps, render, params, opt_state, x, y, filled, norm, key):
     import jax
     import jax.numpy as jnp
     import optax
@@ -261,8 +302,8 @@ def _fit(model, opt, batch, steps, params, opt_state, x, y, filled, norm, key):
     from mjx_pusht.task.rules import CTRL_LIMIT
     from mjx_pusht.train.policy import LATCHES, MOVES
 
-    def loss_fn(p, xb, yb):
-        head = model.apply({"params": p}, (xb - norm[0]) / norm[1])
+    def loss_fn(p, xb, yb, image):
+        head = model.apply({"params": p}, (xb - norm[0]) / norm[1], *image)
         pred = jnp.tanh(head[:, :2]) * CTRL_LIMIT
         mse = jnp.mean(jnp.sum((pred - yb[:, :2]) ** 2, axis=-1))
         memory = yb[:, 2].astype(jnp.int32)
@@ -275,7 +316,11 @@ def _fit(model, opt, batch, steps, params, opt_state, x, y, filled, norm, key):
     def step(c, k):
         p, o = c
         idx = jax.random.randint(k, (batch,), 0, filled)
-        loss, g = jax.value_and_grad(loss_fn)(p, x[idx], y[idx])
+        xb = x[idx]
+        image = ()
+        if render is not None:  # the minibatch's images, rendered again from their states
+            image, xb = (render(xb[:, :RENDER_KEY]),), xb[:, RENDER_KEY:]
+        loss, g = jax.value_and_grad(loss_fn)(p, xb, y[idx], image)
         updates, o = opt.update(g, o, p)
         return (optax.apply_updates(p, updates), o), loss
 

@@ -41,7 +41,7 @@ class TrainError(MjxPushtError, ValueError):
 def _meta(cfg, iteration: int, env_steps: int, norm) -> dict:
     return {"obs_type": cfg.obs_type, "activation": cfg.activation, "in_mean": [float(v) for v in norm[0]],
             "in_std": [float(v) for v in norm[1]], "method": "dagger", "iteration": iteration,
-            "env_steps": int(env_steps), "config": config_dict(cfg)}
+            "env_steps": int(env_steps), "config": config_dict(cfg)} | ({"image": cfg.image} if cfg.image else {})
 
 
 def config_dict(cfg) -> dict:
@@ -65,8 +65,8 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     ckpt = out / "checkpoints"
     ckpt.mkdir(parents=True, exist_ok=True)
     env = PushTEnv(backend=backend, reset_kind=cfg.reset, episode=Episode(max_steps=cfg.max_steps),
-                   threads=default_threads(), keep_states=False)
-    rollouts, learner = Rollouts(env, cfg), Learner(cfg)
+                   threads=default_threads(), keep_states=False, pixels=cfg.image)
+    rollouts, learner = Rollouts(env, cfg), Learner(cfg, env.images(cfg.batch) if cfg.image else None)
     curve, start, env_steps, wall0 = [], 0, 0, 0.0
     resume_path = ckpt / "resume.msgpack"
     if resume:
