@@ -249,14 +249,7 @@ class PushTEnv:
 
         if not self.pixels or self.layout.tee is None:
             raise ConfigError("images() needs an env with pixels and the tee on slide and hinge joints")
-        # qpos column c is the state's column source[c] (the tee's x, y, yaw are state 2..4, the pusher's 0..1),
-        # or qpos0's value where the state says nothing: built by stacking, exact in either namespace
-        source = {**{c: 2 + i for i, c in enumerate(self.layout.tee)}, **{c: i for i, c in enumerate(self.layout.pusher)}}
         q0 = np.asarray(self.model.qpos0, np.float64)
-
-        def qpos(states, xp):
-            return xp.stack([states[..., source[c]] if c in source else xp.full(states.shape[:-1], q0[c], dtype=states.dtype)
-                             for c in range(len(q0))], axis=-1)
 
         shape = jax.ShapeDtypeStruct((n, self.pixels, self.pixels, 3), jnp.uint8)
         if self.backend == "cpu":  # MuJoCo C's OpenGL renderer, on the host
@@ -270,13 +263,14 @@ class PushTEnv:
             renderer = pool.submit(CpuRenderer, self.model, self.pixels).result()
 
             def render(st):
-                return pool.submit(renderer, qpos(np.asarray(st, np.float64), np)).result()
+                return pool.submit(renderer, self.layout.qpos_of_state(q0, np.asarray(st, np.float64))).result()
 
             return lambda states: jax.pure_callback(render, shape, states)
         from mjx_pusht.envs.pixels import WarpRenderer
 
         renderer, d0 = WarpRenderer(self.model, n, self.pixels), self.template(n)
-        return lambda states: jax.vmap(lambda q: renderer(d0.replace(qpos=q)))(qpos(states.astype(self.runner.dtype), jnp))
+        return lambda states: jax.vmap(lambda q: renderer(d0.replace(qpos=q)))(
+            self.layout.qpos_of_state(q0, states.astype(self.runner.dtype)))
 
     def advance_one(self, state: State, action) -> State:
         """One world's control step without the image (pure)."""

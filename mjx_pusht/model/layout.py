@@ -48,6 +48,15 @@ class QposLayout:
     def pusher_xy(self, qpos):
         return qpos[..., list(self.pusher)]
 
+    def qpos_of_state(self, qpos0: np.ndarray, state):
+        """(..., nq) qpos from (..., 5) observation states (pusher x, y, tee x, y, yaw; `observe`'s order):
+        the state's values in the tee's and the pusher's joints, qpos0's elsewhere; built by stacking, so it is
+        exact and jittable in either namespace (the tee on slide and hinge joints only)."""
+        xp = state.__array_namespace__()
+        source = {**{c: 2 + i for i, c in enumerate(self.tee)}, **{c: i for i, c in enumerate(self.pusher)}}
+        return xp.stack([state[..., source[c]] if c in source else xp.full(state.shape[:-1], qpos0[c], dtype=state.dtype)
+                         for c in range(len(qpos0))], axis=-1)
+
     def initial_qpos(self, model: mujoco.MjModel, poses: np.ndarray) -> np.ndarray:
         """(N, nq) start qpos: qpos0 with the tee at each pose and the pusher south of it
         (or, for (N, 5) starts, where columns 3 and 4 put it).

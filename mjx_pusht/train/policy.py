@@ -38,8 +38,7 @@ ACTIVATIONS = ("relu", "silu")
 # softmax over a 19 x 19 map instead, for positions between pixels, fitted worse and did not succeed more:
 # NOTES change 21.)
 CONV_CHANNELS = (32, 32, 32, 32)
-CONV_STRIDES = (2, 2, 2, 2)
-CONV_KERNEL = 3
+CONV_KERNEL, CONV_STRIDE = 3, 2
 
 
 # The memory: the expert's carry (move in the low bits, 0 before the first act; two latch bits).
@@ -55,9 +54,9 @@ def feature_size(obs_type: str) -> int:
 
 
 def conv_out(size: int) -> int:
-    """The last convolution's side for a size x size input."""
-    for stride in CONV_STRIDES:
-        size = (size - CONV_KERNEL) // stride + 1
+    """The image trunk's output side for a size x size input."""
+    for _ in CONV_CHANNELS:
+        size = (size - CONV_KERNEL) // CONV_STRIDE + 1
     return size
 
 
@@ -131,26 +130,25 @@ def _trunk(params: dict, activation: str, image, dtype):
     for i in range(len(CONV_CHANNELS)):
         layer = params[f"Conv_{i}"]
         kernel, bias = xp.asarray(layer["kernel"], dtype=dtype), xp.asarray(layer["bias"], dtype=dtype)
-        stride = CONV_STRIDES[i]
         if xp.__name__.startswith("jax"):
-            acc = _conv_xla(h, kernel, stride) + bias
+            acc = _conv_xla(h, kernel) + bias
         else:
-            side = (h.shape[-2] - CONV_KERNEL) // stride + 1
-            span = stride * (side - 1) + 1
+            side = (h.shape[-2] - CONV_KERNEL) // CONV_STRIDE + 1
+            span = CONV_STRIDE * (side - 1) + 1
             acc = bias
             for a in range(CONV_KERNEL):
                 for b in range(CONV_KERNEL):
-                    acc = acc + h[..., a:a + span:stride, b:b + span:stride, :] @ kernel[a, b]
+                    acc = acc + h[..., a:a + span:CONV_STRIDE, b:b + span:CONV_STRIDE, :] @ kernel[a, b]
         h = _activation(activation, acc, xp)
     return xp.reshape(h, h.shape[:-3] + (-1,))
 
 
-def _conv_xla(h, kernel, stride: int):
-    """flax's `nn.Conv(padding="VALID", strides=stride)` on (..., H, W, C) in JAX, leading axes folded."""
+def _conv_xla(h, kernel):
+    """flax's `nn.Conv(padding="VALID", strides=CONV_STRIDE)` on (..., H, W, C) in JAX, leading axes folded."""
     from jax import lax
 
     lead = h.shape[:-3]
-    out = lax.conv_general_dilated(h.reshape((-1,) + h.shape[-3:]), kernel, (stride, stride), "VALID",
+    out = lax.conv_general_dilated(h.reshape((-1,) + h.shape[-3:]), kernel, (CONV_STRIDE, CONV_STRIDE), "VALID",
                                    dimension_numbers=("NHWC", "HWIO", "NHWC"))
     return out.reshape(lead + out.shape[1:])
 
@@ -184,8 +182,9 @@ def network(hidden: tuple[int, ...], activation: str = "relu", image: int = 0):
         def __call__(self, x, img=None):
             if image:
                 h = img.astype(x.dtype) / 255.0 - 0.5
-                for ch, stride in zip(CONV_CHANNELS, CONV_STRIDES, strict=True):
-                    h = act(nn.Conv(ch, (CONV_KERNEL, CONV_KERNEL), strides=(stride, stride), padding="VALID")(h))
+                for ch in CONV_CHANNELS:
+                    h = act(nn.Conv(ch, (CONV_KERNEL, CONV_KERNEL), strides=(CONV_STRIDE, CONV_STRIDE),
+                                    padding="VALID")(h))
                 x = jnp.concatenate([h.reshape(h.shape[:-3] + (-1,)), x], axis=-1)
             for width in hidden:
                 x = act(nn.Dense(width)(x))
