@@ -1,12 +1,18 @@
 """Where the env step's time goes on the GPU: the same step scanned in one jitted program or called once a step.
 
-    python benchmarks/env_bisect.py N STEPS physics_only,plain,full,percall_plain,percall_full
+    python benchmarks/env_bisect.py N STEPS physics_only,plain,full,percall_plain,percall_full [PIXELS]
+    python benchmarks/env_bisect.py 16384 30 full,percall_full,percall_final,percall_render,gym_jax,gym_torch 96
 
 One process, one N, MJX-Warp (MJX_PUSHT_ENV_GRAPH_MODE picks the CUDA-graph mode). Variants:
 `physics_only` (the env's mjx.Data, frame_skip mjx.steps at the action's ctrl, nothing else),
 `plain` (the env's control step: physics, invariants, task score), `full` (plus the autoreset);
 each in a `lax.scan` of STEPS steps, and `percall_*` the same step jitted once and called STEPS
-times from Python. Figures are N x STEPS / seconds of the second call. Results: NOTES change 13.
+times from Python. With PIXELS (an image size) the env renders in its step, and three more variants
+split the pixel vector env's step: `percall_final` (the autoreset that also renders each ended
+episode's last image, as the vector env's same-step mode does for `final_obs`), `percall_render`
+(the render alone, on the state's Data) and `gym_jax` / `gym_torch` (the gymnasium vector env, same-step
+autoreset, jax or torch arrays out, zero actions). Figures are N x STEPS / seconds of the second call.
+Results: NOTES changes 13 and 22.
 """
 import json
 import sys
@@ -22,12 +28,15 @@ from mjx_pusht.envs.wrappers import AutoReset
 
 n, steps = int(sys.argv[1]), int(sys.argv[2])
 variants = sys.argv[3].split(",")
-env = PushTEnv(backend="mjx-warp")
+pixels = int(sys.argv[4]) if len(sys.argv) > 4 else 0
+env = PushTEnv(backend="mjx-warp", pixels=pixels)
 ar = AutoReset(env, mode="same_step")
+ar_final = AutoReset(env, mode="same_step", final_pixels=True)
 s = ar.reset(np.arange(n))
+s_final = ar_final.reset(np.arange(n)) if "percall_final" in variants else None
 W = jax.random.normal(jax.random.PRNGKey(0), (5, 2)) * 0.5
 d0 = env.template(n)
-out = {"n": n, "steps": steps, "device": str(jax.devices()[0])}
+out = {"n": n, "steps": steps, "pixels": pixels, "device": str(jax.devices()[0])}
 
 def plain(s):
     a = jnp.tanh(s.obs["state"] @ W)
@@ -36,6 +45,12 @@ def plain(s):
 
 def full(s):
     return ar._step_batch(d0, s, jnp.tanh(s.obs["state"] @ W))
+
+def final(s):
+    return ar_final._step_batch(d0, s, jnp.tanh(s.obs["state"] @ W))
+
+def render(s):  # the image of each world's current Data, nothing else
+    return s._replace(obs={**s.obs, "pixels": jax.vmap(env._renderer)(s.data)})
 
 def physics_only(s):  # the env's data, its frame_skip mjx.steps at the action's ctrl, nothing else
     a = jnp.tanh(s.obs["state"] @ W)
@@ -59,15 +74,37 @@ def timed(name, run, s):
         out[name] = {"error": f"{type(e).__name__}: {str(e).splitlines()[0][:200]}"}
     print(json.dumps({name: out[name]}), flush=True)
 
+def gym(array_type):
+    import gymnasium as gym
+
+    import mjx_pusht  # noqa: F401  (registers the envs)
+
+    envs = gym.make_vec("mjx_pusht/PushT-v0", num_envs=n, backend="mjx-warp", array_type=array_type,
+                        obs_type="pixels_agent_pos" if pixels else "state", autoreset_mode="same_step")
+    envs.reset(seed=0)
+    zero = np.zeros((n, 2), np.float32)
+    if array_type == "torch":
+        import torch
+
+        zero = torch.zeros((n, 2), device="cuda")
+
+    def run(_):
+        for _ in range(steps):
+            envs.step(zero)
+        return envs._state.reward
+    return run
+
 for v in variants:
-    if v.startswith("percall_"):
-        fn = {"percall_plain": plain, "percall_full": full}[v]
+    if v.startswith("gym_"):
+        timed(v, gym(v[4:]), s)
+    elif v.startswith("percall_"):
+        fn = {"percall_plain": plain, "percall_full": full, "percall_final": final, "percall_render": render}[v]
         j = jax.jit(fn)
         def run(s, j=j):
             for _ in range(steps):
                 s = j(s)
             return s
-        timed(v, run, s)
+        timed(v, run, s_final if v == "percall_final" else s)
     else:
         timed(v, scan_of({"plain": plain, "full": full, "physics_only": physics_only}[v]), s)
 print("RESULT " + json.dumps(out), flush=True)

@@ -5,12 +5,17 @@
 
 For each N (one process each, so that one size failing to fit is recorded, not fatal), on MJX-Warp:
 - `raw`: the physics alone: a jitted scan of `steps` control steps, each 10 `mjx.step`s of all N
-  worlds at a constant ctrl (no task, no reset, no observation): the ceiling;
+  worlds at the JAX policy's ctrl (no task, no reset, no env observation), from the same start poses
+  as the env's (seeds 0..N-1): the ceiling, the same physics as `scan_autoreset` steps;
+- `raw_zero_pose`: the raw case as measured before NOTES change 22: every world from one pose (tee
+  and pusher at the origin) at random actions: different physics, kept to compare old figures;
 - `scan_autoreset`: the env (`wrappers.AutoReset(PushTEnv)`, same-step autoreset, start poses from
   the device pool) stepped in a jitted scan by a JAX policy (a fixed random linear layer + tanh on
   the observation), with pixels rendered in the step for `--obs pixels`;
-- `gym_torch`: `gym.make_vec("mjx_pusht/PushT-v0", num_envs=N, array_type="torch")` stepped from
-  Python by a torch policy on the same GPU (observations reach torch through DLPack);
+- `gym_torch`: `gym.make_vec("mjx_pusht/PushT-v0", num_envs=N, array_type="torch",
+  autoreset_mode="same_step")` stepped from Python by a torch policy on the same GPU (observations
+  reach torch through DLPack); `gym_torch_next_step` the same in gymnasium's default mode, next_step
+  (with pixels, same_step renders twice a step: the ended episodes' last images for `final_obs`);
 - `gym_numpy`: the same vector env with `array_type="numpy"` and NumPy actions (copies to the host);
 - `dropin_numpy` / `dropin_torch`: the gym-pusht drop-in's vector env
   (`gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", ...)`, `pixels_agent_pos` with `--obs pixels`),
@@ -69,6 +74,29 @@ row["graph_mode"] = env.graph_mode or "MJX default"  # the mode the env resolved
 W = jax.random.normal(jax.random.PRNGKey(0), (5, 2)) * 0.5
 
 def raw():
+    # the env's own worlds (its reset's start poses for seeds 0..n-1, as scan_autoreset starts) under the same
+    # policy, the observation read off qpos: the same physics as the env steps, without the env around it
+    from mjx_pusht.task.reset import start_poses
+    mx, d0, lay = env._mx, env.template(n), env.layout
+    q0 = lay.initial_qpos(env.model, start_poses(np.arange(n), reset=env.reset_kind))
+    # committed to the device as the jitted run's outputs are, so the timed call reuses the first call's program
+    d = jax.device_put(jax.vmap(lambda q: d0.replace(qpos=q))(jnp.asarray(q0, env.runner.dtype)), jax.devices()[0])
+    def ctrl_step(d):
+        u = jnp.tanh(jnp.concatenate([lay.pusher_xy(d.qpos), lay.tee_pose(d.qpos)]) @ W)
+        def phys(d, _):
+            return mjx.step(mx, d.replace(ctrl=u)), None
+        return jax.lax.scan(phys, d, None, env.episode.frame_skip)[0]
+    vstep = jax.vmap(ctrl_step)
+    @jax.jit
+    def run(d):
+        return jax.lax.scan(lambda d, _: (vstep(d), None), d, None, steps)[0]
+    d1 = jax.block_until_ready(run(d))
+    t0 = time.perf_counter(); jax.block_until_ready(run(d1)); record("raw", time.perf_counter() - t0)
+    row["raw"]["compiles"] = run._cache_size()  # 1: the timed call ran the program compiled by the first
+
+def raw_zero_pose():
+    # the raw case before NOTES change 22: every world from one pose (tee and pusher at the origin), random
+    # actions; other physics than the env's worlds step, kept to compare with the figures measured with it
     mx, d0 = env._mx, env.template(n)
     d = jax.vmap(lambda q: d0.replace(qpos=q))(jnp.asarray(env.layout.initial_qpos(env.model, np.zeros((n, 5))), jnp.float32))
     def ctrl_step(d, u):
@@ -83,8 +111,7 @@ def raw():
             return vstep(d, u), None
         return jax.lax.scan(body, d, jax.random.split(key, steps))[0]
     jax.block_until_ready(run(d, jax.random.PRNGKey(1)))
-    t0 = time.perf_counter(); jax.block_until_ready(run(d, jax.random.PRNGKey(2))); record("raw", time.perf_counter() - t0)
-    row["raw"]["compiles"] = run._cache_size()  # 1: the timed call ran the program compiled by the first
+    t0 = time.perf_counter(); jax.block_until_ready(run(d, jax.random.PRNGKey(2))); record("raw_zero_pose", time.perf_counter() - t0)
 
 def scan_autoreset():
     ar = AutoReset(env, mode="same_step")
@@ -103,10 +130,10 @@ def scan_autoreset():
     record("scan_autoreset", dt, {"episodes_reset": ended, "max_resets_per_row": int(np.asarray(s2.info["used"]).max()),
                                   "compiles": run._cache_size()})
 
-def gym_loop(array_type):
+def gym_loop(array_type, mode="same_step"):
     import gymnasium as gym
     envs = gym.make_vec("mjx_pusht/PushT-v0", num_envs=n, backend="mjx-warp", obs_type="state" if not pixels else "pixels_agent_pos",
-                        array_type=array_type, autoreset_mode="same_step")
+                        array_type=array_type, autoreset_mode=mode)
     obs, _ = envs.reset(seed=0)
     if array_type == "torch":
         import torch
@@ -127,7 +154,8 @@ def gym_loop(array_type):
     for _ in range(steps):
         obs, r, te, tr, info = envs.step(act(obs))
     sync(); jax.block_until_ready(envs._state.reward)
-    record("gym_" + array_type, time.perf_counter() - t0, {"output": type(r).__module__.split(".")[0]})
+    record("gym_" + array_type + ("" if mode == "same_step" else "_" + mode), time.perf_counter() - t0,
+           {"output": type(r).__module__.split(".")[0], "autoreset_mode": mode})
     envs.close()
 
 def dropin(array_type):
@@ -154,7 +182,8 @@ def dropin(array_type):
     envs.close()
 
 for c in cases:
-    attempt(c, {"raw": raw, "scan_autoreset": scan_autoreset, "gym_torch": lambda: gym_loop("torch"),
+    attempt(c, {"raw": raw, "raw_zero_pose": raw_zero_pose, "scan_autoreset": scan_autoreset,
+                "gym_torch": lambda: gym_loop("torch"), "gym_torch_next_step": lambda: gym_loop("torch", "next_step"),
                 "gym_numpy": lambda: gym_loop("numpy"), "dropin_numpy": lambda: dropin("numpy"),
                 "dropin_torch": lambda: dropin("torch")}[c])
 if "raw" in row and "control_steps_per_s" in row["raw"]:
@@ -164,7 +193,7 @@ if "raw" in row and "control_steps_per_s" in row["raw"]:
 print(json.dumps(row))
 """
 
-CASES = "raw,scan_autoreset,gym_torch,gym_numpy"
+CASES = "raw,raw_zero_pose,scan_autoreset,gym_torch,gym_torch_next_step,gym_numpy"
 
 
 def main(argv=None) -> int:
