@@ -266,8 +266,8 @@ class Learner:
         import jax.numpy as jnp
 
         x, y = jnp.asarray(x, jnp.float32), jnp.asarray(y, jnp.float32)
-        if self.norm is None:  # of the features (not of a pixel student's image keys)
-            f = x[:, self.cfg.sample_width - feature_size(self.cfg.obs_type):]
+        if self.norm is None:  # of the features (not of a pixel student's image keys, which come first)
+            f = x[:, RENDER_KEY:] if self.cfg.image else x
             self.norm = (np.asarray(f.mean(0)), np.asarray(f.std(0)) + 1e-3)
         room = self.cfg.max_samples - self.floor
         if keep:
