@@ -173,6 +173,10 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--lr", type=_positive_float, default=None, help="Adam's learning rate (default 1e-3; PPO 3e-4)")
     t.add_argument("--beta-decay", type=_fraction, default=0.7,
                    help="the expert's share of control steps: 1, then times this each iteration (default 0.7)")
+    t.add_argument("--teacher", choices=("paced", "expert"), default="paced",
+                   help="DAgger: whom the student learns from: the expert paced for a student (its slowest actions "
+                        "faster, its last trims coarser, so a student's small errors still move the T; default), or "
+                        "the expert as is")
     t.add_argument("--max-samples", type=_positive, default=8_000_000, help="dataset ring size (default 8,000,000)")
     t.add_argument("--reset", choices=("task", "chapter"), default="task",
                    help="start distribution trained and judged on (default task)")

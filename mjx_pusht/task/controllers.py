@@ -168,6 +168,7 @@ class Expert(Controller):
     steer: float = 0.1  # m of lateral offset per rad of yaw error while translating
     travel_gain: float = 8.0  # 1/s, moving to the start of a push
     travel_max: float = 0.8
+    travel_min: float = 0.0  # m/s: 0, the approach to a push slows in proportion to the distance left
     corridor: float = 0.15  # rad: within this polar angle of a push's start, go straight to it
     near: float = 0.06  # m: beyond this (either axis) the T travels square to the axes, then turns to 0
     wall_room: float = 0.2  # m: from here (fully at +4 cm) a stem toward the wall leaves no room behind it
@@ -274,6 +275,8 @@ class Expert(Controller):
         v_travel = xp.where(in_view[..., None], v_straight, v_orbit)
         speed = xp.sqrt(xp.sum(v_travel * v_travel, axis=-1))
         v_travel = v_travel * xp.minimum(1.0, self.travel_max / xp.maximum(speed, 1e-9))[..., None]
+        if self.travel_min > 0:  # drive into the push's lane at a pace, not ever slower toward its start
+            v_travel = v_travel * xp.maximum(1.0, self.travel_min / xp.maximum(speed, 1e-9))[..., None]
 
         v = xp.where(in_lane[..., None], v_push, v_travel)
         world = xp.stack([c * v[..., 0] - sn * v[..., 1], sn * v[..., 0] + c * v[..., 1]], axis=-1)
