@@ -223,6 +223,21 @@ def test_a_folder_with_another_commands_results_is_refused_unless_replaced(tmp_p
     assert sorted(_files(out)) == ["per_seed.parquet", "summary.json"]  # no eval table left beside the sweep's
 
 
+def test_a_summary_json_no_run_wrote_is_not_overwritten(tmp_path):
+    """A folder holding someone's own summary.json (no mjx-pusht run's file beside it) was taken as empty, and the
+    run replaced the file. Now it is one line and the file stays; --replace says go."""
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "summary.json").write_text("precious")
+    r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--out", str(out))
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1
+    assert "finished results (not mjx-pusht: summary.json)" in r.stderr and "--replace" in r.stderr
+    assert (out / "summary.json").read_text() == "precious"
+    r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--replace", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    assert (out / "summary.json").read_text() != "precious"
+
+
 def test_a_finished_sweep_is_not_overwritten_by_other_seeds_but_may_be_rerun(tmp_path):
     """Finding 3: --resume on a finished sweep with other seeds overwrote it."""
     out = tmp_path / "sw"

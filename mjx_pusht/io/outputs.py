@@ -97,19 +97,21 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
     _lock(path)
     mine = {"command": command,
             "fingerprint": hashlib.sha256(json.dumps(fingerprint, sort_keys=True, default=str).encode()).hexdigest()}
-    held = [name for name in RESULTS if (path / name).exists()]
+    # a summary.json counts too: every command writes one, and one with no run file beside it is no run's here
+    held = [name for name in (*RESULTS, "summary.json") if (path / name).exists()]
     if held:
         try:
             owner = json.loads((path / RUN_FILE).read_text())
         except (OSError, ValueError):
-            owner = {"command": RESULTS[held[0]]}  # results from before this file existed: known by their name
+            # results from before this file existed are known by their name; a lone summary.json by nobody
+            owner = {"command": RESULTS.get(held[0], "not mjx-pusht")}
         same = owner.get("command") == command and owner.get("fingerprint", mine["fingerprint"]) == mine["fingerprint"]
         if not same and not replace:
             what = ("another command's" if owner.get("command") != command else "other seeds' or settings'")
             raise OutputError(f"--out {path} holds {what} finished results ({owner.get('command')}: {', '.join(held)}); "
                               "pass --replace to overwrite them, or choose another --out")
         if not same:
-            for f in [*(path / name for name in (*held, "summary.json")), *path.glob("*.rrd")]:
+            for f in [*(path / name for name in held), *path.glob("*.rrd")]:
                 f.unlink(missing_ok=True)
             print(f"--replace: removed the earlier {owner.get('command')} results in {path} ({', '.join(held)})")
     atomic_write_json(path / RUN_FILE, mine)
