@@ -25,7 +25,7 @@ from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json
 from mjx_pusht.study.stats import wilson
 
 CURVE_COLUMNS = ("iteration", "beta", "env_steps", "samples", "loss", "success", "success_lo", "success_hi",
-                 "coverage", "sim_seconds", "learn_seconds", "wall_seconds")
+                 "coverage", "sim_seconds", "learn_seconds", "wall_seconds", "pose_error_mm")
 
 
 # The resume checkpoint holds the whole dataset (8 M samples: ~0.5 GB, ~4 s to write, measured on the H100
@@ -71,7 +71,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     graph_mode = "WARP" if backend == "mjx-warp" and has_gpu() else None
     env = PushTEnv(backend=backend, reset_kind=cfg.reset, episode=Episode(max_steps=cfg.max_steps),
                    threads=default_threads(), keep_states=False, pixels=cfg.image, graph_mode=graph_mode)
-    rollouts, learner = Rollouts(env, cfg), Learner(cfg, env.images(cfg.batch) if cfg.image else None)
+    rollouts, learner = Rollouts(env, cfg), Learner(cfg, env.images(cfg.image_batch) if cfg.image else None)
     curve, start, env_steps, wall0 = [], 0, 0, 0.0
     resume_path = ckpt / "resume.msgpack"
     if resume:
@@ -95,7 +95,8 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         row = {"iteration": i, "beta": cfg.beta(i), "env_steps": env_steps, "samples": learner.filled,
                "loss": loss, "success": k / n, "success_lo": lo, "success_hi": hi,
                "coverage": float(held["coverage"].mean()), "sim_seconds": sim + sim_judge, "learn_seconds": learn,
-               "wall_seconds": time.perf_counter() - t_start}
+               "wall_seconds": time.perf_counter() - t_start,
+               "pose_error_mm": learner.pose_error_mm}  # a pixel student's reading of the T, in its last fit
         curve.append(row)
         meta = _meta(cfg, i, env_steps, learner.norm)
         save(ckpt / f"policy_{i:03d}.msgpack", learner.params, meta)
@@ -104,7 +105,8 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         if stop or i == cfg.iterations - 1 or time.perf_counter() - saved > RESUME_EVERY_S:
             writer[0] = _checkpoint(resume_path, cfg, learner, i, env_steps, curve, writer[0])
             saved = time.perf_counter()
-        bar.set_postfix(success=f"{k / n:.1%}", loss=f"{loss:.4f}", steps=env_steps)
+        bar.set_postfix(success=f"{k / n:.1%}", loss=f"{loss:.4f}", steps=env_steps,
+                        **({"pose_mm": f"{learner.pose_error_mm:.2f}"} if cfg.image else {}))
         bar.update(1)
         return stop
 
@@ -282,8 +284,8 @@ def write_curve(out: Path, curve: list[dict], title: str, rerun: bool = True) ->
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    lines = [",".join(CURVE_COLUMNS)] + [",".join(f"{r[c]:.6g}" if isinstance(r[c], float) else
-                                                  "" if r[c] is None else str(r[c])
+    lines = [",".join(CURVE_COLUMNS)] + [",".join(f"{r[c]:.6g}" if isinstance(r.get(c), float) else
+                                                  "" if r.get(c) is None else str(r[c])
                                                   for c in CURVE_COLUMNS) for r in curve]
     atomic_write_bytes(out / "curve.csv", ("\n".join(lines) + "\n").encode())
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
@@ -337,7 +339,8 @@ def cmd_train(args) -> int:
     cfg = DaggerConfig(obs_type=args.obs, envs=args.envs, iterations=args.iterations, hidden=tuple(args.hidden),
                        learning_rate=args.lr or 1e-3, batch=args.batch or 4096, fit_steps=args.fit_steps,
                        beta_decay=args.beta_decay, max_samples=args.max_samples, eval_envs=args.eval_envs,
-                       seed=args.seed, reset=args.reset, teacher=args.teacher)
+                       seed=args.seed, reset=args.reset, teacher=args.teacher,
+                       image_batch=args.image_batch or min(512, args.batch or 4096))
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
@@ -398,6 +401,12 @@ def _cmd_ppo(args, name: str, why: str) -> int:
 
 
 def _finish(args, name: str, out: Path, summary: dict, banner) -> int:
+    import gc
+
+    # Training's rollouts and renderers sit in reference cycles (jitted bound methods); collected during eval's CUDA
+    # graph capture, their programs' unloading broke the capture ("operation not permitted when stream is
+    # capturing", then Warp's render kernel failed: an H100 pixel run, NOTES change 25). Collected here, before it.
+    gc.collect()
     summary["eval"] = _judge(args, name, out, summary)
     atomic_write_json(out / "summary.json", summary)
     ev = summary["eval"]
