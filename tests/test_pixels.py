@@ -123,6 +123,29 @@ def test_bad_sizes_and_missing_gl_are_one_line(model, monkeypatch):
     assert "\n" not in str(e.value)
 
 
+def test_a_script_that_renders_on_the_cpu_exits_without_a_traceback():
+    """MuJoCo tears the EGL display down in an exit hook; a renderer still open then was closed after it and
+    printed EGL_NOT_INITIALIZED tracebacks at every such exit, whenever anything had made a weakref finalizer
+    before the first GL context (as this script does first). Now the renderer closes first."""
+    import subprocess
+    import sys
+
+    from helpers import ENV
+
+    script = """
+import weakref
+class Early: pass
+early = Early(); weakref.finalize(early, print, end="")  # weakref's exit hook, before any GL context's
+import numpy as np
+from mjx_pusht.envs.functional import PushTEnv
+env = PushTEnv(backend="cpu", pixels=96, reset_kind="task")  # alive at exit, as a script's env is
+print(env.reset(np.arange(2)).obs["pixels"].shape)
+"""
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=ENV, timeout=120)
+    assert r.returncode == 0 and r.stdout.strip() == "(2, 96, 96, 3)", r.stderr
+    assert "Traceback" not in r.stderr and "EGL" not in r.stderr, r.stderr
+
+
 @pytest.mark.slow
 @pytest.mark.warp
 def test_mjx_warp_renders_the_cpus_image_of_the_same_states():

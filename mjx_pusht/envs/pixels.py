@@ -95,10 +95,17 @@ class CpuRenderer:
                 "install EGL (Debian: apt-get install libegl1 libgl1-mesa-dri) and set MUJOCO_GL=egl, "
                 "or OSMesa (apt-get install libosmesa6) and MUJOCO_GL=osmesa") from None
         self._camera = self.view.camera(CAMERA).id
+        import atexit
         import weakref
 
-        # closed when this renderer goes, or at exit before EGL is torn down (else its destructor complains)
-        weakref.finalize(self, self.renderer.close)
+        # Closed when this renderer goes, or at exit before EGL is torn down (else its destructor complains). MuJoCo
+        # terminates the EGL display in an exit hook it registers with the first GL context; weakref's own exit hook
+        # may have been registered before that, and exit hooks run last-registered first, so a finalizer left to it
+        # ran after the display was gone (EGL_NOT_INITIALIZED tracebacks at exit). Registered here, after the
+        # context, it runs before. (Once it has run, it holds nothing.)
+        close = weakref.finalize(self, self.renderer.close)
+        close.atexit = False
+        atexit.register(close)
 
     def __call__(self, qpos) -> np.ndarray:
         import mujoco
