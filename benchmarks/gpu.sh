@@ -86,5 +86,16 @@ same = all(np.array_equal(np.asarray(a[k]), np.asarray(b[k])) for k in a)
 rows = np.all([np.asarray(a[k]) == np.asarray(b[k]) for k in a if k.startswith('tee_')], axis=0)
 print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:', a['seed'] == b['seed'],
       'rigid:', np.mean(a['tee_stayed_rigid']), np.mean(b['tee_stayed_rigid']))" | tee -a "$OUT/two-times.txt" ;;
+  train-pixels) # DAgger from pixels, continued across calls on one machine (a call runs at most 10 minutes): the
+          # first call with MINUTES=9, the next with MINUTES=19.5 resumes the same run ($HOME/runs/$RUN) to 19.5
+          # minutes of training in all. FIT_STEPS / IMAGE_STEPS: the actions' and the reader's steps an iteration
+          # (change 25 ran 4000 / 4000).
+          run=$HOME/runs/${RUN:-px}; resume=""; [ -f "$run/checkpoints/resume.msgpack" ] && resume="--resume"
+          python3 -m mjx_pusht train --obs pixels_agent_pos --backend mjx-warp --reset task --envs 4096 \
+            --iterations 300 --minutes "${MINUTES:?MINUTES=training minutes in all}" --hidden 1024,1024,1024 \
+            --fit-steps "${FIT_STEPS:-10000}" --image-steps "${IMAGE_STEPS:-4000}" --batch 4096 --image-batch 512 \
+            --max-samples 8000000 --beta-decay 0.7 --eval-envs 4096 --seed "${SEED:-0}" --no-progress --no-rerun \
+            --record 8 --out "$run" $resume >> "$OUT/$stage.log" 2>&1
+          cp "$run"/curve.csv "$run"/curve.png "$run"/summary.json "$run"/policy.msgpack "$OUT/" ;;
   *) echo "unknown stage $stage" >&2; exit 2 ;;
 esac

@@ -145,6 +145,30 @@ def test_resume_with_other_settings_or_nothing_to_resume_is_one_line(run, tmp_pa
     assert r.returncode == 1 and "nothing to resume" in r.stderr
 
 
+def test_a_resume_file_of_another_optimiser_layout_or_image_steps_without_images_is_one_line(run, tmp_path):
+    """Since change 26 the fit keeps an Adam state per part of the network (a tuple, of one for a state student);
+    a resume file written before, with one Adam state bare, names that in one line instead of a traceback. And
+    --image-steps, the steps of a pixel student's image reader, is refused for a student without one."""
+    import shutil
+
+    from flax import serialization
+
+    out = tmp_path / "run"
+    shutil.copytree(run, out)
+    path = out / "checkpoints" / "resume.msgpack"
+    tree = serialization.msgpack_restore(path.read_bytes())
+    tree["opt_state"] = tree["opt_state"]["0"]  # the one Adam's state, as change 25 wrote it
+    path.write_bytes(serialization.msgpack_serialize(tree))
+    args = list(TINY)
+    args[args.index("--iterations") + 1] = "3"
+    r = cli("train", *args, "--out", str(out), "--resume")
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "optimiser state this version does not use" in r.stderr
+    r = cli("train", *TINY, "--image-steps", "5", "--out", str(tmp_path / "state"))
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and "--image-steps" in r.stderr, r.stderr
+    assert not (tmp_path / "state" / "checkpoints").exists()
+
+
 def test_bad_checkpoints_are_one_line(run, tmp_path):
     good = (run / "policy.msgpack").read_bytes()
     cut = tmp_path / "cut.msgpack"

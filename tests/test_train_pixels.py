@@ -183,3 +183,97 @@ def test_the_fit_teaches_the_pose_reader_the_pose_each_image_shows(env):
     read = rms_mm(read_pose(jax.tree.map(np.asarray, learner.params), "relu", images, np.float64))
     assert read < 0.6 * blind, (read, blind)
     assert learner.pose_error_mm == pytest.approx(read, rel=0.5)
+
+
+
+def _pixel_learner(env, render=None, rows=256, **kw):
+    """A small pixel Learner with `rows` ring samples of states anywhere a task episode puts pusher and T."""
+    from mjx_pusht.train.dagger import DaggerConfig, Learner
+
+    r = np.random.default_rng(0)
+    states = np.column_stack([r.uniform(-0.3, 0.3, (rows, 4)), r.uniform(-np.pi, np.pi, rows)])
+    memory = r.integers(0, 4, rows)
+    x = np.column_stack([states, features({"state": states}, "pixels_agent_pos", memory)])
+    y = np.column_stack([r.uniform(-0.3, 0.3, (rows, 2)), memory])
+    cfg = DaggerConfig(obs_type="pixels_agent_pos", batch=16, image_batch=8, hidden=(16,), max_samples=rows, **kw)
+    learner = Learner(cfg, render or env.images(cfg.image_batch))
+    learner.add(x, y)
+    return learner
+
+
+def test_the_actions_and_the_reader_fitted_apart_are_the_one_scan_fit_they_replace(env):
+    """A pixel student's acting layers and image reader share no weights, so the fit runs them as two scans with
+    an Adam each (the actions then need not render). With as many steps each, that is exactly the fit change 25
+    measured: one scan, one Adam over all weights, both losses every step. That fit, written out here, and the
+    Learner's end at the same weights and report the same loss and pose error."""
+    import jax
+    import jax.numpy as jnp
+    import optax
+
+    from mjx_pusht.task.rules import CTRL_LIMIT
+    from mjx_pusht.train.dagger import MEMORY_WEIGHT, RENDER_KEY
+    from mjx_pusht.train.policy import LATCHES, MOVES, POSE_SCALE, pose_target
+
+    learner = _pixel_learner(env, fit_steps=12)
+    cfg, render, k = learner.cfg, env.images(8), 8
+    params0, norm = learner.params, tuple(jnp.asarray(a) for a in learner.norm)
+    x, y, key = learner.x, learner.y, jax.random.fold_in(jax.random.key(cfg.seed + 1), 0)
+    decay = optax.cosine_decay_schedule(cfg.learning_rate, cfg.fit_steps, alpha=0.05)
+    opt = optax.adam(lambda count: decay(count % cfg.fit_steps))
+
+    def loss_fn(p, xb, yb, state):  # change 25's: the actions from the true pose, the pose from k images
+        xb = (xb - norm[0]) / norm[1]
+        truth = pose_target(state)
+        head = learner.model.apply({"params": p}, xb, None, state[:, :2], truth)[0]
+        mse = jnp.mean(jnp.sum((jnp.tanh(head[:, :2]) * CTRL_LIMIT - yb[:, :2]) ** 2, axis=-1))
+        memory = yb[:, 2].astype(jnp.int32)
+        move = optax.softmax_cross_entropy_with_integer_labels(head[:, 2:2 + MOVES], memory & (NEAR - 1))
+        bits = jnp.stack([(memory & b) != 0 for b in LATCHES], -1).astype(jnp.float32)
+        latch = optax.sigmoid_binary_cross_entropy(head[:, 2 + MOVES:], bits).sum(-1)
+        _, pose = learner.model.apply({"params": p}, xb[:k], render(state[:k]), state[:k, :2])
+        pose_mse = jnp.mean(jnp.sum((pose - truth[:k]) ** 2, axis=-1))
+        return mse + MEMORY_WEIGHT * jnp.mean(move + latch) + pose_mse, pose_mse  # change 25's POSE_WEIGHT: 1
+
+    def step(c, key):
+        p, o = c
+        idx = jax.random.randint(key, (cfg.batch,), 0, learner.filled)
+        (loss, pose_mse), g = jax.value_and_grad(loss_fn, has_aux=True)(p, x[idx, RENDER_KEY:], y[idx],
+                                                                        x[idx, :RENDER_KEY])
+        updates, o = opt.update(g, o, p)
+        return (optax.apply_updates(p, updates), o), (loss, pose_mse)
+
+    (joint, _), (losses, poses) = jax.lax.scan(step, (params0, opt.init(params0)), jax.random.split(key, 12))
+    loss = learner.fit(0)
+    assert learner.params.keys() == joint.keys()
+    for name in joint:
+        for leaf in ("kernel", "bias"):
+            np.testing.assert_allclose(learner.params[name][leaf], joint[name][leaf], rtol=1e-5, atol=1e-6,
+                                       err_msg=name)
+    assert loss == pytest.approx(float(losses[-1:].mean()), rel=1e-5)  # the last tenth of 12 steps: the last
+    assert learner.pose_error_mm == pytest.approx(float(np.sqrt(poses[-1] / 4) * POSE_SCALE * 1000), rel=1e-5)
+    moved = {n[:5] for n in joint if not np.allclose(joint[n]["kernel"], params0[n]["kernel"])}
+    assert moved == {"Conv_", "Pose_", "Dense"}  # both parts learned: not the agreement of two fits of nothing
+
+
+def test_only_the_image_steps_render_and_the_actions_fit_does_not_depend_on_them(env):
+    """--image-steps: the reader's steps an iteration, apart from the actions' --fit-steps. Only the reader's steps
+    render (one render of --image-batch images each), and the acting layers end where they would with any number
+    of image steps, while the reader's do not."""
+    import jax
+
+    render, calls, fits = env.images(8), [], {}
+
+    def counted(states):  # the renderer, counting the renders the fit runs (not the times it is traced)
+        jax.debug.callback(lambda s: calls.append(len(s)), states)
+        return render(states)
+
+    for image_steps in (3, 7):
+        learner = _pixel_learner(env, counted, fit_steps=20, image_steps=image_steps)
+        calls.clear()
+        learner.fit(0)
+        jax.effects_barrier()
+        assert calls == [8] * image_steps
+        fits[image_steps] = learner.params
+    for name, layer in fits[3].items():  # (close, not equal: two programs, whose fusions XLA may choose apart)
+        same = np.allclose(layer["kernel"], fits[7][name]["kernel"], rtol=1e-6, atol=1e-7)
+        assert same == name.startswith("Dense_"), name

@@ -172,6 +172,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--image-batch", type=_positive, default=None,
                    help="DAgger from pixels: of each step's --batch samples, how many are rendered to teach the image "
                         "trunk the T's pose (all teach the actions from the true pose; default 512, at most --batch)")
+    t.add_argument("--image-steps", type=_positive, default=None,
+                   help="DAgger from pixels: gradient steps an iteration that teach the image trunk the T's pose, "
+                        "apart from the --fit-steps that teach the actions (default: as many as --fit-steps)")
     t.add_argument("--hidden", type=_widths, default=(256, 256, 256), help="hidden widths (default 256,256,256)")
     t.add_argument("--lr", type=_positive_float, default=None, help="Adam's learning rate (default 1e-3; PPO 3e-4)")
     t.add_argument("--beta-decay", type=_fraction, default=0.7,

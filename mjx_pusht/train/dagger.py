@@ -47,10 +47,6 @@ from mjx_pusht.train.policy import (
 )
 
 MEMORY_WEIGHT = 0.01  # the memory heads' cross-entropy against the actions' squared error (m/s)^2
-# A pixel student's pose estimate's squared error (POSE_SCALE units: 0.1 m) in the loss. The pose teaches the image
-# trunk and pose reader alone and the actions the Dense layers alone (`_fit`), so under Adam this is a scale, not a
-# trade-off; 2 mm off in each of the 4 numbers costs 0.0016, about what a 0.04 m/s action error does.
-POSE_WEIGHT = 1.0
 
 # The teacher: by default the expert paced for a student ("paced"): its slowest actions faster, its tolerances coarser.
 # The expert's turns end at 4 mm/s against the 3.8 mm/s the T's yaw frictionloss needs, its pushes at 61 mm/s against
@@ -89,14 +85,18 @@ class DaggerConfig:
     seed: int = 0
     teacher: str = "paced"  # TEACHERS: the expert distilled, as is or paced for a student
     image_batch: int = 512  # a pixel student: of each gradient step's `batch` samples, how many are rendered (`_fit`)
+    # A pixel student: the gradient steps an iteration that teach the reader the pose (`_fit`); None: `fit_steps`.
+    # (None, not a number, when not given: a run's resume file written before this setting existed still matches.)
+    image_steps: int | None = None
 
     def __post_init__(self) -> None:
         if self.obs_type not in OBS_TYPES:
             raise ConfigError(f"DAgger trains from {', '.join(OBS_TYPES)} observations, not {self.obs_type!r}")
         if self.activation not in ACTIVATIONS:
             raise ConfigError(f"unknown activation {self.activation!r}; choose from {', '.join(ACTIVATIONS)}")
-        for name in ("envs", "iterations", "batch", "fit_steps", "max_samples", "eval_envs", "max_steps", "image_batch"):
-            if int(getattr(self, name)) < 1:
+        for name in ("envs", "iterations", "batch", "fit_steps", "max_samples", "eval_envs", "max_steps", "image_batch",
+                     "image_steps"):
+            if getattr(self, name) is not None and int(getattr(self, name)) < 1:
                 raise ConfigError(f"--{name.replace('_', '-')} must be at least 1, got {getattr(self, name)}")
         if self.envs * self.iterations >= HELD_OUT_FIRST:
             raise ConfigError(f"{self.envs} envs x {self.iterations} iterations would reach the held-out seeds "
@@ -107,6 +107,8 @@ class DaggerConfig:
             raise ConfigError(f"DAgger trains on the task or chapter reset, not {self.reset!r}")
         if self.teacher not in TEACHERS:
             raise ConfigError(f"unknown teacher {self.teacher!r}; choose from {', '.join(TEACHERS)}")
+        if self.image_steps is not None and not self.obs_type.startswith("pixels"):
+            raise ConfigError(f"--image-steps teaches a pixel student's image reader; a {self.obs_type} student has none")
         if self.obs_type.startswith("pixels") and self.image_batch > self.batch:
             raise ConfigError(f"--image-batch ({self.image_batch}) must be at most --batch ({self.batch}): it is how "
                               "many of a step's samples are rendered")
@@ -119,6 +121,11 @@ class DaggerConfig:
         from mjx_pusht.envs.pixels import IMAGE_SIZE
 
         return IMAGE_SIZE if self.obs_type.startswith("pixels") else 0
+
+    @property
+    def reader_steps(self) -> int:
+        """A pixel student's image steps an iteration (`_fit`): `image_steps`, or as many as the actions'."""
+        return self.fit_steps if self.image_steps is None else self.image_steps
 
     @property
     def sample_width(self) -> int:
@@ -274,15 +281,18 @@ class Learner:
         # Each fit anneals the learning rate from its value to 5% (cosine, restarted every iteration): the
         # policy judged after a fit is then a settled one, not a snapshot of Adam at full step size (measured
         # with a constant rate: held-out success swinging 36-78% between neighbouring iterations, NOTES change 14).
-        decay = optax.cosine_decay_schedule(cfg.learning_rate, cfg.fit_steps, alpha=0.05)
-        self.opt = optax.adam(lambda count: decay(count % cfg.fit_steps))
-        self.opt_state = self.opt.init(self.params)
+        # A pixel student's two parts (the acting layers, the image reader) share no parameters and are fitted apart
+        # (`_fit`), each with an Adam of its own annealed over its own steps.
+        self.opts = tuple(_adam(cfg.learning_rate, steps) for steps in
+                          ((cfg.fit_steps, cfg.reader_steps) if cfg.image else (cfg.fit_steps,)))
+        self.opt_state = tuple(opt.init(part) for opt, part in zip(self.opts, _parts(self.params, cfg.image)))
         self.x = jnp.zeros((cfg.max_samples, cfg.sample_width), jnp.float32)
         self.y = jnp.zeros((cfg.max_samples, 3), jnp.float32)  # _label: action, memory
         self.filled, self.head, self.floor = 0, 0, 0  # samples held; where the next goes; kept below here
         self.norm = None  # (mean, std) of the features, fixed from the first iteration's data
         self.pose_error_mm = None  # a pixel student's last fit: its pose estimate's RMS error per number, mm
-        self._fit = jax.jit(partial(_fit, self.model, self.opt, cfg.batch, cfg.image_batch, cfg.fit_steps, render))
+        self._fit = jax.jit(partial(_fit, self.model, self.opts, cfg.batch, cfg.image_batch,
+                                    (cfg.fit_steps, cfg.reader_steps), render))
 
     def add(self, x, y, keep: bool = False) -> None:
         """Append samples; when the ring is full the oldest student-visited ones go, never those added with
@@ -322,19 +332,42 @@ class Learner:
         return float(loss)
 
 
-def _fit(model, opt, batch, image_batch, steps, render, params, opt_state, x, y, filled, norm, key):
-    """`steps` Adam steps on minibatches of `batch` samples from the ring; returns the new parameters and optimiser
-    state, the loss and (a pixel student) the pose estimate's squared error, both over the last tenth of the steps.
+def _adam(learning_rate: float, steps: int):
+    """Adam whose rate anneals from `learning_rate` to 5% over each `steps` (cosine, restarted every fit)."""
+    import optax
 
-    A pixel student's step has two parts that share no parameters. All `batch` samples teach its Dense layers the
-    teacher's action and memory from the *true* pose (`pose_target`: what the image shows), as a state student is
-    taught; the first `image_batch` of them are rendered and teach the convolutions and the pose reader that pose.
-    The student is then "read the pose, act on it": at run time the Dense layers get the reader's estimate. Measured
-    on one H100 (NOTES change 25): taught the actions through the images as well, the reader's error grew to ~3 mm
-    (the teacher's labels, discontinuous at the mm scale, are not a function of an image, and their averaged
-    gradients blurred what it saw) and held-out success stayed at 3-9% for 20 minutes; taught the pose alone, it
-    read to 0.8 mm and the student reached 70% in 8 minutes. And rendering (~2 ms per 512 images) bounds how many
-    samples a step can show as images, not how many can teach the actions."""
+    decay = optax.cosine_decay_schedule(learning_rate, steps, alpha=0.05)
+    return optax.adam(lambda count: decay(count % steps))
+
+
+READER = ("Conv_", "Pose_")  # a pixel student's image reader: its layers' names begin so; the acting layers' Dense_
+
+
+def _parts(params: dict, image: int) -> tuple[dict, ...]:
+    """The parameters a fit updates apart: (acting layers, image reader) for a pixel student, else (all,)."""
+    if not image:
+        return (params,)
+    reader = {k: v for k, v in params.items() if k.startswith(READER)}
+    return {k: v for k, v in params.items() if k not in reader}, reader
+
+
+def _fit(model, opts, batch, image_batch, steps, render, params, opt_state, x, y, filled, norm, key):
+    """Adam steps on minibatches of `batch` samples from the ring; returns the new parameters and optimiser states,
+    the loss and (a pixel student) the pose estimate's squared error, each over the last tenth of its steps.
+    `steps` is (the actions' steps, the image reader's steps); a state student takes the first.
+
+    A pixel student has two parts that share no parameters, fitted one after the other. Its Dense layers learn the
+    teacher's action and memory from the *true* pose (`pose_target`: what the image shows), as a state student
+    does, in `steps[0]` steps of `batch` samples with no image; then the convolutions and the pose reader learn that
+    pose from the first `image_batch` of each of `steps[1]` minibatches, rendered. The student is then "read the
+    pose, act on it": at run time the Dense layers get the reader's estimate. Measured on one H100 (NOTES change
+    25): taught the actions through the images as well, the reader's error grew to ~3 mm (the teacher's labels,
+    discontinuous at the mm scale, are not a function of an image, and their averaged gradients blurred what it
+    saw) and held-out success stayed at 3-9% for 20 minutes; taught the pose alone, it read to 0.8 mm and the
+    student reached 70% in 8 minutes. Fitted apart, the actions need not pay for rendering (~2 ms per 512 images),
+    so they can take as many steps as a state student's (NOTES change 26). With equal steps the two fits are the
+    one-scan, one-Adam fit of change 25 (Adam is elementwise, and neither loss reaches the other part's weights:
+    a test checks it)."""
     import jax
     import jax.numpy as jnp
     import optax
@@ -353,27 +386,43 @@ def _fit(model, opt, batch, image_batch, steps, render, params, opt_state, x, y,
         # the memory terms weighted so a wrong move costs what a 0.1 m/s action error does: both matter
         return mse + MEMORY_WEIGHT * jnp.mean(move + latch)
 
-    def loss_fn(p, xb, yb, state):
-        xb = (xb - norm[0]) / norm[1]
-        if render is None:
-            return imitation(model.apply({"params": p}, xb), yb), jnp.zeros(())
-        truth = pose_target(state)
-        head, _ = model.apply({"params": p}, xb, None, state[:, :2], truth)  # the Dense layers, from the true pose
-        k = image_batch  # the images of the first k samples teach the reader the pose they show
-        _, pose = model.apply({"params": p}, xb[:k], render(state[:k]), state[:k, :2])
-        pose_mse = jnp.mean(jnp.sum((pose - truth[:k]) ** 2, axis=-1))
-        return imitation(head, yb) + POSE_WEIGHT * pose_mse, pose_mse
-
-    def step(c, k):
-        p, o = c
-        idx = jax.random.randint(k, (batch,), 0, filled)
+    def minibatch(k, n):
+        """The first n of `batch` samples drawn from the ring: (features normalised, labels, image state or None)."""
+        idx = jax.random.randint(k, (batch,), 0, filled)[:n]
         xb, state = x[idx], None
         if render is not None:  # a pixel student's sample: its image's state first, then the features
             state, xb = xb[:, :RENDER_KEY], xb[:, RENDER_KEY:]
-        (loss, pose_mse), g = jax.value_and_grad(loss_fn, has_aux=True)(p, xb, y[idx], state)
-        updates, o = opt.update(g, o, p)
-        return (optax.apply_updates(p, updates), o), (loss, pose_mse)
+        return (xb - norm[0]) / norm[1], y[idx], state
 
-    (params, opt_state), (losses, pose) = jax.lax.scan(step, (params, opt_state), jax.random.split(key, steps))
-    tail = max(1, steps // 10)
-    return params, opt_state, losses[-tail:].mean(), pose[-tail:].mean()
+    def acting(p, fixed, k):  # the actions and memory, from the features (and a pixel student's true pose)
+        xb, yb, state = minibatch(k, batch)
+        if render is None:
+            return imitation(model.apply({"params": p}, xb), yb)
+        return imitation(model.apply({"params": {**fixed, **p}}, xb, None, state[:, :2], pose_target(state))[0], yb)
+
+    def reading(p, fixed, k):  # a pixel student's pose estimate from the images, against the true pose
+        xb, _, state = minibatch(k, image_batch)
+        _, pose = model.apply({"params": {**fixed, **p}}, xb, render(state), state[:, :2])
+        return jnp.mean(jnp.sum((pose - pose_target(state)) ** 2, axis=-1))
+
+    def descend(loss_fn, opt, part, state, fixed, n, k):
+        def step(c, k):
+            p, o = c
+            loss, g = jax.value_and_grad(loss_fn)(p, fixed, k)
+            updates, o = opt.update(g, o, p)
+            return (optax.apply_updates(p, updates), o), loss
+
+        (part, state), losses = jax.lax.scan(step, (part, state), jax.random.split(k, n))
+        return part, state, losses[-max(1, n // 10):].mean()
+
+    if render is None:
+        params, state, loss = descend(acting, opts[0], params, opt_state[0], {}, steps[0], key)
+        return params, (state,), loss, jnp.zeros(())
+    actor, reader = _parts(params, True)
+    actor, actor_state, loss = descend(acting, opts[0], actor, opt_state[0], reader, steps[0], key)
+    # the same key as the actions' minibatches: with equal steps each step shows the reader the first
+    # `image_batch` samples of the actions' minibatch, as change 25's one scan did
+    reader, reader_state, pose_mse = descend(reading, opts[1], reader, opt_state[1], actor, steps[1], key)
+    # the loss reported: the actions' and the pose's (POSE_SCALE units: 2 mm off in each of the 4 numbers is 0.0016,
+    # about what a 0.04 m/s action error costs), as change 25's one loss was
+    return {**actor, **reader}, (actor_state, reader_state), loss + pose_mse, pose_mse

@@ -227,8 +227,12 @@ def _restore(path, cfg, learner):
     from flax import serialization
 
     tree = resume_tree(path, cfg, ("iterations",))
+    try:  # the optimiser's layout is this version's: one Adam a part of the network (dagger._parts)
+        learner.opt_state = serialization.from_state_dict(learner.opt_state, tree["opt_state"])
+    except (KeyError, ValueError, TypeError) as e:
+        raise TrainError(f"--resume: {path} holds an optimiser state this version does not use ({type(e).__name__}; "
+                         "written before the fit's parts had an Adam each?); start again without --resume") from None
     learner.params = jax.tree.map(jnp.asarray, tree["params"])
-    learner.opt_state = serialization.from_state_dict(learner.opt_state, tree["opt_state"])
     n = len(tree["x"])
     learner.x = learner.x.at[:n].set(jnp.asarray(tree["x"]))
     learner.y = learner.y.at[:n].set(jnp.asarray(tree["y"]))
@@ -340,7 +344,7 @@ def cmd_train(args) -> int:
                        learning_rate=args.lr or 1e-3, batch=args.batch or 4096, fit_steps=args.fit_steps,
                        beta_decay=args.beta_decay, max_samples=args.max_samples, eval_envs=args.eval_envs,
                        seed=args.seed, reset=args.reset, teacher=args.teacher,
-                       image_batch=args.image_batch or min(512, args.batch or 4096))
+                       image_batch=args.image_batch or min(512, args.batch or 4096), image_steps=args.image_steps)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
