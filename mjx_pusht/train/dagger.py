@@ -262,9 +262,9 @@ def _outcomes(s) -> dict:
 
 # -- the fit: minibatch regression onto the expert's labels ------------------------------------------
 class Learner:
-    """The student network, its optimiser and the dataset ring, on the default JAX device. A pixel student needs
-    `render`: a jittable (n, RENDER_KEY) states -> (n, H, W, 3) uint8 images for n = cfg.batch
-    (`PushTEnv.images`), the same images its rollouts showed it."""
+    """The student network, its optimisers (one a part of the network, `_parts`) and the dataset ring, on the
+    default JAX device. A pixel student needs `render`: a jittable (n, RENDER_KEY) states -> (n, H, W, 3) uint8
+    images for n = cfg.image_batch (`PushTEnv.images`), the same images its rollouts showed it."""
 
     def __init__(self, cfg: DaggerConfig, render=None):
         import jax
