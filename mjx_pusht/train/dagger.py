@@ -40,6 +40,7 @@ from mjx_pusht.task.controllers import Expert
 from mjx_pusht.train.policy import (
     ACTIVATIONS,
     OBS_TYPES,
+    POSE_SCALE,
     feature_size,
     features,
     network,
@@ -326,8 +327,6 @@ class Learner:
         self.params, self.opt_state, loss, pose_mse = self._fit(self.params, self.opt_state, self.x, self.y,
                                                                 jnp.int32(self.filled), norm, key)
         if self.cfg.image:
-            from mjx_pusht.train.policy import POSE_SCALE
-
             self.pose_error_mm = float(np.sqrt(pose_mse / 4) * POSE_SCALE * 1000)
         return float(loss)
 
