@@ -42,3 +42,112 @@ def test_compare_on_a_few_seeds_agrees_where_it_must(tmp_path):
 
 
 # --- the task score -------------------------------------------------------------
+
+
+# --- compare --evals: a transfer report from two machines' evals --------------------------------
+
+_EVAL = ["eval", "--controller", "expert", "--reset", "chapter", "--max-steps", "60", "--no-rerun", "--no-progress"]
+
+
+@pytest.fixture(scope="module")
+def cpu_eval(tmp_path_factory):
+    """The expert on MuJoCo C, seeds 0..5: the rows every pairing below starts from."""
+    from mjx_pusht.cli.commands import main
+
+    out = tmp_path_factory.mktemp("cpu-eval")
+    assert main([*_EVAL, "--backend", "cpu", "--seeds", "6", "--out", str(out)]) == 0
+    return out
+
+
+def _as_mjx(src, dst, *, flip=(), order=None, **config):
+    """`src`'s eval folder as if MJX had run it: rows reordered by `order`, the success verdicts of the
+    seeds in `flip` turned over, config entries replaced."""
+    import shutil
+
+    from mjx_pusht.io.outputs import atomic_write_table, read_table
+
+    shutil.copytree(src, dst)
+    s = json.loads((dst / "summary.json").read_text())
+    s["backend"] = s["config"]["backend"] = "mjx-jax"
+    s["config"].update(config)
+    (dst / "summary.json").write_text(json.dumps(s))
+    t = read_table(dst / "per_episode.parquet")
+    for seed in flip:
+        t["success"][t["seed"] == seed] ^= True
+    idx = np.arange(len(t["seed"])) if order is None else np.asarray(order)
+    atomic_write_table(dst / "per_episode.parquet", {k: v[idx] for k, v in t.items()})
+    return dst
+
+
+def test_two_evals_pair_seed_by_seed_whatever_order_their_rows_are_in(cpu_eval, tmp_path):
+    from mjx_pusht.cli.commands import main
+    from mjx_pusht.io.outputs import read_table
+
+    cpu = read_table(cpu_eval / "per_episode.parquet")
+    flip = (1, 4)
+    mjx = _as_mjx(cpu_eval, tmp_path / "mjx", flip=flip, order=[5, 3, 1, 0, 2, 4])
+    assert main(["compare", "--evals", str(mjx), str(cpu_eval), "--out", str(tmp_path / "r")]) == 0
+    r = json.loads((tmp_path / "r" / "compare_episodes.json").read_text())
+    d = r["success_difference_mjx_minus_cpu"]
+    # counted by hand: a flipped seed that succeeded on the CPU succeeds only there, and the other way round
+    ok = dict(zip(cpu["seed"].tolist(), cpu["success"].tolist()))
+    only_cpu, only_mjx = sum(ok[s] for s in flip), sum(not ok[s] for s in flip)
+    diff, se = (only_mjx - only_cpu) / 6, np.sqrt(only_mjx + only_cpu - (only_mjx - only_cpu) ** 2 / 6) / 6
+    assert (d["only_mjx"], d["only_cpu"]) == (only_mjx, only_cpu) and d["difference"] == pytest.approx(diff)
+    assert d["ci95"] == pytest.approx([diff - 1.959964 * se, diff + 1.959964 * se])
+    assert r["per_seed_success_agreement"]["mjx_vs_cpu"] == pytest.approx(4 / 6)
+    # the reordered rows were put back in seed order: the same final poses, seed for seed
+    assert r["final_pose_diff"]["mjx_vs_cpu"]["max_m"] == 0.0
+    assert r["mjx"]["n_success"] == r["cpu"]["n_success"] + only_mjx - only_cpu and r["cpu_f32_starts"] is None
+    md = (tmp_path / "r" / "compare_episodes.md").read_text()
+    assert "Paired from two evals" in md and "float32-rounded starts: the chaos yardstick is not" in md
+
+
+@pytest.mark.parametrize("change, says", [
+    ({"max_steps": 61}, "differ in max_steps"),
+    ({"controller": "nudge"}, "differ in controller"),
+    ({"controller_sha256": "0" * 64, "reset": "task"}, "differ in reset"),
+])
+def test_evals_of_other_episodes_are_refused_in_one_line(cpu_eval, tmp_path, capsys, change, says):
+    from mjx_pusht.cli.commands import main
+
+    mjx = _as_mjx(cpu_eval, tmp_path / "mjx", **change)
+    assert main(["compare", "--evals", str(cpu_eval), str(mjx), "--out", str(tmp_path / "r")]) != 0
+    err = capsys.readouterr().err.strip()
+    assert says in err and "\n" not in err and not (tmp_path / "r" / "compare_episodes.json").exists()
+
+
+def test_evals_of_other_seeds_two_cpu_runs_or_a_sweep_are_refused_in_one_line(cpu_eval, tmp_path, capsys):
+    from mjx_pusht.cli.commands import main
+    from mjx_pusht.io.outputs import read_table
+
+    n = len(read_table(cpu_eval / "per_episode.parquet")["seed"])
+    fewer = _as_mjx(cpu_eval, tmp_path / "fewer", order=range(n - 1))
+    assert main(["compare", "--evals", str(cpu_eval), str(fewer), "--out", str(tmp_path / "a")]) != 0
+    assert "ran other seeds" in capsys.readouterr().err
+    assert main(["compare", "--evals", str(cpu_eval), str(cpu_eval), "--out", str(tmp_path / "b")]) != 0
+    assert "these ran on cpu and cpu" in capsys.readouterr().err
+    assert main(["compare", "--evals", str(cpu_eval), str(tmp_path), "--out", str(tmp_path / "c")]) != 0
+    assert "is not a finished eval folder" in capsys.readouterr().err
+    assert main(["compare", "--evals", str(cpu_eval), str(fewer), "--controller", "expert",
+                 "--out", str(tmp_path / "d")]) == 2
+
+
+def test_an_eval_of_a_policy_records_its_files_hash_and_pairing_checks_it(tmp_path, capsys):
+    import hashlib
+    import shutil
+    from pathlib import Path
+
+    from mjx_pusht.cli.commands import main
+
+    policy = Path(__file__).resolve().parents[1] / "outputs/reports/train/ppo-state/policy.msgpack"
+    shutil.copy(policy, tmp_path / "p.msgpack")
+    args = ["eval", "--controller", "policy:p.msgpack", "--reset", "task", "--seeds", "2", "--max-steps", "5",
+            "--no-rerun", "--no-progress", "--backend", "cpu"]
+    assert main([*args, "--out", str(tmp_path / "c")]) == 0
+    s = json.loads((tmp_path / "c" / "summary.json").read_text())
+    assert s["config"]["controller_sha256"] == hashlib.sha256(policy.read_bytes()).hexdigest()
+    # the same path holding other weights on the "MJX" machine: the hashes differ, and that is refused
+    mjx = _as_mjx(tmp_path / "c", tmp_path / "m", controller_sha256="f" * 64)
+    assert main(["compare", "--evals", str(tmp_path / "c"), str(mjx), "--out", str(tmp_path / "r")]) != 0
+    assert "differ in controller_sha256" in capsys.readouterr().err

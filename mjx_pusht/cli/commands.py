@@ -42,6 +42,8 @@ def cmd_compare(args) -> int:
     from mjx_pusht.study.compare import compare
     from mjx_pusht.study.seeds import parse_seeds
 
+    if args.evals:
+        return _compare_evals(args)
     seeds = parse_seeds(args.seeds)
     if args.backend not in ("mjx-jax", "mjx-warp"):
         raise BackendError(f"compare takes --backend mjx-jax or mjx-warp, not {args.backend!r}")
@@ -61,11 +63,7 @@ def cmd_compare(args) -> int:
 
         r = compare_episodes(seeds, IMPL[args.backend], out, controller=controller,
                              reset=args.reset, episode=Episode(max_steps=args.max_steps), workers=default_threads())
-        d = r["success_difference_mjx_minus_cpu"]
-        print(f"success: cpu {r['cpu']['success_rate']:.2%}, {r['impl']} {r['mjx']['success_rate']:.2%} "
-              f"(difference {d['difference']:+.2%}, 95% {d['ci95'][0]:+.2%} to {d['ci95'][1]:+.2%}); same verdict on "
-              f"{r['per_seed_success_agreement']['mjx_vs_cpu']:.2%} of seeds")
-        print(f"report: {out / 'compare_episodes.md'}\njson: {out / 'compare_episodes.json'}")
+        _print_episodes(r, out)
         banner.done()
         return 0
     opts = {k: v for k, v in (("tolerance", args.tolerance), ("iterations", args.iterations)) if v is not None}
@@ -323,6 +321,36 @@ def _video(args, backend, r, combos, episode, summary: dict, clock) -> None:
     print(f"video: {args.video} ({len(shown)} episodes, {len(frames)} frames at {fps:g} per second)")
 
 
+def _compare_evals(args) -> int:
+    from mjx_pusht.io.outputs import claim_out_dir
+
+    if args.controller:
+        raise UsageError("--evals pairs two finished evals; their controller is theirs, so --controller is not taken")
+    from mjx_pusht.study.closed_loop import compare_evals
+
+    out = claim_out_dir(args.out, "compare", {"evals": [str(p.resolve()) for p in args.evals]}, replace=args.replace)
+    _print_episodes(compare_evals(*args.evals, out), out)
+    return 0
+
+
+def _print_episodes(r: dict, out: Path) -> None:
+    d = r["success_difference_mjx_minus_cpu"]
+    print(f"success: cpu {r['cpu']['success_rate']:.2%}, {r['impl']} {r['mjx']['success_rate']:.2%} "
+          f"(difference {d['difference']:+.2%}, 95% {d['ci95'][0]:+.2%} to {d['ci95'][1]:+.2%}); same verdict on "
+          f"{r['per_seed_success_agreement']['mjx_vs_cpu']:.2%} of seeds")
+    print(f"report: {out / 'compare_episodes.md'}\njson: {out / 'compare_episodes.json'}")
+
+
+def _policy_sha256(spec: str) -> str | None:
+    """A trained policy's file, by content: what `compare --evals` checks before it pairs two evals' rows
+    (the same path on two machines can hold other weights). None for the built-in controllers."""
+    if not spec.startswith("policy:"):
+        return None
+    import hashlib
+
+    return hashlib.sha256(Path(spec.removeprefix("policy:")).read_bytes()).hexdigest()
+
+
 def cmd_eval(args) -> int:
     from mjx_pusht.backends.base import resolve
     from mjx_pusht.io.outputs import atomic_write_json
@@ -348,7 +376,8 @@ def cmd_eval(args) -> int:
     name, why = resolve(args.backend)
     config = {"command": "eval", "backend": name, "controller": args.controller, "action": controller.action_type,
               "reset": args.reset, "break_it": args.break_it, "max_steps": args.max_steps,
-              "frame_skip": args.frame_skip, "params": [[n, list(v)] for n, v in params]}
+              "frame_skip": args.frame_skip, "params": [[n, list(v)] for n, v in params],
+              "controller_sha256": _policy_sha256(args.controller)}
     scenario = Scenario(SceneSpec(args.break_it), params=params, reset=args.reset, controller=controller, episode=episode)
     row_seeds, combos, out, banner, clock, backend = _start_batch("eval", args, seeds, name, why, config, scenario)
     from mjx_pusht.backends.cpu import default_threads

@@ -175,6 +175,10 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--image-steps", type=_positive, default=None,
                    help="DAgger from pixels: gradient steps an iteration that teach the image trunk the T's pose, "
                         "apart from the --fit-steps that teach the actions (default: as many as --fit-steps)")
+    t.add_argument("--keep", choices=("last", "best"), default="last",
+                   help="DAgger: the run's policy is the last fit (default), or the fit whose next rollout succeeded "
+                        "most on that iteration's fresh training seeds once the expert's share there is at most 1%% "
+                        "(chosen without the held-out seeds)")
     t.add_argument("--hidden", type=_widths, default=(256, 256, 256), help="hidden widths (default 256,256,256)")
     t.add_argument("--lr", type=_positive_float, default=None, help="Adam's learning rate (default 1e-3; PPO 3e-4)")
     t.add_argument("--beta-decay", type=_fraction, default=0.7,
@@ -210,4 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "per-seed agreement, final poses")
     c.add_argument("--reset", choices=("task", "chapter"), default="task", help="closed loop: start distribution")
     c.add_argument("--max-steps", type=_positive, default=300, help="closed loop: control steps per episode")
+    c.add_argument("--evals", nargs=2, type=Path, metavar=("EVAL_DIR", "EVAL_DIR"), default=None,
+                   help="pair two finished eval folders of the same controller and seeds, one run on the cpu backend "
+                        "and one on MJX (e.g. on two machines), into the closed-loop report; runs nothing")
     return p

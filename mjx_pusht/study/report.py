@@ -142,10 +142,15 @@ def render_episodes_markdown(r: dict) -> str:
     d, dj = r["success_difference_mjx_minus_cpu"], r["success_difference_cpu_f32_minus_cpu"]
     fd = r["final_pose_diff"]
     st = r["steps_to_success_abs_diff_where_both_succeed"]
-    return "\n".join([
+    ag = r["per_seed_success_agreement"]
+    f32 = r["cpu_f32_starts"] is not None  # absent from a report paired from two evals (compare --evals)
+    where = (f"Device: {r['device']}" if "cpu_device" not in r else
+             f"Paired from two evals: {r['impl']} on {r['device']} ({r['evals']['mjx']}), MuJoCo C on "
+             f"{r['cpu_device']} ({r['evals']['cpu']})")
+    lines = [
         f"# Closed loop, CPU vs {r['impl']}: {r['controller']} on {r['n_seeds']} {r['reset']} starts",
         "",
-        f"Device: {r['device']}; pusher: {r['pusher_shape']}; {r['episode']['max_steps']} control steps x "
+        f"{where}; pusher: {r['pusher_shape']}; {r['episode']['max_steps']} control steps x "
         f"{r['episode']['frame_skip']} physics steps; success at coverage >= {r['episode']['success']}. "
         f"Versions: {r['versions']}.",
         "",
@@ -153,20 +158,24 @@ def render_episodes_markdown(r: dict) -> str:
         "| --- | --- | --- |",
         f"| CPU (MuJoCo C, float64) | {rate(r['cpu'])} | {r['cpu']['median_steps_to_success']} |",
         f"| {r['impl']} | {rate(r['mjx'])} | {r['mjx']['median_steps_to_success']} |",
-        f"| CPU from float32-rounded starts | {rate(r['cpu_f32_starts'])} | "
-        f"{r['cpu_f32_starts']['median_steps_to_success']} |",
+    ]
+    if f32:
+        lines.append(f"| CPU from float32-rounded starts | {rate(r['cpu_f32_starts'])} | "
+                     f"{r['cpu_f32_starts']['median_steps_to_success']} |")
+    lines += [
         "",
         f"Success rate difference {r['impl']} - CPU: {d['difference']:+.2%} (paired 95% interval "
         f"{d['ci95'][0]:+.2%} to {d['ci95'][1]:+.2%}; {d['only_mjx']} seeds succeed only on MJX, {d['only_cpu']} only on "
-        f"the CPU). The CPU against itself from float32-rounded starts: {dj['difference']:+.2%} "
-        f"({dj['only_mjx']} / {dj['only_cpu']}).",
+        f"the CPU)." + (f" The CPU against itself from float32-rounded starts: {dj['difference']:+.2%} "
+                        f"({dj['only_mjx']} / {dj['only_cpu']})." if f32 else
+                        " (No CPU run from float32-rounded starts: the chaos yardstick is not in this report.)"),
         "",
-        "| per seed | MJX vs CPU | CPU f32 starts vs CPU |",
-        "| --- | --- | --- |",
-        f"| same success verdict | {r['per_seed_success_agreement']['mjx_vs_cpu']:.2%} | "
-        f"{r['per_seed_success_agreement']['cpu_f32_vs_cpu']:.2%} |",
-        f"| steps to success, abs diff (both succeed) | {_fmt(st['mjx_vs_cpu'])} | {_fmt(st['cpu_f32_vs_cpu'])} |",
-        f"| final position diff, median | {fd['mjx_vs_cpu']['median_m']:.2e} m | {fd['cpu_f32_vs_cpu']['median_m']:.2e} m |",
-        f"| final position diff > 1 mm | {fd['mjx_vs_cpu']['frac_over_1mm']:.2%} | {fd['cpu_f32_vs_cpu']['frac_over_1mm']:.2%} |",
-        "",
-    ])
+    ]
+    cols = [("MJX vs CPU", "mjx_vs_cpu")] + ([("CPU f32 starts vs CPU", "cpu_f32_vs_cpu")] if f32 else [])
+    lines += ["| per seed | " + " | ".join(n for n, _ in cols) + " |", "| --- |" + " --- |" * len(cols),
+              "| same success verdict | " + " | ".join(f"{ag[k]:.2%}" for _, k in cols) + " |",
+              "| steps to success, abs diff (both succeed) | " + " | ".join(_fmt(st[k]) for _, k in cols) + " |",
+              "| final position diff, median | " + " | ".join(f"{fd[k]['median_m']:.2e} m" for _, k in cols) + " |",
+              "| final position diff > 1 mm | " + " | ".join(f"{fd[k]['frac_over_1mm']:.2%}" for _, k in cols) + " |",
+              ""]
+    return "\n".join(lines)
