@@ -86,16 +86,26 @@ same = all(np.array_equal(np.asarray(a[k]), np.asarray(b[k])) for k in a)
 rows = np.all([np.asarray(a[k]) == np.asarray(b[k]) for k in a if k.startswith('tee_')], axis=0)
 print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:', a['seed'] == b['seed'],
       'rigid:', np.mean(a['tee_stayed_rigid']), np.mean(b['tee_stayed_rigid']))" | tee -a "$OUT/two-times.txt" ;;
-  train-pixels) # DAgger from pixels, continued across calls on one machine (a call runs at most 10 minutes): the
-          # first call with MINUTES=9, the next with MINUTES=19.5 resumes the same run ($HOME/runs/$RUN) to 19.5
-          # minutes of training in all. FIT_STEPS / IMAGE_STEPS: the actions' and the reader's steps an iteration
-          # (change 25 ran 4000 / 4000).
-          run=$HOME/runs/${RUN:-px}; resume=""; [ -f "$run/checkpoints/resume.msgpack" ] && resume="--resume"
-          python3 -m mjx_pusht train --obs pixels_agent_pos --backend mjx-warp --reset task --envs 4096 \
-            --iterations 300 --minutes "${MINUTES:?MINUTES=training minutes in all}" --hidden 1024,1024,1024 \
+  train-pixels) # DAgger from pixels for MINUTES (default 19.5) of training, started in its own process session
+          # (setsid) so that it outlives this call (a call runs at most 10 minutes) and trains on without a
+          # resume; `watch` calls, back to back, keep the machine held and copy back its log and results.
+          # FIT_STEPS / IMAGE_STEPS: the actions' and the reader's steps an iteration (change 25 ran 4000 / 4000).
+          run=$HOME/runs/${RUN:-px}; mkdir -p "$HOME/runs"
+          setsid nohup python3 -m mjx_pusht train --obs pixels_agent_pos --backend mjx-warp --reset task --envs 4096 \
+            --iterations 300 --minutes "${MINUTES:-19.5}" --hidden 1024,1024,1024 \
             --fit-steps "${FIT_STEPS:-10000}" --image-steps "${IMAGE_STEPS:-4000}" --batch 4096 --image-batch 512 \
             --max-samples 8000000 --beta-decay 0.7 --eval-envs 4096 --seed "${SEED:-0}" --no-progress --no-rerun \
-            --record 8 --out "$run" $resume >> "$OUT/$stage.log" 2>&1
-          cp "$run"/curve.csv "$run"/curve.png "$run"/summary.json "$run"/policy.msgpack "$OUT/" ;;
+            --record 8 --keep "${KEEP:-best}" --out "$run" > "$run.log" 2>&1 < /dev/null &
+          echo $! > "$run.pid"; sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
+  watch)  # wait up to WAIT seconds (default 570) for the run started by train-pixels, then copy back what it has
+          run=$HOME/runs/${RUN:-px}; t=0
+          while kill -0 "$(cat "$run.pid")" 2>/dev/null && [ "$t" -lt "${WAIT:-570}" ]; do sleep 5; t=$((t + 5)); done
+          cp "$run.log" "$OUT/"; for f in curve.csv curve.png summary.json policy.msgpack; do
+            [ -f "$run/$f" ] && cp "$run/$f" "$OUT/"; done; true ;;
+  transfer) # a trained policy (POLICY=path) on the 4,096 held-out task seeds, on MJX-Warp and on MuJoCo C, paired
+          # seed by seed; a pixel policy renders on the CPU too, so EGL must be there (.gl, see the device README)
+          MUJOCO_GL=egl python3 -m mjx_pusht compare --controller "policy:${POLICY:?POLICY=path of a policy.msgpack}" \
+            --backend mjx-warp --seeds 1000000000:1000004096 --reset task --out "$OUT/transfer-mjx-warp" \
+            > "$OUT/$stage.log" 2>&1 ;;
   *) echo "unknown stage $stage" >&2; exit 2 ;;
 esac

@@ -79,6 +79,37 @@ def test_a_fits_judgement_riding_in_the_next_training_batch_is_its_judgement_alo
     assert first["coverage"] == pytest.approx(alone["coverage"].mean(), abs=1e-4)
 
 
+def test_keep_best_keeps_the_fit_whose_next_rollout_on_fresh_training_seeds_succeeded_most(tmp_path_factory):
+    """--keep best: each fit is validated on the next iteration's training seeds (with the expert's share 0 here:
+    --beta-decay 0), never on the held-out ones; the run's policy is the best-validated fit, and its held-out
+    rate is that fit's own curve point, which eval of the kept policy.msgpack reproduces."""
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.task.episode import Episode
+    from mjx_pusht.train.dagger import DaggerConfig, Rollouts
+
+    run = train_run(tmp_path_factory, *TINY[:6], "--iterations", "3", *TINY[8:], "--beta-decay", "0",
+                    "--keep", "best")
+    summary = json.loads((run / "summary.json").read_text())
+    curve = summary["curve"]
+    cfg = DaggerConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in summary["config"].items()})
+    env = PushTEnv(backend="cpu", reset_kind=cfg.reset, episode=Episode(max_steps=cfg.max_steps), keep_states=False)
+    for row in curve[:2]:  # fit i rode in rollout i + 1, whose training rows are train_seeds(i + 1), all student
+        i = row["iteration"]
+        params, meta = load_checkpoint(run / "checkpoints" / f"policy_{i:03d}.msgpack")
+        _, _, alone = Rollouts(env, cfg)(params, (np.asarray(meta["in_mean"]), np.asarray(meta["in_std"])),
+                                         cfg.train_seeds(i + 1), 0.0, 99, learn=0)
+        assert row["validation_beta"] == 0.0 and row["validation_success"] == alone["success"].mean()
+        assert not set(cfg.train_seeds(i + 1)) & set(cfg.held_out_seeds())
+    assert curve[2]["validation_success"] is None  # on the cpu the last fit is judged on the held-out seeds alone
+    best = max(curve[:2], key=lambda r: (r["validation_success"], r["iteration"]))
+    assert summary["kept"] == {"rule": "best", "iteration": best["iteration"],
+                               "validation_success": best["validation_success"], "validation_beta": 0.0}
+    kept = run / "checkpoints" / f"policy_{best['iteration']:03d}.msgpack"
+    assert (run / "policy.msgpack").read_bytes() == kept.read_bytes()
+    assert summary["final_success"] == best["success"] == summary["eval"]["success_rate"]
+    assert "validation_success" in (run / "curve.csv").read_text().splitlines()[0]
+
+
 def test_a_saved_policy_acts_as_the_training_process_network_in_numpy_and_in_jax(run):
     import jax
     import jax.numpy as jnp
@@ -399,7 +430,8 @@ def test_ppos_training_reward_makes_succeeding_the_best_outcome():
 
 
 def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
-    for extra, why in ((("--backend", "cpu"), "Brax's jitted JAX"), (("--backend", "mjx-jax", "--resume"), "nothing to resume")):
+    for extra, why in ((("--backend", "cpu"), "Brax's jitted JAX"), (("--backend", "mjx-jax", "--resume"), "nothing to resume"),
+                       (("--backend", "mjx-jax", "--keep", "best"), "PPO keeps its last")):
         r = cli("train", "--algo", "ppo", *extra, "--out", str(tmp_path / "p"), "--no-rerun")
         assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and why in r.stderr, r.stderr
         assert not (tmp_path / "p" / "checkpoints").exists()

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 import threading
 import time
 from pathlib import Path
@@ -25,7 +26,8 @@ from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json
 from mjx_pusht.study.stats import wilson
 
 CURVE_COLUMNS = ("iteration", "beta", "env_steps", "samples", "loss", "success", "success_lo", "success_hi",
-                 "coverage", "sim_seconds", "learn_seconds", "wall_seconds", "pose_error_mm")
+                 "coverage", "sim_seconds", "learn_seconds", "wall_seconds", "pose_error_mm", "validation_success",
+                 "validation_beta")
 
 
 # The resume checkpoint holds the whole dataset (8 M samples: ~0.5 GB, ~4 s to write, measured on the H100
@@ -50,8 +52,13 @@ def config_dict(cfg) -> dict:
 
 
 def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes: float | None = None,
-                 progress: bool = True, rerun: bool = True) -> dict:
-    """Run DAgger on `backend` into `out`; returns the summary (also written as summary.json)."""
+                 progress: bool = True, rerun: bool = True, keep: str = "last") -> dict:
+    """Run DAgger on `backend` into `out`; returns the summary (also written as summary.json).
+
+    `keep`: which fit is the run's policy.msgpack: the last one, or ("best") the one whose next rollout
+    succeeded most on that iteration's fresh training seeds with the expert's share at most
+    VALIDATION_BETA (`_kept`); never chosen by the held-out seeds, so its held-out rate is not a maximum
+    taken over the curve's noise."""
     import jax
     from tqdm import tqdm
 
@@ -86,8 +93,10 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     pending = None  # (iteration, loss, learn seconds, sim seconds) of the fit awaiting its judgement
     writer = [None]  # the thread writing the resume checkpoint
 
-    def judged(held, sim_judge: float) -> bool:
-        """Curve row, checkpoints and progress for the pending fit; True when --minutes is spent."""
+    def judged(held, sim_judge: float, validation=None, validation_beta=None) -> bool:
+        """Curve row, checkpoints and progress for the pending fit; True when --minutes is spent. `validation`:
+        the training rows of the same rollout (fresh seeds, never held out), driven by this fit with the
+        expert's share `validation_beta`."""
         nonlocal saved
         i, loss, learn, sim = pending
         k, n = int(held["success"].sum()), len(held_out)
@@ -96,7 +105,9 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
                "loss": loss, "success": k / n, "success_lo": lo, "success_hi": hi,
                "coverage": float(held["coverage"].mean()), "sim_seconds": sim + sim_judge, "learn_seconds": learn,
                "wall_seconds": time.perf_counter() - t_start,
-               "pose_error_mm": learner.pose_error_mm}  # a pixel student's reading of the T, in its last fit
+               "pose_error_mm": learner.pose_error_mm,  # a pixel student's reading of the T, in its last fit
+               "validation_success": None if validation is None else float(np.mean(validation["success"])),
+               "validation_beta": validation_beta}
         curve.append(row)
         meta = _meta(cfg, i, env_steps, learner.norm)
         save(ckpt / f"policy_{i:03d}.msgpack", learner.params, meta)
@@ -120,7 +131,9 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
             seeds, beta = np.concatenate([seeds, held_out]), np.concatenate([beta, np.zeros(len(held_out), np.float32)])
         (x, y, outcome), sim = _timed(rollouts, learner.params, learner.norm or _unit(cfg), seeds, beta, i, cfg.envs)
         if pending is not None:
-            stop, pending = judged({k: v[cfg.envs:] for k, v in outcome.items()}, 0.0), None
+            stop = judged({k: v[cfg.envs:] for k, v in outcome.items()}, 0.0,
+                          {k: v[:cfg.envs] for k, v in outcome.items()}, float(cfg.beta(i)))
+            pending = None
             if stop:
                 curve[-1]["sim_seconds"] += sim  # spent, though the samples go unlearned: the judged policy is the run's
                 break
@@ -136,14 +149,35 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
             seeds, n_train = np.concatenate([cfg.train_seeds(pending[0] + 1), held_out]), cfg.envs
         (_, _, held), sim_judge = _timed(rollouts, learner.params, learner.norm, seeds, 0.0, cfg.iterations + pending[0],
                                          0)
-        judged({k: v[n_train:] for k, v in held.items()}, sim_judge)
+        judged({k: v[n_train:] for k, v in held.items()}, sim_judge,
+               {k: v[:n_train] for k, v in held.items()} if n_train else None, 0.0 if n_train else None)
     if writer[0] is not None:
         writer[0].join()
     if curve and curve[-1]["iteration"] < cfg.iterations - 1:
         bar.write(f"stopping after iteration {curve[-1]['iteration']}: the {minutes:g}-minute budget is spent")
     bar.close()
     jax.block_until_ready(learner.params)
-    return _summary(cfg, backend, out, curve, rerun)
+    kept = _kept(curve, keep)
+    if kept is not None and kept["iteration"] != curve[-1]["iteration"]:
+        shutil.copyfile(ckpt / f"policy_{kept['iteration']:03d}.msgpack", out / "policy.msgpack")
+        bar.write(f"keeping iteration {kept['iteration']}'s policy: {kept['validation_success']:.1%} on its "
+                  f"validation rollout (held-out {kept['success']:.1%})")
+    return _summary(cfg, backend, out, curve, rerun, kept=kept, keep=keep)
+
+
+VALIDATION_BETA = 0.01  # --keep best: a fit's validation rollout counts once the expert acts this little in it
+
+
+def _kept(curve: list[dict], keep: str) -> dict | None:
+    """The curve row of the fit --keep names: the last, or the best by validation success among the fits whose
+    validation rollout the expert's share touched at most VALIDATION_BETA (the last when none qualifies)."""
+    if not curve:
+        return None
+    rows = [r for r in curve if r.get("validation_success") is not None
+            and r.get("validation_beta") is not None and r["validation_beta"] <= VALIDATION_BETA]
+    if keep == "last" or not rows:
+        return curve[-1]
+    return max(reversed(rows), key=lambda r: r["validation_success"])  # a tie: the later fit
 
 
 def _unit(cfg):
@@ -242,10 +276,12 @@ def _restore(path, cfg, learner):
     return int(tree["iteration"]) + 1, int(tree["env_steps"]), curve, curve[-1]["wall_seconds"] if curve else 0.0
 
 
-def _summary(cfg, backend, out: Path, curve, rerun: bool = True, method: str = "dagger") -> dict:
+def _summary(cfg, backend, out: Path, curve, rerun: bool = True, method: str = "dagger", kept: dict | None = None,
+             keep: str = "last") -> dict:
     from mjx_pusht.backends.base import versions
 
     last = curve[-1] if curve else None
+    final = kept or last
     summary = {
         "method": method, "obs_type": cfg.obs_type, "backend": backend, "device": _device(backend),
         "versions": versions(), "config": config_dict(cfg), "iterations_run": len(curve),
@@ -255,8 +291,10 @@ def _summary(cfg, backend, out: Path, curve, rerun: bool = True, method: str = "
         "learning_seconds": round(sum(r["learn_seconds"] for r in curve), 3),
         "held_out": {"seeds": f"{cfg.held_out_seeds()[0]}:{cfg.held_out_seeds()[-1] + 1}", "reset": cfg.reset,
                      "success_coverage": 0.95, "max_steps": cfg.max_steps},
-        "final_success": last["success"] if last else None,
-        "final_success_ci95": [last["success_lo"], last["success_hi"]] if last else None,
+        "final_success": final["success"] if final else None,
+        "final_success_ci95": [final["success_lo"], final["success_hi"]] if final else None,
+        "kept": {"rule": keep, "iteration": final["iteration"], "validation_success": final.get("validation_success"),
+                 "validation_beta": final.get("validation_beta")} if final else None,
         "policy": str(out / "policy.msgpack"),
         "curve": curve,
     }
@@ -299,10 +337,15 @@ def write_curve(out: Path, curve: list[dict], title: str, rerun: bool = True) ->
         xs = np.array([r[key] for r in curve]) / scale
         ax.fill_between(xs, [100 * r["success_lo"] for r in curve], [100 * r["success_hi"] for r in curve], alpha=0.3)
         ax.plot(xs, [100 * r["success"] for r in curve], "o-", label="held-out success")
+        val = [(x, 100 * r["validation_success"]) for x, r in zip(xs, curve) if r.get("validation_success") is not None
+               and r.get("validation_beta") is not None and r["validation_beta"] <= VALIDATION_BETA]
+        if val:  # what --keep best chooses by: the next rollout's fresh training seeds
+            ax.plot(*zip(*val), ".--", alpha=0.6, label="validation (training seeds, expert share <= 1%)")
         ax.set_xlabel(label)
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("success, % (coverage >= 0.95 in 300 steps)")
     axes[0].set_ylim(0, 100)
+    axes[0].legend(loc="lower right", fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
     buf = io.BytesIO()
@@ -352,7 +395,7 @@ def cmd_train(args) -> int:
     print(f"backend: {name} ({why}); DAgger from {cfg.obs_type}: {cfg.envs} {cfg.reset} episodes an iteration, "
           f"{cfg.iterations} iterations, held-out seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
     summary = train_dagger(cfg, name, out, resume=args.resume, minutes=args.minutes, progress=args.progress,
-                           rerun=args.rerun)
+                           rerun=args.rerun, keep=args.keep)
     return _finish(args, name, out, summary, banner)
 
 
@@ -360,8 +403,6 @@ def _restart(out: Path, args) -> None:
     """A folder holding a training run is continued (--resume) or started over (--replace), never mixed."""
     started = (out / "checkpoints" / "resume.msgpack").exists()
     if started and args.replace and not args.resume:
-        import shutil
-
         shutil.rmtree(out / "checkpoints")
         print(f"--replace: removed the earlier training run's checkpoints in {out}")
     elif started and not args.resume:
@@ -380,6 +421,8 @@ def _check_rerun(args) -> None:
 
 def _cmd_ppo(args, name: str, why: str) -> int:
     """`train --algo ppo`: Brax's PPO (train/ppo.py), then the same judgement and files as DAgger's."""
+    if args.keep != "last":
+        raise TrainError("--keep best is DAgger's (a fit judged on its next rollout's fresh seeds); PPO keeps its last")
     from mjx_pusht.cli.banner import Banner
     from mjx_pusht.io.outputs import claim_out_dir
 
@@ -426,8 +469,6 @@ def _finish(args, name: str, out: Path, summary: dict, banner) -> int:
 
 def _judge(args, backend: str, out: Path, summary: dict) -> dict:
     """`mjx-pusht eval --controller policy:out/policy.msgpack` on the held-out seeds, into out/eval."""
-    import shutil
-
     from mjx_pusht.cli.commands import cmd_eval
     from mjx_pusht.cli.parser import build_parser
 
