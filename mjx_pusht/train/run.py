@@ -458,7 +458,10 @@ def _finish(args, name: str, out: Path, summary: dict, banner) -> int:
     atomic_write_json(out / "summary.json", summary)
     ev = summary["eval"]
     lo, hi = ev["success_rate_ci95"]
-    print(f"held-out success (eval, {ev['n_episodes']} task seeds): {ev['success_rate']:.1%} "
+    kept = summary.get("kept") or {}
+    which = f"iteration {kept['iteration']}'s policy, kept by validation; " if kept.get("rule") == "best" else ""
+    print(f"held-out success ({which}eval, {ev['n_episodes']} {summary['held_out']['reset']} seeds): "
+          f"{ev['success_rate']:.1%} "
           f"(95% interval {lo:.1%}-{hi:.1%}); training wall-clock {summary['wall_seconds']:.0f} s "
           f"(simulation {summary['simulation_seconds']:.0f} s, learning {summary['learning_seconds']:.0f} s)")
     print(f"policy: {out / 'policy.msgpack'} (use it as --controller policy:{out / 'policy.msgpack'})\n"
