@@ -131,6 +131,11 @@ def test_evals_of_other_seeds_two_cpu_runs_or_a_sweep_are_refused_in_one_line(cp
     assert "is not a finished eval folder" in capsys.readouterr().err
     assert main(["compare", "--evals", str(cpu_eval), str(fewer), "--controller", "expert",
                  "--out", str(tmp_path / "d")]) == 2
+    assert "--controller is not taken" in capsys.readouterr().err
+    (fewer / "per_episode.parquet").write_bytes(b"cut short")
+    assert main(["compare", "--evals", str(cpu_eval), str(fewer), "--out", str(tmp_path / "e")]) != 0
+    err = capsys.readouterr().err.strip()
+    assert "is not an eval's table" in err and "\n" not in err
 
 
 def test_an_eval_of_a_policy_records_its_files_hash_and_pairing_checks_it(tmp_path, capsys):

@@ -121,7 +121,11 @@ def compare_evals(first: Path, second: Path, out: Path) -> dict:
             raise ConfigError(f"{summary} is not an mjx-pusht summary ({type(e).__name__}: {e})") from None
         if command != "eval":
             raise ConfigError(f"{folder} holds a {command} run, not an eval")
-        runs.append((folder, s, Rollouts.from_columns(read_table(table))))
+        try:  # a cut or foreign table (pyarrow's errors are ValueErrors; a missing column a KeyError)
+            rows = Rollouts.from_columns(read_table(table))
+        except (ValueError, KeyError, OSError) as e:
+            raise ConfigError(f"{table} is not an eval's table ({type(e).__name__}: {str(e).splitlines()[0]})") from None
+        runs.append((folder, s, rows))
     if sorted(s["config"]["backend"] == "cpu" for _, s, _ in runs) != [False, True]:
         raise ConfigError("--evals pairs one eval on the cpu backend with one on MJX: these ran on "
                           f"{runs[0][1]['config']['backend']} and {runs[1][1]['config']['backend']}")
