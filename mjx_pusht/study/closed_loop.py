@@ -62,12 +62,7 @@ def compare_episodes(seeds: np.ndarray, impl: str, out: Path, *, controller=None
                              episode={"frame_skip": episode.frame_skip, "max_steps": episode.max_steps,
                                       "success": episode.success}, versions=versions())
     report["wall_seconds"] = round(time.perf_counter() - t0, 1)
-    from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json
-
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(out / "compare_episodes.json", report)
-    atomic_write_bytes(out / "compare_episodes.md", render_episodes_markdown(report).encode())
-    return report
+    return _written(out, report)
 
 
 def episodes_report(mjx_r, cpu_r, jit=None, **meta) -> dict:
@@ -107,7 +102,7 @@ def compare_evals(first: Path, second: Path, out: Path) -> dict:
     seeds, another controller file, other episode settings, two CPU runs) is refused, not reported."""
     from mjx_pusht.backends.results import Rollouts
     from mjx_pusht.errors import ConfigError
-    from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json, read_table
+    from mjx_pusht.io.outputs import read_table
 
     runs = []
     for folder in (Path(first), Path(second)):
@@ -152,6 +147,13 @@ def compare_evals(first: Path, second: Path, out: Path) -> dict:
                              evals={"cpu": str(cpu_dir), "mjx": str(mjx_dir)}, cpu_device=s_cpu.get("device"),
                              controller_sha256={"cpu": c_cpu.get("controller_sha256"),
                                                 "mjx": c.get("controller_sha256")})
+    return _written(out, report)
+
+
+def _written(out: Path, report: dict) -> dict:
+    """compare_episodes.json and .md in `out`: the closed-loop report, however its two sides were run."""
+    from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json
+
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(out / "compare_episodes.json", report)
     atomic_write_bytes(out / "compare_episodes.md", render_episodes_markdown(report).encode())

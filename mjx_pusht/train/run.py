@@ -168,13 +168,19 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
 VALIDATION_BETA = 0.01  # --keep best: a fit's validation rollout counts once the expert acts this little in it
 
 
+def _validated(row: dict) -> bool:
+    """Whether a curve row's validation rollout counts: there was one, and the expert acted in at most
+    VALIDATION_BETA of it (rows written before validation was recorded have neither key)."""
+    beta = row.get("validation_beta")
+    return row.get("validation_success") is not None and beta is not None and beta <= VALIDATION_BETA
+
+
 def _kept(curve: list[dict], keep: str) -> dict | None:
-    """The curve row of the fit --keep names: the last, or the best by validation success among the fits whose
-    validation rollout the expert's share touched at most VALIDATION_BETA (the last when none qualifies)."""
+    """The curve row of the fit --keep names: the last, or the best by validation success among the fits
+    `_validated` (the last when none is)."""
     if not curve:
         return None
-    rows = [r for r in curve if r.get("validation_success") is not None
-            and r.get("validation_beta") is not None and r["validation_beta"] <= VALIDATION_BETA]
+    rows = [r for r in curve if _validated(r)]
     if keep == "last" or not rows:
         return curve[-1]
     return max(reversed(rows), key=lambda r: r["validation_success"])  # a tie: the later fit
@@ -337,8 +343,7 @@ def write_curve(out: Path, curve: list[dict], title: str, rerun: bool = True) ->
         xs = np.array([r[key] for r in curve]) / scale
         ax.fill_between(xs, [100 * r["success_lo"] for r in curve], [100 * r["success_hi"] for r in curve], alpha=0.3)
         ax.plot(xs, [100 * r["success"] for r in curve], "o-", label="held-out success")
-        val = [(x, 100 * r["validation_success"]) for x, r in zip(xs, curve) if r.get("validation_success") is not None
-               and r.get("validation_beta") is not None and r["validation_beta"] <= VALIDATION_BETA]
+        val = [(x, 100 * r["validation_success"]) for x, r in zip(xs, curve) if _validated(r)]
         if val:  # what --keep best chooses by: the next rollout's fresh training seeds
             ax.plot(*zip(*val), ".--", alpha=0.6, label="validation (training seeds, expert share <= 1%)")
         ax.set_xlabel(label)
