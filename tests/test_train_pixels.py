@@ -55,9 +55,10 @@ def test_a_pixel_run_is_judged_alike_by_its_own_rollout_and_by_eval_which_render
     alone = [rollouts(params, norm, [seed], 0.0, 99, learn=0)[2] for seed in rows["seed"]]
     assert [float(a["coverage"][0]) for a in alone] == rows["final_coverage"]
     assert [bool(a["success"][0]) for a in alone] == rows["success"]
-    # The curve's point rolled the four together: BLAS blocks the convolutions' products by the batch's size,
-    # the last bit of an action differs, and an image's edge pixel can flip on it; so close, not equal
-    assert summary["curve"][-1]["coverage"] == pytest.approx(np.mean(rows["final_coverage"]), abs=0.01)
+    # The curve's point rolled the four together, and a row's actions do not depend on the rows beside it, so
+    # it is the same episodes too (before, BLAS summed the products in an order it picked by the batch's size,
+    # the last bit of an action differed and an image's edge pixel could flip on it)
+    assert summary["curve"][-1]["coverage"] == np.mean(rows["final_coverage"])
 
 
 def _assert_rendered_again_as_shown(env):
