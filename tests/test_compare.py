@@ -114,7 +114,7 @@ def test_evals_of_other_episodes_are_refused_in_one_line(cpu_eval, tmp_path, cap
     mjx = _as_mjx(cpu_eval, tmp_path / "mjx", **change)
     assert main(["compare", "--evals", str(cpu_eval), str(mjx), "--out", str(tmp_path / "r")]) != 0
     err = capsys.readouterr().err.strip()
-    assert says in err and "\n" not in err and not (tmp_path / "r" / "compare_episodes.json").exists()
+    assert says in err and "\n" not in err and not (tmp_path / "r").exists()  # checked before --out is made
 
 
 def test_evals_of_other_seeds_two_cpu_runs_or_a_sweep_are_refused_in_one_line(cpu_eval, tmp_path, capsys):
@@ -136,6 +136,7 @@ def test_evals_of_other_seeds_two_cpu_runs_or_a_sweep_are_refused_in_one_line(cp
     assert main(["compare", "--evals", str(cpu_eval), str(fewer), "--out", str(tmp_path / "e")]) != 0
     err = capsys.readouterr().err.strip()
     assert "is not an eval's table" in err and "\n" not in err
+    assert not any((tmp_path / d).exists() for d in "abcde")  # each refused before its --out was made
 
 
 def test_an_eval_of_a_policy_records_its_files_hash_and_pairing_checks_it(tmp_path, capsys):

@@ -326,10 +326,11 @@ def _compare_evals(args) -> int:
 
     if args.controller:
         raise UsageError("--evals pairs two finished evals; their controller is theirs, so --controller is not taken")
-    from mjx_pusht.study.closed_loop import compare_evals
+    from mjx_pusht.study.closed_loop import evals_report, write_report
 
+    report = evals_report(*args.evals)  # a refused pairing leaves no --out folder behind
     out = claim_out_dir(args.out, "compare", {"evals": [str(p.resolve()) for p in args.evals]}, replace=args.replace)
-    _print_episodes(compare_evals(*args.evals, out), out)
+    _print_episodes(write_report(out, report), out)
     return 0
 
 

@@ -62,7 +62,7 @@ def compare_episodes(seeds: np.ndarray, impl: str, out: Path, *, controller=None
                              episode={"frame_skip": episode.frame_skip, "max_steps": episode.max_steps,
                                       "success": episode.success}, versions=versions())
     report["wall_seconds"] = round(time.perf_counter() - t0, 1)
-    return _written(out, report)
+    return write_report(out, report)
 
 
 def episodes_report(mjx_r, cpu_r, jit=None, **meta) -> dict:
@@ -95,11 +95,12 @@ def episodes_report(mjx_r, cpu_r, jit=None, **meta) -> dict:
 _SAME = ("controller_sha256", "action", "reset", "break_it", "max_steps", "frame_skip", "params")
 
 
-def compare_evals(first: Path, second: Path, out: Path) -> dict:
-    """The closed-loop report from two finished `eval` folders, one on MuJoCo C and one on MJX, of the same
+def evals_report(first: Path, second: Path) -> dict:
+    """The closed-loop report (`write_report` writes it) from two finished `eval` folders, one on MuJoCo C and one on MJX, of the same
     controller on the same seeds: for runs that could not share a machine (a pixel policy's CPU side renders
     through EGL; the GPU that ran MJX-Warp may have none). Anything that would pair unlike episodes (other
-    seeds, another controller file, other episode settings, two CPU runs) is refused, not reported."""
+    seeds, another controller file, other episode settings, two CPU runs) is refused, not reported; it reads and
+    checks both before anything is written, so `compare --evals` claims its --out only for a pairing it can report."""
     from mjx_pusht.backends.results import Rollouts
     from mjx_pusht.errors import ConfigError
     from mjx_pusht.io.outputs import read_table
@@ -147,10 +148,10 @@ def compare_evals(first: Path, second: Path, out: Path) -> dict:
                              evals={"cpu": str(cpu_dir), "mjx": str(mjx_dir)}, cpu_device=s_cpu.get("device"),
                              controller_sha256={"cpu": c_cpu.get("controller_sha256"),
                                                 "mjx": c.get("controller_sha256")})
-    return _written(out, report)
+    return report
 
 
-def _written(out: Path, report: dict) -> dict:
+def write_report(out: Path, report: dict) -> dict:
     """compare_episodes.json and .md in `out`: the closed-loop report, however its two sides were run."""
     from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json
 
