@@ -102,6 +102,14 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           while kill -0 "$(cat "$run.pid")" 2>/dev/null && [ "$t" -lt "${WAIT:-570}" ]; do sleep 5; t=$((t + 5)); done
           cp "$run.log" "$OUT/"; for f in curve.csv curve.png summary.json policy.msgpack; do
             [ -f "$run/$f" ] && cp "$run/$f" "$OUT/"; done; true ;;
+  train-state) # DAgger from state for MINUTES (default 5) of training, inside one call (about 6.5 minutes with
+          # compiling and the held-out eval); results and the held-out eval's table are copied back
+          run=$HOME/runs/state-${SEED:-0}
+          python3 -m mjx_pusht train --backend mjx-warp --reset task --envs 4096 --iterations 60 --minutes "${MINUTES:-5}" \
+            --hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 --max-samples 8000000 --beta-decay 0.7 \
+            --seed "${SEED:-0}" --keep "${KEEP:-best}" --no-progress --no-rerun --record 0 --out "$run" > "$OUT/$stage.log" 2>&1
+          for f in curve.csv curve.png summary.json policy.msgpack; do [ -f "$run/$f" ] && cp "$run/$f" "$OUT/"; done
+          mkdir -p "$OUT/eval"; cp "$run"/eval/*.parquet "$run"/eval/summary.json "$OUT/eval/" 2>/dev/null; true ;;
   transfer) # a trained policy (POLICY=path) on the 4,096 held-out task seeds, on MJX-Warp and on MuJoCo C, paired
           # seed by seed; a pixel policy renders on the CPU too, so EGL must be there (.gl, see the device README)
           MUJOCO_GL=egl python3 -m mjx_pusht compare --controller "policy:${POLICY:?POLICY=path of a policy.msgpack}" \
