@@ -96,11 +96,12 @@ _SAME = ("controller_sha256", "action", "reset", "break_it", "max_steps", "frame
 
 
 def evals_report(first: Path, second: Path) -> dict:
-    """The closed-loop report (`write_report` writes it) from two finished `eval` folders, one on MuJoCo C and one on MJX, of the same
-    controller on the same seeds: for runs that could not share a machine (a pixel policy's CPU side renders
-    through EGL; the GPU that ran MJX-Warp may have none). Anything that would pair unlike episodes (other
-    seeds, another controller file, other episode settings, two CPU runs) is refused, not reported; it reads and
-    checks both before anything is written, so `compare --evals` claims its --out only for a pairing it can report."""
+    """The closed-loop report (`write_report` writes it) from two finished `eval` folders, one on MuJoCo C and
+    one on MJX, of the same controller on the same seeds: for runs that could not share a machine (a pixel
+    policy's CPU side renders through EGL; the GPU that ran MJX-Warp may have none). Anything that would pair
+    unlike episodes (other seeds, another controller file, other episode settings, two CPU runs) is refused, not
+    reported. It reads and checks both before anything is written, so `compare --evals` claims its --out only
+    for a pairing it can report."""
     from mjx_pusht.backends.results import Rollouts
     from mjx_pusht.errors import ConfigError
     from mjx_pusht.io.outputs import read_table

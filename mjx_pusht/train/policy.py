@@ -114,11 +114,13 @@ def _activation(name: str, x, xp):
 # NumPy's matmul (BLAS) chooses its kernels, and so its order of summation, by the matrices' shapes, so a row's
 # product moved in its last bits with the number of rows it came with; the contacts then amplify it, and a seed's
 # MuJoCo C episode depended on which seeds shared its eval (the pixel policy of NOTES change 28 ended seed
-# 1000000002 at coverage 0.956 in a 9-seed eval and at 0.970 among 4,096). Evaluated in blocks of a fixed
-# CPU_BLOCK rows, a row's action is a function of its own observation alone. Measured on this repo's 2-core
-# machine: 32-row blocks take a 1024 x 3 state network on 4,096 rows in the time of one product (0.24 s against
-# 0.22), and a pixel network's trunk in less (its slices stay in cache: 0.44 s against 1.57 for 600 rows). JAX is
-# left as it is: MJX-Warp's physics is not repeatable to the bit anyway, and the compiled scan wants one product.
+# 1000000002 at coverage 0.956 in a 9-seed eval and at 0.970 among 4,096). The Dense layers are evaluated in
+# blocks of a fixed CPU_BLOCK rows, so a row's action is a function of its own observation alone. Measured on this
+# repo's 2-core machine: 32-row blocks take a 1024 x 3 state network on 4,096 rows in the time of one product (0.24 s
+# against 0.22). The image trunk is not blocked: its products are tall for one image already (47 x 47 rows), BLAS
+# sums them alike whatever the batch (an image's map alone equals its map among 64, float32 and float64), and
+# padding one image to 32 cost 45 times the work. JAX is left as it is: MJX-Warp's physics is not repeatable to
+# the bit anyway, and the compiled scan wants one product.
 CPU_BLOCK = 32
 
 
@@ -126,7 +128,7 @@ def _rowwise(fn, *arrays):
     """fn on (batch, ...) NumPy arrays (None passes through), CPU_BLOCK rows at a time, padded with zeros to whole
     blocks; fn's outputs (an array or a tuple of arrays) are cut back to the batch. JAX arrays go to fn whole."""
     first = arrays[0]
-    if not isinstance(first, np.ndarray):
+    if not isinstance(first, np.ndarray) or first.size == 0:  # JAX, or no rows to block
         return fn(*arrays)
     single = first.ndim == 1  # one env's observation (the CPU gym env): a batch of one
     if single:
@@ -150,14 +152,13 @@ def apply(params: dict, meta: dict, x, image=None):
     """The network on (..., feature_size) features (and, for a pixel policy, the (..., H, W, 3) uint8 image), in
     x's array namespace: (action (..., 2), memory (...,)). In NumPy a row's result does not depend on the rows
     beside it (`_rowwise`)."""
-    return _rowwise(lambda v, img: _apply(params, meta, v, img), x, image)
-
-
-def _apply(params: dict, meta: dict, x, image):
+    act = meta["activation"]
     if meta.get("image"):
-        pose = read_pose(params, meta["activation"], image, x.dtype)
-        return decode(_mlp(params, meta, meta["activation"], x, pose_features(pose, x[..., :2])))
-    return decode(_mlp(params, meta, meta["activation"], x))
+        def dense(v, h):  # the reader's Dense layers and the acting layers, on features and flattened maps
+            return decode(_mlp(params, meta, act, v, pose_features(_pose_head(params, act, h), v[..., :2])))
+
+        return _rowwise(dense, x, _trunk(params, act, image, x.dtype))
+    return _rowwise(lambda v: decode(_mlp(params, meta, act, v)), x)
 
 
 def apply_ppo(params: dict, meta: dict, obs):
@@ -189,11 +190,15 @@ def pose_features(pose, pusher):
 
 def read_pose(params: dict, activation: str, image, dtype):
     """A pixel policy's estimate of the T's pose from (..., H, W, 3) uint8 images: (..., 4), POSE_SCALE units."""
-    xp = array_namespace(image)
-    h = _trunk(params, activation, image, dtype)
+    return _pose_head(params, activation, _trunk(params, activation, image, dtype))
+
+
+def _pose_head(params: dict, activation: str, h):
+    """The reader's two Dense layers on the trunk's flattened maps (..., 800): the pose, (..., 4)."""
+    xp = array_namespace(h)
     for i in range(2):
         layer = params[f"Pose_{i}"]
-        h = h @ xp.asarray(layer["kernel"], dtype=dtype) + xp.asarray(layer["bias"], dtype=dtype)
+        h = h @ xp.asarray(layer["kernel"], dtype=h.dtype) + xp.asarray(layer["bias"], dtype=h.dtype)
         h = _activation(activation, h, xp) if i == 0 else h
     return h
 
