@@ -35,7 +35,7 @@ def start_batch(command: str, out, seeds, name: str, why: str, config: dict, sce
     """What every batch command does before its first row: the rows, a writable `out` that holds no
     other unfinished run, the banner, and the backend (which compiles the scene and checks its tree).
     Returns (row seeds, their parameter combinations, out, banner, clock, backend)."""
-    from mjx_pusht.backends.base import make_backend
+    from mjx_pusht.backends.factory import make_backend
     from mjx_pusht.backends.cpu import default_threads
     from mjx_pusht.io.banner import Banner
     from mjx_pusht.io.outputs import claim_out_dir, prepare_out_dir
