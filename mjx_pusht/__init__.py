@@ -49,6 +49,11 @@ from mjx_pusht.scenario import Scenario
 from mjx_pusht.task.invariants import gap_deviation, stayed_rigid, weld_gap
 from mjx_pusht.task.reset import start_pose, start_poses
 from mjx_pusht.task.schedule import Schedule
+from mjx_pusht.train.controller import register_policy as _register_policy
+
+# `--controller policy:PATH` (and `task.controllers.load("policy:PATH")`) without importing the training layer:
+# the task layer keeps a registry of controller prefixes, and training's is registered here, at the top
+_register_policy()
 
 __all__ = [
     "EXPECTED_TREES", "Rollouts", "Scenario", "SceneSpec", "Schedule", "Tree", "TreeMismatch",
