@@ -22,7 +22,7 @@ if _sys.platform.startswith("linux") and not _os.environ.get("DISPLAY") and "MUJ
             break
 # A MUJOCO_GL whose library is missing breaks `import mujoco` itself, so every command would die at
 # import, `tree` and `sweep` included, that never draw. Only pixels need GL: the setting is set aside
-# here and the renderer (envs/pixels.py) refuses in one line, naming it, when pixels are asked for.
+# here and the renderer (render/pixels.py) refuses in one line, naming it, when pixels are asked for.
 elif _os.environ.get("MUJOCO_GL") in ("egl", "osmesa") and _sys.platform.startswith("linux"):
     import ctypes.util as _cu
 

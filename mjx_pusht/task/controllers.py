@@ -72,7 +72,7 @@ class Controller:
     name: str = "zero"
     action_type: str = "velocity"
     # The side of the top-camera image the controller looks at, in obs["pixels"] (each backend renders it for
-    # every control step; envs/pixels.py); 0: it reads the state alone, and nothing is rendered.
+    # every control step; render/pixels.py); 0: it reads the state alone, and nothing is rendered.
     pixels: ClassVar[int] = 0
 
     def __post_init__(self) -> None:
