@@ -329,13 +329,6 @@ def _device_thread():
     return ThreadPoolExecutor(max_workers=1, thread_name_prefix="mjx-launch")
 
 
-@functools.lru_cache(maxsize=1)
-def _device_thread():
-    """One thread launches rollouts, in order: MJX-Warp's program reads its loop predicate on the host, so a
-    launch blocks until the device is done; from this thread it blocks nobody else."""
-    return ThreadPoolExecutor(max_workers=1, thread_name_prefix="mjx-launch")
-
-
 class MjxBackend(Backend):
     """MJX with impl='jax' (capsule pusher) or impl='warp' (the scene as authored)."""
 
