@@ -51,8 +51,8 @@ def modules(root: Path) -> dict[str, Path]:
 
 def import_graph(root: Path) -> dict[str, dict[str, int]]:
     """Module -> {module of the package it imports: the first line that does}. `from a.b import c` counts as
-    importing a.b.c when that is a module, else a.b; a module's imports of its own package's __init__ (its
-    parents) are not edges."""
+    importing a.b.c when that is a module, else a.b; a module's imports of its own subpackages' __init__ (its
+    parents) are not edges, but an import of the package itself (`from mjx_pusht import X`) is."""
     mods = modules(root)
     graph: dict[str, dict[str, int]] = {m: {} for m in mods}
     for m, path in mods.items():
@@ -71,7 +71,7 @@ def import_graph(root: Path) -> dict[str, dict[str, int]]:
             for name in names:
                 while name and name not in mods:  # the longest prefix that is a module of ours
                     name = name.rpartition(".")[0]
-                if name and name != m and not m.startswith(name + "."):
+                if name and name != m and (name == root.name or not m.startswith(name + ".")):
                     graph[m].setdefault(name, node.lineno)
     return graph
 
@@ -172,10 +172,13 @@ def test_the_checks_find_a_cycle_and_an_upward_import(tmp_path):
         "task/c.py": "import mjx_pusht.task.a\nfrom ..backends.base import X\n",
         "backends/__init__.py": "",
         "backends/base.py": "X = 1\n",
+        "backends/cpu.py": "from mjx_pusht import api\nfrom . import base\n",
     }.items():
         (pkg / path).parent.mkdir(parents=True, exist_ok=True)
         (pkg / path).write_text(text)
     g = import_graph(pkg)
     assert cycles(g) == [["mjx_pusht.task.a", "mjx_pusht.task.b", "mjx_pusht.task.c"]]
     up = upward_imports(g, (("task",), ("backends",), ("",)))
-    assert len(up) == 1 and up[0].startswith("mjx_pusht.task.c (line 2, layer 0: task) imports mjx_pusht.backends.base")
+    assert len(up) == 2, up
+    assert up[0].startswith("mjx_pusht.backends.cpu (line 1, layer 1: backends) imports mjx_pusht (layer 2")
+    assert up[1].startswith("mjx_pusht.task.c (line 2, layer 0: task) imports mjx_pusht.backends.base (layer 1")
