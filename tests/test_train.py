@@ -51,6 +51,9 @@ def test_a_run_leaves_policy_curve_summary_and_the_eval_of_its_held_out_seeds(ru
     for name in ("policy.msgpack", "curve.csv", "curve.png", "checkpoints/policy_000.msgpack",
                  "checkpoints/policy_001.msgpack", "checkpoints/resume.msgpack"):
         assert (run / name).is_file(), name
+    # it names its files relative to its own folder, never by the machine's path: a summary is committed as it is
+    assert (run / summary["policy"]).is_file() and (run / summary["eval"]["table"]).is_file()
+    assert str(run) not in (run / "summary.json").read_text()
     # The curve's last point (the trainer's own rollout of the student, 8 held-out rows in one batch) and `eval
     # --controller policy:...` (the backend's episode machinery, another code path, 4 rows to each worker) judge
     # the same seeds alike, to the bit: a row's actions do not depend on the rows beside it (before they did,

@@ -301,7 +301,7 @@ def _summary(cfg, backend, out: Path, curve, rerun: bool = True, method: str = "
         "final_success_ci95": [final["success_lo"], final["success_hi"]] if final else None,
         "kept": {"rule": keep, "iteration": final["iteration"], "validation_success": final.get("validation_success"),
                  "validation_beta": final.get("validation_beta")} if final else None,
-        "policy": str(out / "policy.msgpack"),
+        "policy": "policy.msgpack",  # paths in a summary are relative to its folder, never the machine's
         "curve": curve,
     }
     if method == "ppo":
@@ -492,4 +492,4 @@ def _judge(args, backend: str, out: Path, summary: dict) -> dict:
     s = json.loads((out / "eval" / "summary.json").read_text())
     return {k: s[k] for k in ("n_episodes", "n_success", "success_rate", "success_rate_ci95", "median_steps_to_success",
                               "n_non_finite", "n_rigid")} | {"backend": s["backend"], "seeds": seeds,
-                                                             "table": str(out / "eval" / "per_episode.parquet")}
+                                                             "table": "eval/per_episode.parquet"}
