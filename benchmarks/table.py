@@ -76,7 +76,7 @@ def main(argv=None) -> int:
     if "--write" in (argv or sys.argv[1:]):
         text = PAGE.read_text()
         a, b = text.index(BEGIN) + len(BEGIN), text.index(END)
-        PAGE.write_text(text[:a] + "\n" + table + "\n" + text[b:])
+        PAGE.write_text(text[:a] + "\n\n" + table + "\n" + text[b:])  # a blank line: the comment is its own block
     else:
         print(table)
     return 0
