@@ -8,6 +8,8 @@
   repository stays as written, and `mkdocs build --strict` fails on it like on any broken link.
 - Every `docs/notebook/<branch>.md` (a branch's lab-notebook entry) is listed under "Lab notebook".
 - "notebook change N" in a page's prose links to that change's entry in the lab notebook.
+- The API reference has a page for every package of mjx_pusht, found at build time: a package added or
+  renamed gets its page (and its nav entry) without an edit here.
 """
 
 from __future__ import annotations
@@ -45,8 +47,29 @@ def _outside(page_uri: str, target: str, docs_rel: str) -> str | None:
     return path
 
 
+API_MARKER = "<!-- api-packages -->"
+
+
+def packages() -> list[str]:
+    """mjx_pusht's packages (folders with an __init__.py), by name."""
+    return sorted(p.parent.name for p in (ROOT / "mjx_pusht").glob("*/__init__.py"))
+
+
+def _api_nav(items) -> None:
+    """Expand the nav's "API" entry into its index and a page per package."""
+    for item in items or []:
+        if not isinstance(item, dict):
+            continue
+        for key, value in item.items():
+            if key == "API" and isinstance(value, str):
+                item[key] = [value] + [{p: f"api/{p}.md"} for p in packages()]
+            elif isinstance(value, list):
+                _api_nav(value)
+
+
 def on_config(config):
-    """List docs/notebook/*.md under the nav's "Lab notebook" section, after notebook.md."""
+    """Give the nav a page per package under "API", and docs/notebook/*.md under "Lab notebook"."""
+    _api_nav(config["nav"])
     folder = Path(config["docs_dir"]) / "notebook"
     entries = sorted(f"notebook/{p.name}" for p in folder.glob("*.md")) if folder.is_dir() else []
     for i, item in enumerate(config["nav"] or []):
@@ -75,6 +98,10 @@ def on_files(files, config):
             if repo_path.endswith(".md"):
                 queue.append((repo_path, ROOT / repo_path))
     config["_repo_files"] = added
+    for p in packages():  # the API pages: one a package, written here unless docs/ has one of its own
+        if files.get_file_from_path(f"api/{p}.md") is None:
+            files.append(File.generated(config, f"api/{p}.md", content=f"# `mjx_pusht.{p}`\n\n::: mjx_pusht.{p}\n"
+                                        "    options:\n      show_root_heading: false\n"))
     return files
 
 
@@ -108,6 +135,8 @@ def on_page_markdown(markdown, page, config, files):
         markdown = "".join(p if p.startswith(("`", "[")) else _CHANGE.sub(change, p) for p in parts)
     if CLI_MARKER in markdown:
         markdown = markdown.replace(CLI_MARKER, cli_reference())
+    if API_MARKER in markdown:
+        markdown = markdown.replace(API_MARKER, "\n".join(f"- [`mjx_pusht.{p}`]({p}.md)" for p in packages()))
     if not page.file.abs_src_path or not Path(page.file.abs_src_path).resolve().is_relative_to(ROOT / docs_rel):
         return markdown  # a copied repository file: its links are already relative to its own place
     added = config.get("_repo_files", set())
