@@ -15,14 +15,11 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import posixpath
 import re
 from pathlib import Path
 
 from mkdocs.structure.files import File
-
-log = logging.getLogger("mkdocs.hooks.mjx_pusht")
 
 ROOT = Path(__file__).resolve().parents[1]
 CLI_MARKER = "<!-- cli-reference -->"
