@@ -12,7 +12,7 @@ split the pixel vector env's step: `percall_final` (the autoreset that also rend
 episode's last image, as the vector env's same-step mode does for `final_obs`), `percall_render`
 (the render alone, on the state's Data) and `gym_jax` / `gym_torch` (the gymnasium vector env, same-step
 autoreset, jax or torch arrays out, zero actions). Figures are N x STEPS / seconds of the second call.
-Results: NOTES changes 13 and 22.
+Results: notebook changes 13 and 22.
 """
 import json
 import sys

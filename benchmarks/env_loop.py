@@ -7,7 +7,7 @@ For each N (one process each, so that one size failing to fit is recorded, not f
 - `raw`: the physics alone: a jitted scan of `steps` control steps, each 10 `mjx.step`s of all N
   worlds at the JAX policy's ctrl (no task, no reset, no env observation), from the same start poses
   as the env's (seeds 0..N-1): the ceiling, the same physics as `scan_autoreset` steps;
-- `raw_zero_pose`: the raw case as measured before NOTES change 22: every world from one pose (tee
+- `raw_zero_pose`: the raw case as measured before notebook change 22: every world from one pose (tee
   and pusher at the origin) at random actions: different physics, kept to compare old figures;
 - `scan_autoreset`: the env (`wrappers.AutoReset(PushTEnv)`, same-step autoreset, start poses from
   the device pool) stepped in a jitted scan by a JAX policy (a fixed random linear layer + tanh on
@@ -95,7 +95,7 @@ def raw():
     row["raw"]["compiles"] = run._cache_size()  # 1: the timed call ran the program compiled by the first
 
 def raw_zero_pose():
-    # the raw case before NOTES change 22: every world from one pose (tee and pusher at the origin), random
+    # the raw case before notebook change 22: every world from one pose (tee and pusher at the origin), random
     # actions; other physics than the env's worlds step, kept to compare with the figures measured with it
     mx, d0 = env._mx, env.template(n)
     d = jax.vmap(lambda q: d0.replace(qpos=q))(jnp.asarray(env.layout.initial_qpos(env.model, np.zeros((n, 5))), jnp.float32))

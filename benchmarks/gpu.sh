@@ -90,12 +90,13 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # (setsid) so that it outlives this call (a call runs at most 10 minutes) and trains on without a
           # resume; `watch` calls, back to back, keep the machine held and copy back its log and results.
           # FIT_STEPS / IMAGE_STEPS: the actions' and the reader's steps an iteration (change 25 ran 4000 / 4000).
-          run=$HOME/runs/${RUN:-px}; mkdir -p "$HOME/runs"
+          # run from $HOME/runs with a relative --out, so the log copied back names no machine's path
+          run=$HOME/runs/${RUN:-px}; mkdir -p "$HOME/runs"; cd "$HOME/runs"
           setsid nohup python3 -m mjx_pusht train --obs pixels_agent_pos --backend mjx-warp --reset task --envs 4096 \
             --iterations 300 --minutes "${MINUTES:-19.5}" --hidden 1024,1024,1024 \
             --fit-steps "${FIT_STEPS:-10000}" --image-steps "${IMAGE_STEPS:-4000}" --batch 4096 --image-batch 512 \
             --max-samples 8000000 --beta-decay 0.7 --eval-envs 4096 --seed "${SEED:-0}" --no-progress --no-rerun \
-            --record 8 --keep "${KEEP:-best}" --out "$run" > "$run.log" 2>&1 < /dev/null &
+            --record 8 --keep "${KEEP:-best}" --out "${RUN:-px}" > "$run.log" 2>&1 < /dev/null &
           echo $! > "$run.pid"; sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
   watch)  # wait up to WAIT seconds (default 570) for the run started by train-pixels, then copy back what it has
           run=$HOME/runs/${RUN:-px}; t=0
@@ -104,10 +105,10 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
             [ -f "$run/$f" ] && cp "$run/$f" "$OUT/"; done; true ;;
   train-state) # DAgger from state for MINUTES (default 5) of training, inside one call (about 6.5 minutes with
           # compiling and the held-out eval); results and the held-out eval's table are copied back
-          run=$HOME/runs/state-${SEED:-0}
-          python3 -m mjx_pusht train --backend mjx-warp --reset task --envs 4096 --iterations 60 --minutes "${MINUTES:-5}" \
+          run=$HOME/runs/state-${SEED:-0}; mkdir -p "$HOME/runs"
+          (cd "$HOME/runs" && python3 -m mjx_pusht train --backend mjx-warp --reset task --envs 4096 --iterations 60 --minutes "${MINUTES:-5}" \
             --hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 --max-samples 8000000 --beta-decay 0.7 \
-            --seed "${SEED:-0}" --keep "${KEEP:-best}" --no-progress --no-rerun --record 0 --out "$run" > "$OUT/$stage.log" 2>&1
+            --seed "${SEED:-0}" --keep "${KEEP:-best}" --no-progress --no-rerun --record 0 --out "state-${SEED:-0}") > "$OUT/$stage.log" 2>&1
           for f in curve.csv curve.png summary.json policy.msgpack; do [ -f "$run/$f" ] && cp "$run/$f" "$OUT/"; done
           mkdir -p "$OUT/eval"; cp "$run"/eval/*.parquet "$run"/eval/summary.json "$OUT/eval/" 2>/dev/null; true ;;
   transfer) # a trained policy (POLICY=path) on the 4,096 held-out task seeds, on MJX-Warp and on MuJoCo C, paired

@@ -1,7 +1,7 @@
-"""Render the README's benchmark table from benchmarks/results/*.json (numbers are never typed in).
+"""Render the docs' benchmark table (docs/benchmarks.md) from benchmarks/results/*.json (numbers are never typed in).
 
     python -m benchmarks.table            # print the table
-    python -m benchmarks.table --write    # replace the block between the markers in README.md
+    python -m benchmarks.table --write    # replace the block between the markers in docs/benchmarks.md
 """
 
 from __future__ import annotations
@@ -12,8 +12,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
+PAGE = ROOT / "docs" / "benchmarks.md"  # the page whose table this is
 BEGIN, END = "<!-- bench-table:begin -->", "<!-- bench-table:end -->"
-# Each tier's current results; superseded runs live in results/history/ and benchmarks/NOTES.md.
+# Each tier's current results; superseded runs live in results/history/ and docs/notebook.md.
 TIERS = [("cpu", ["cpu"]), ("h100", ["h100", "h100-jax", "h100-task"]), ("h200", ["h200"]), ("h200-x2", ["h200-x2"])]
 
 
@@ -73,10 +74,9 @@ def render() -> str:
 def main(argv=None) -> int:
     table = render()
     if "--write" in (argv or sys.argv[1:]):
-        readme = ROOT / "README.md"
-        text = readme.read_text()
+        text = PAGE.read_text()
         a, b = text.index(BEGIN) + len(BEGIN), text.index(END)
-        readme.write_text(text[:a] + "\n" + table + "\n" + text[b:])
+        PAGE.write_text(text[:a] + "\n\n" + table + "\n" + text[b:])  # a blank line: the comment is its own block
     else:
         print(table)
     return 0

@@ -29,9 +29,9 @@ def test_harness_records_a_backend_that_cannot_run_instead_of_crashing(tmp_path)
     assert "error" in json.loads((tmp_path / "t.json").read_text())["backends"]["no-such-backend"]
 
 
-def test_readme_table_is_rendered_from_the_committed_results():
-    readme = (table.ROOT / "README.md").read_text()
-    block = readme[readme.index(table.BEGIN) + len(table.BEGIN): readme.index(table.END)].strip()
+def test_the_benchmarks_page_table_is_rendered_from_the_committed_results():
+    page = table.PAGE.read_text()
+    block = page[page.index(table.BEGIN) + len(table.BEGIN): page.index(table.END)].strip()
     assert block == table.render().strip()
 
 
@@ -53,7 +53,7 @@ def test_harness_measures_a_backend_sharded_over_two_devices_with_its_scaling(tm
 @pytest.mark.warp
 def test_env_loop_times_the_env_against_the_raw_physics_of_the_same_worlds_each_compiled_once(tmp_path):
     """benchmarks.env_loop at 8 envs on Warp's CPU device: every case runs, its timed call compiled nothing
-    (a second compile was once timed as stepping: NOTES change 16), and the ratio is against `raw`."""
+    (a second compile was once timed as stepping: notebook change 16), and the ratio is against `raw`."""
     from benchmarks import env_loop
 
     out = tmp_path / "loop.json"

@@ -99,7 +99,7 @@ TWO_CPU_DEVICES = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_
 def test_sweep_sharded_over_two_cpu_devices_gives_the_same_rows():
     # In float64 the sharded batch reproduces the unsharded one to 1e-12 on every column.
     # (In float32 any change of compiled program, a batch size as much as a sharding,
-    # moves post-contact poses by ~1e-4: see README, "Determinism".)
+    # moves post-contact poses by ~1e-4: see docs/study/fidelity.md, "Determinism".)
     r = subprocess.run([sys.executable, "-c", SHARD_SCRIPT, "jax"], capture_output=True, text=True, env=TWO_CPU_DEVICES)
     assert "SHARDED_OK" in r.stdout, r.stderr[-2000:]
 

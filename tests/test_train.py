@@ -51,6 +51,9 @@ def test_a_run_leaves_policy_curve_summary_and_the_eval_of_its_held_out_seeds(ru
     for name in ("policy.msgpack", "curve.csv", "curve.png", "checkpoints/policy_000.msgpack",
                  "checkpoints/policy_001.msgpack", "checkpoints/resume.msgpack"):
         assert (run / name).is_file(), name
+    # it names its files relative to its own folder, never by the machine's path: a summary is committed as it is
+    assert (run / summary["policy"]).is_file() and (run / summary["eval"]["table"]).is_file()
+    assert str(run) not in (run / "summary.json").read_text()
     # The curve's last point (the trainer's own rollout of the student, 8 held-out rows in one batch) and `eval
     # --controller policy:...` (the backend's episode machinery, another code path, 4 rows to each worker) judge
     # the same seeds alike, to the bit: a row's actions do not depend on the rows beside it (before they did,
@@ -285,7 +288,7 @@ def test_dagger_learns_to_finish_episodes_on_cpu_in_about_a_minute():
 
     Four iterations of 256 chapter episodes (the first the expert's own demonstrations), judged on 64
     held-out starts never trained on, the student driving alone. Measured on this machine (2 cores,
-    NOTES change 20): the untrained network and `random` finish 0 of 64, the student 31 of 64 (48%) after
+    notebook change 20): the untrained network and `random` finish 0 of 64, the student 31 of 64 (48%) after
     ~60 s of training. The test asserts a quarter, far above both references, and, on the same held-out
     episodes, what the student learned beside success: its actions agree with the expert's labels far
     better than the untrained network's and its memory keeps the expert's (move and latches).
@@ -296,7 +299,7 @@ def test_dagger_learns_to_finish_episodes_on_cpu_in_about_a_minute():
     from mjx_pusht.task.controllers import Random
     from mjx_pusht.train.dagger import DaggerConfig, Learner, Rollouts
 
-    # the expert as teacher, as measured (the paced teacher, the same way: 18 of 64, NOTES change 24)
+    # the expert as teacher, as measured (the paced teacher, the same way: 18 of 64, notebook change 24)
     cfg = DaggerConfig(reset="chapter", envs=256, iterations=4, eval_envs=64, fit_steps=1500, batch=1024,
                        hidden=(256, 256), max_samples=400_000, teacher="expert")
     env = PushTEnv(backend="cpu", reset_kind="chapter", threads=2, keep_states=False)
@@ -431,7 +434,7 @@ def test_a_ppo_checkpoint_acts_as_braxs_own_deterministic_policy(tmp_path):
 def test_ppos_training_reward_makes_succeeding_the_best_outcome():
     """Success ends the episode, so at PPO's discount, ending it now with success must be worth more than
     staying just short of it forever (with the coverage itself as the reward, it was not: PPO learned to
-    park the T at 0.8 coverage, NOTES change 18)."""
+    park the T at 0.8 coverage, notebook change 18)."""
     from types import SimpleNamespace
 
     import jax.numpy as jnp

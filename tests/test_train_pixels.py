@@ -2,7 +2,7 @@
 checkpoint is a controller that every backend shows the same image to.
 
 One tiny run on MuJoCo C (chapter starts, OpenGL images) is shared by the tests; learning from pixels is
-measured on the GPU (NOTES change 21), not here.
+measured on the GPU (notebook change 21), not here.
 """
 
 from __future__ import annotations

@@ -187,7 +187,7 @@ class FeedbackPool:
         # One BLAS thread per worker (spawned workers inherit the environment and read it when NumPy loads):
         # a trained policy's matrix products run in every worker, and OpenBLAS's default of one thread per
         # core in each of `workers` processes oversubscribed a 16-core host (the C side of a 4,096-episode
-        # compare with a 1024-wide policy did not finish in 400 s, NOTES change 12). A user's setting wins.
+        # compare with a 1024-wide policy did not finish in 400 s, notebook change 12). A user's setting wins.
         for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ.setdefault(var, "1")
         self.workers = workers

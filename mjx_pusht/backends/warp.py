@@ -30,7 +30,7 @@ _MAX_CONTACTS_PER_PAIR = 8  # box-box, the richest pair in this scene, makes at 
 START_CONTACTS_PER_WORLD = 16
 START_ROWS_PER_WORLD = 48
 # The environment cannot rerun a step, and a policy drives the pusher anywhere: on one H100, 30 steps
-# of a random linear policy overflowed 48 rows (NEFC) in 20 of 16,384 worlds (benchmarks/NOTES.md,
+# of a random linear policy overflowed 48 rows (NEFC) in 20 of 16,384 worlds (docs/notebook.md,
 # change 10), while MuJoCo C saw at most 35 rows in 64 such episodes; 96 rows ran out of GPU memory
 # at 65,536 worlds (Warp's solver scratch grows with rows squared). 64 rows, checked every step.
 ENV_ROWS_PER_WORLD = 64

@@ -2,7 +2,7 @@
 
 Warp compiles a module the first time one of its kernels launches, one after the other, so
 MJX-Warp's first call on a fresh machine is mostly compilation (93-134 s on an H100 host,
-benchmarks/NOTES.md). `precompile` steps MuJoCo Warp once with every launch recorded instead of
+docs/notebook.md). `precompile` steps MuJoCo Warp once with every launch recorded instead of
 run, which names the modules this scene needs without compiling anything, then compiles those
 in parallel. What the recording misses still compiles lazily at first launch, as before, so the
 worst case is the old one.

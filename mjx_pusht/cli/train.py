@@ -93,7 +93,7 @@ def _finish(args, name: str, out: Path, summary: dict, banner) -> int:
 
     # Training's rollouts and renderers sit in reference cycles (jitted bound methods); collected during eval's CUDA
     # graph capture, their programs' unloading broke the capture ("operation not permitted when stream is
-    # capturing", then Warp's render kernel failed: an H100 pixel run, NOTES change 25). Collected here, before it.
+    # capturing", then Warp's render kernel failed: an H100 pixel run, notebook change 25). Collected here, before it.
     gc.collect()
     summary["eval"] = _judge(args, name, out, summary)
     atomic_write_json(out / "summary.json", summary)
@@ -124,4 +124,4 @@ def _judge(args, backend: str, out: Path, summary: dict) -> dict:
     s = json.loads((out / "eval" / "summary.json").read_text())
     return {k: s[k] for k in ("n_episodes", "n_success", "success_rate", "success_rate_ci95", "median_steps_to_success",
                               "n_non_finite", "n_rigid")} | {"backend": s["backend"], "seeds": seeds,
-                                                             "table": str(out / "eval" / "per_episode.parquet")}
+                                                             "table": "eval/per_episode.parquet"}

@@ -14,7 +14,7 @@ Underneath it is the `gym-pusht` scene variant (model/gym_pusht.py) on the one f
 this file only converts units at the boundary (`gym_view`). A single env is MuJoCo C; the vector
 env is `gym.PushTVectorEnv` (the batch, device autoreset, the full vector API), handing out
 NumPy by default, as a gym-pusht loop expects (`array_type="torch"` or `"jax"` to stay on the GPU).
-What differs from pymunk's physics is in the README ("Coming from gym-pusht / LeRobot").
+What differs from pymunk's physics is in docs/envs/dropin.md.
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def _check_kwargs(obs_type, width, height, render_mode, block_cog, damping) -> N
         raise ConfigError(f"render_mode must be 'rgb_array' (or None), got {render_mode!r}")
     if block_cog is not None or damping is not None:
         raise ConfigError("block_cog and damping are pymunk settings: this physics is MuJoCo's "
-                          "(see the README, 'Coming from gym-pusht / LeRobot')")
+                          "(see docs/envs/dropin.md)")
 
 
 def gym_pusht_spaces(obs_type: str, width: int = 96, height: int = 96, dtype=np.float64):

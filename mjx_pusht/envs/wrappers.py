@@ -131,7 +131,7 @@ class AutoReset:
             # Placed on the state's device as the step's own outputs are: jit keys its compiled programs on
             # whether an input is committed to a device, and arrays made from NumPy are not, so the first step
             # after every reset or refill compiled the whole step (or the user's scan of it) a second time:
-            # seconds that change 13's scan benchmark timed as stepping (NOTES change 16).
+            # seconds that change 13's scan benchmark timed as stepping (notebook change 16).
             info = jax.device_put(info, state.step.sharding)
         return state._replace(info=info)
 

@@ -18,7 +18,7 @@ expert still labels from the state, and the fit teaches the reader the pose each
 no images: a sample holds the 5 numbers of the state that the image is a function of (`RENDER_KEY`
 columns, ahead of the features), and each minibatch is rendered again from them inside the fit (on one
 H100 a fit step of 512 samples, their render, the CNN's forward and backward pass and Adam's update, took
-2.3 ms: NOTES change 21), so a ring of millions of samples costs megabytes, not the tens of GB its images
+2.3 ms: notebook change 21), so a ring of millions of samples costs megabytes, not the tens of GB its images
 would.
 
 The student has a memory (policy.py): the expert's carry format, which it carries itself. DAgger's
@@ -55,7 +55,7 @@ MEMORY_WEIGHT = 0.01  # the memory heads' cross-entropy against the actions' squ
 # not move the T. And it trims to 0.7 mm and 0.006 rad, where the side it pushes from flips with the error's sign:
 # a student that cannot tell the sign at that scale averages the two sides into standing still. Either way the
 # student's velocity field has a zero there and the pusher settles in it for good: 49 of 64 failed held-out
-# episodes of change 17's policy ended so, and 21 of 47 of a student paced only in speed (NOTES change 24). Paced,
+# episodes of change 17's policy ended so, and 21 of 47 of a student paced only in speed (notebook change 24). Paced,
 # the teacher succeeds as often and sooner (2,048 held-out seeds on MuJoCo C: 99.66% in 86.6 control steps on
 # average, the expert 99.46% in 108.6): success (coverage 0.95) comes before those last trims matter.
 TEACHERS = {"paced": {"push_min": 0.08, "turn_min": 0.01, "travel_min": 0.06, "pos_tol": 0.002, "yaw_done": 0.015},
@@ -281,7 +281,7 @@ class Learner:
         self.params = self.model.init(jax.random.key(cfg.seed), jnp.zeros((1, width)), *image)["params"]
         # Each fit anneals the learning rate from its value to 5% (cosine, restarted every iteration): the
         # policy judged after a fit is then a settled one, not a snapshot of Adam at full step size (measured
-        # with a constant rate: held-out success swinging 36-78% between neighbouring iterations, NOTES change 14).
+        # with a constant rate: held-out success swinging 36-78% between neighbouring iterations, notebook change 14).
         # A pixel student's two parts (the acting layers, the image reader) share no parameters and are fitted apart
         # (`_fit`), each with an Adam of its own annealed over its own steps.
         self.opts = tuple(_adam(cfg.learning_rate, steps) for steps in
@@ -298,7 +298,7 @@ class Learner:
     def add(self, x, y, keep: bool = False) -> None:
         """Append samples; when the ring is full the oldest student-visited ones go, never those added with
         `keep` (the expert's own demonstrations, iteration 0): measured, a ring that let them go lost the
-        student what it had learned as the later, stalled episodes filled it (NOTES, change 12)."""
+        student what it had learned as the later, stalled episodes filled it (notebook, change 12)."""
         import jax.numpy as jnp
 
         x, y = jnp.asarray(x, jnp.float32), jnp.asarray(y, jnp.float32)
@@ -359,12 +359,12 @@ def _fit(model, opts, batch, image_batch, steps, render, params, opt_state, x, y
     teacher's action and memory from the *true* pose (`pose_target`: what the image shows), as a state student
     does, in `steps[0]` steps of `batch` samples with no image; then the convolutions and the pose reader learn that
     pose from the first `image_batch` of each of `steps[1]` minibatches, rendered. The student is then "read the
-    pose, act on it": at run time the Dense layers get the reader's estimate. Measured on one H100 (NOTES change
+    pose, act on it": at run time the Dense layers get the reader's estimate. Measured on one H100 (notebook change
     25): taught the actions through the images as well, the reader's error grew to ~3 mm (the teacher's labels,
     discontinuous at the mm scale, are not a function of an image, and their averaged gradients blurred what it
     saw) and held-out success stayed at 3-9% for 20 minutes; taught the pose alone, it read to 0.8 mm and the
     student reached 70% in 8 minutes. Fitted apart, the actions need not pay for rendering (~2 ms per 512 images),
-    so they can take as many steps as a state student's (NOTES change 26). With equal steps the two fits are the
+    so they can take as many steps as a state student's (notebook change 26). With equal steps the two fits are the
     one-scan, one-Adam fit of change 25 (Adam is elementwise, and neither loss reaches the other part's weights:
     a test checks it)."""
     import jax

@@ -6,7 +6,7 @@ and the next memory. The memory is a small discrete state in the expert's own ca
 move it is on, and its "near" and "go the long way round" latches, `Expert.act`): the expert
 decides with hysteresis, so the present observation alone does not fix its action, and a network
 asked to regress it from the observation averages the two choices where they meet (left or right
-round the T) into standing still (NOTES, changes 12 and 14). With a memory of its own, trained to
+round the T) into standing still (notebook, changes 12 and 14). With a memory of its own, trained to
 take the expert's next carry, the policy is a function again. Training applies it with flax; the
 controller (`PolicyController`, what `--controller policy:PATH` loads) evaluates the same layers
 with the array namespace of its input, so one checkpoint runs inside MJX's compiled scan (JAX,
@@ -29,7 +29,7 @@ import numpy as np
 from mjx_pusht.task.controllers import NEAR, REVERSE, Controller, ControllerError
 from mjx_pusht.task.rules import CTRL_LIMIT, array_namespace
 
-FORMAT = "mjx_pusht.policy/2"  # /1: one head, the last action as memory (NOTES, change 12)
+FORMAT = "mjx_pusht.policy/2"  # /1: one head, the last action as memory (notebook, change 12)
 OBS_TYPES = ("state", "keypoints", "pixels_agent_pos")
 OBS_SIZE = {"state": 5, "keypoints": 16}  # the observations' own widths (what a PPO policy reads)
 ACTIVATIONS = ("relu", "silu")
@@ -39,7 +39,7 @@ ACTIVATIONS = ("relu", "silu")
 # true pose from the images and the Dense layers the teacher's actions from the true pose (train/dagger.py `_fit`).
 # Before, the flattened map joined the Dense layers directly, taught by the actions alone: 3.6% held-out success
 # after 18 minutes on an H100, where this reaches 70% in 8; a spatial softmax over a 19 x 19 map did no better
-# (NOTES changes 21, 25).
+# (notebook changes 21, 25).
 CONV_CHANNELS = (32, 32, 32, 32)
 CONV_KERNEL, CONV_STRIDE = 3, 2
 POSE_HIDDEN = 256
@@ -113,7 +113,7 @@ def _activation(name: str, x, xp):
 
 # NumPy's matmul (BLAS) chooses its kernels, and so its order of summation, by the matrices' shapes, so a row's
 # product moved in its last bits with the number of rows it came with; the contacts then amplify it, and a seed's
-# MuJoCo C episode depended on which seeds shared its eval (the pixel policy of NOTES change 28 ended seed
+# MuJoCo C episode depended on which seeds shared its eval (the pixel policy of notebook change 28 ended seed
 # 1000000002 at coverage 0.956 in a 9-seed eval and at 0.970 among 4,096). The Dense layers are evaluated in
 # blocks of a fixed CPU_BLOCK rows, so a row's action is a function of its own observation alone. Measured on this
 # repo's 2-core machine: 32-row blocks take a 1024 x 3 state network on 4,096 rows in the time of one product (0.24 s
@@ -210,7 +210,7 @@ def _trunk(params: dict, activation: str, image, dtype):
     starting at (a, b) times that offset's (in, out) kernel matrix; summed over offsets that is exactly
     flax's `nn.Conv(padding="VALID")`, written in slices and matmuls so NumPy runs it as flax does. JAX runs
     XLA's own convolution instead: the slices' partial sums of a 4,096-image batch asked an H100 for 19.6 GiB
-    in DAgger's rollout (NOTES change 21)."""
+    in DAgger's rollout (notebook change 21)."""
     xp = array_namespace(image)
     h = xp.astype(image, dtype) / 255.0 - 0.5
     for i in range(len(CONV_CHANNELS)):

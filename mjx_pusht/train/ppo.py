@@ -13,7 +13,7 @@ The training reward, per control step (`training_reward`):
 The first term is the env's own reward (the coverage, what gym-pusht pays) less 1: a cost for every
 step not yet covered. Success ends the episode, so a reward of plain coverage made *not* succeeding
 the better policy: staying at 0.8 coverage is worth 0.8 / (1 - 0.97) ~ 27 discounted, more than the
-bonus and the end (measured on the H100, NOTES change 17: PPO's held-out coverage rose to 0.79 in two
+bonus and the end (measured on the H100, notebook change 17: PPO's held-out coverage rose to 0.79 in two
 minutes and stayed there, success under 1.5%). With the cost, every step short of success loses and
 ending it is the best outcome (a test checks this). The bonus marks the end the task asks for; the
 shaping term is potential-based (Ng et al., 1999), so it changes how fast PPO finds the task, not

@@ -15,7 +15,7 @@ from mjx_pusht.errors import MjxPushtError
 from mjx_pusht.io.outputs import atomic_write_bytes
 
 # The resume checkpoint holds the whole dataset (8 M samples: ~0.5 GB, ~4 s to write, measured on the H100
-# run of NOTES change 14), so it is written at most this often, and at the last iteration; a run killed
+# run of notebook change 14), so it is written at most this often, and at the last iteration; a run killed
 # between two repeats at most this much work on --resume (the per-iteration policies are written every time).
 RESUME_EVERY_S = 60.0
 
@@ -31,7 +31,7 @@ def config_dict(cfg) -> dict:
 
 def checkpoint(path, cfg, learner, iteration, env_steps, curve, writer=None):
     """Everything --resume needs (optimiser, dataset ring, normalisation, curve), written whole. The arrays are
-    copied to the host here; encoding and writing (~4 s for 8 M samples on the H100 run of NOTES change 14) go
+    copied to the host here; encoding and writing (~4 s for 8 M samples on the H100 run of notebook change 14) go
     on in a thread while training continues. Returns that thread: join it before the next one, and at the end."""
     from flax import serialization
 

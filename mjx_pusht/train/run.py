@@ -53,7 +53,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     ckpt.mkdir(parents=True, exist_ok=True)
     # A rollout is one long jitted scan, where MJX's default CUDA-graph mode ("WARP": graphs keyed on buffer
     # addresses, which stay put inside the scan) replays its captures; the env's own default, staged, is for
-    # stepping once a call. Measured on an H100: 491k against 287k control steps/s at 4,096 (NOTES change 16).
+    # stepping once a call. Measured on an H100: 491k against 287k control steps/s at 4,096 (notebook change 16).
     graph_mode = "WARP" if backend == "mjx-warp" and has_gpu() else None
     env = PushTEnv(backend=backend, reset_kind=cfg.reset, episode=Episode(max_steps=cfg.max_steps),
                    threads=default_threads(), keep_states=False, pixels=cfg.image, graph_mode=graph_mode)
@@ -68,7 +68,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     bar = tqdm(desc="dagger", unit="iter", disable=not progress, initial=start, total=cfg.iterations)
     # Each fit's held-out judgement rides in the next iteration's rollout (the same policy drives both: the
     # held-out rows with beta 0, their samples never learned from), so judging costs a bigger batch, not a
-    # second rollout (NOTES change 16); the last fit, or the one that spends --minutes, is judged alone.
+    # second rollout (notebook change 16); the last fit, or the one that spends --minutes, is judged alone.
     pending = None  # (iteration, loss, learn seconds, sim seconds) of the fit awaiting its judgement
     writer = [None]  # the thread writing the resume checkpoint
 
@@ -102,7 +102,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
 
     # On MJX every rollout has the held-out rows, so the scan compiles for one batch shape: the first
     # iteration's show the untrained student, unrecorded (a second shape cost ~8 s of a 5-minute budget,
-    # NOTES change 23); on cpu, nothing to compile, they are rolled only when there is a fit to judge.
+    # notebook change 23); on cpu, nothing to compile, they are rolled only when there is a fit to judge.
     one_shape = backend != "cpu"
     for i in range(start, cfg.iterations):
         seeds, beta = cfg.train_seeds(i), np.full(cfg.envs, cfg.beta(i), np.float32)

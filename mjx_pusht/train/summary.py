@@ -32,7 +32,7 @@ def write_summary(cfg, backend, out: Path, curve, rerun: bool = True, method: st
         "final_success_ci95": [final["success_lo"], final["success_hi"]] if final else None,
         "kept": {"rule": keep, "iteration": final["iteration"], "validation_success": final.get("validation_success"),
                  "validation_beta": final.get("validation_beta")} if final else None,
-        "policy": str(out / "policy.msgpack"),
+        "policy": "policy.msgpack",  # paths in a summary are relative to its folder, never the machine's
         "curve": curve,
     }
     if method == "ppo":
