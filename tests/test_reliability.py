@@ -208,34 +208,31 @@ def _files(folder):
     return {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")}
 
 
-def test_a_folder_with_another_commands_results_is_refused_unless_replaced(tmp_path):
-    """Finding 3: a sweep into a finished eval folder replaced its summary.json and left
-    per_episode.parquet without one. Now it is one line and the folder is as it was; --replace says go."""
+def test_a_folder_with_another_commands_results_is_refused_whatever_the_flags(tmp_path):
+    """Finding 3: a sweep into a finished eval folder replaced its summary.json and left per_episode.parquet
+    without one. Issue 42: --replace then deleted the eval's table. Now it is one line naming what is there, with
+    or without --replace, and the folder is as it was."""
     out = tmp_path / "ev"
     assert cli("eval", "--backend", "cpu", "--seeds", "2", "--max-steps", "3", "--no-rerun", "--out", str(out)).returncode == 0
     before = _files(out)
-    r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--out", str(out))
-    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1
-    assert "another command's finished results (eval" in r.stderr and "--replace" in r.stderr
-    assert _files(out) == before
-    r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--replace", "--out", str(out))
-    assert r.returncode == 0, r.stderr
-    assert sorted(_files(out)) == ["per_seed.parquet", "summary.json"]  # no eval table left beside the sweep's
+    for extra in ([], ["--replace"]):
+        r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--out", str(out), *extra)
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert "holds eval's results (per_episode.parquet, summary.json)" in r.stderr and "whatever the flags" in r.stderr
+        assert _files(out) == before
 
 
 def test_a_summary_json_no_run_wrote_is_not_overwritten(tmp_path):
     """A folder holding someone's own summary.json (no mjx-pusht run's file beside it) was taken as empty, and the
-    run replaced the file. Now it is one line and the file stays; --replace says go."""
+    run replaced the file. Now it is one line and the file stays, --replace or not."""
     out = tmp_path / "mine"
     out.mkdir()
     (out / "summary.json").write_text("precious")
-    r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--out", str(out))
-    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1
-    assert "finished results (not mjx-pusht: summary.json)" in r.stderr and "--replace" in r.stderr
-    assert (out / "summary.json").read_text() == "precious"
-    r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--replace", "--out", str(out))
-    assert r.returncode == 0, r.stderr
-    assert (out / "summary.json").read_text() != "precious"
+    for extra in ([], ["--replace"]):
+        r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--out", str(out), *extra)
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1
+        assert "holds files no mjx-pusht run wrote here (summary.json)" in r.stderr
+        assert (out / "summary.json").read_text() == "precious"
 
 
 def test_a_finished_sweep_is_not_overwritten_by_other_seeds_but_may_be_rerun(tmp_path):

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mjx_pusht.backends.actions import NonFiniteActionError
 from mjx_pusht.backends.results import Rollouts
 from mjx_pusht.errors import MjxPushtError
 from mjx_pusht.io.outputs import atomic_write_json, atomic_write_table, read_table
@@ -196,6 +197,12 @@ def run_sweep(
             lo, hi, submitted = pending[0]
             try:
                 land(lo, hi, submitted)
+            except NonFiniteActionError as e:  # the chunks before it stay, and --resume picks up from them
+                for f in written:
+                    f.exception()
+                kept = len(list(parts.glob("seeds-*.parquet")))
+                raise NonFiniteActionError(*e.args[:4], f"; {kept} finished chunk files are kept in {parts}: "
+                                                        "fix the controller and rerun with --resume") from None
             except Exception as e:  # noqa: BLE001 - only memory errors are retried
                 if not _is_out_of_memory(e) or chunk <= 1:
                     raise
