@@ -35,7 +35,7 @@ def scenarios(max_steps: int) -> dict:
 
 
 def measure(name: str, scenario, backend_name: str, batch: int, repeats: int) -> dict:
-    from mjx_pusht.backends.base import make_backend
+    from mjx_pusht.backends.factory import make_backend
     from mjx_pusht.task.reset import start_poses
 
     seeds = np.arange(batch)
@@ -87,7 +87,7 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, required=True, help="the JSON file to write")
     args = p.parse_args(argv)
     from mjx_pusht.backends.base import versions
-    from mjx_pusht.cli.banner import tier
+    from mjx_pusht.io.banner import tier
 
     every = scenarios(args.max_steps)
     result = {"what": "MJX rollout with and without the finiteness check of the controller's actions",

@@ -105,7 +105,8 @@ def _one_error_line(r) -> str:
     return errors[0]
 
 
-@pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
+@pytest.mark.parametrize("value", ["inf", pytest.param("nan", marks=pytest.mark.slow),
+                                   pytest.param("-inf", marks=pytest.mark.slow)])
 def test_eval_of_a_controller_returning_nonfinite_actions_is_one_line_and_a_nonzero_exit(tmp_path, value):
     r = cli("eval", "--backend", "cpu", "--controller", "bad_actions:act", "--seeds", "4", "--max-steps", "5",
             "--no-rerun", "--no-progress", "--out", str(tmp_path / "o"), env=_user_env(value=value))
