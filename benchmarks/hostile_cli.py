@@ -80,6 +80,21 @@ def tries(root: Path) -> list[Try]:
             edit(s)
             (d / "summary.json").write_text(json.dumps(s))
         broken[name] = d
+    # an interrupted sweep's folder, then broken in the ways a disk or a hand can break it
+    cut = root / "cut"
+    assert run_cli(["sweep", "--backend", "cpu", "--seeds", "4", "--steps", "5", "--chunk", "2", "--no-rerun",
+                    "--no-progress", "--out", cut])[0] == 0
+    parts = {}
+    for name in ("manifest", "chunk", "run_file"):
+        d = root / f"cut_{name}"
+        (d / ".parts").mkdir(parents=True)
+        (d / ".run.json").write_text((cut / ".run.json").read_text() if name != "run_file" else "[not, json")
+        (d / ".parts" / "manifest.json").write_text("{not json" if name == "manifest" else json.dumps(
+            {"config": {"backend": "cpu", "break_it": "none", "steps": 5, "params": []}, "n_seeds": 4,
+             "seeds_sha256": __import__("hashlib").sha256(__import__("numpy").arange(4).tobytes()).hexdigest()}))
+        (d / ".parts" / "seeds-000000000000-000000000002.parquet").write_bytes(
+            b"PAR1 cut short" if name == "chunk" else (cut / "per_seed.parquet").read_bytes())
+        parts[name] = d
     o = iter(range(10_000))
 
     def out() -> str:
@@ -136,6 +151,9 @@ def tries(root: Path) -> list[Try]:
         c("sweep", *sw_args, "--peer-timeout", "inf", "--out", out()),
         c("sweep", *sw_args, "--resume", "--out", out(), expect="honour"),
         c("sweep", *sw_args, "--out", str(root / "a_file")),
+        *[c("sweep", "sweep", *quick, "--seeds", "4", "--steps", "5", "--chunk", "2", "--resume", "--out", d)
+          for d in parts.values()],
+        c("sweep", "sweep", *quick, "--seeds", "4", "--steps", "5", "--chunk", "2", "--out", parts["manifest"]),
         c("sweep", *sw_args, "--out", ev, after=kept(ev)), c("sweep", *sw_args, "--replace", "--out", ev, after=kept(ev)),
         # eval
         *[c("eval", *ev_args, "--controller", s, "--out", out()) for s in

@@ -372,3 +372,39 @@ def test_a_video_that_cannot_be_written_is_one_line_before_the_episodes(tmp_path
         assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and needle in r.stderr, r.stderr
         assert not (out / "per_episode.parquet").exists()  # refused before any episode ran
     assert [p.name for p in tmp_path.iterdir() if "partial" in p.name] == []
+
+
+def _interrupted_sweep(folder):
+    """A sweep of seeds 0..3 in chunks of 2 stopped after its first chunk, as an interrupted run leaves it."""
+    from mjx_pusht.io.outputs import atomic_write_json, atomic_write_table, read_table
+    from mjx_pusht.study.sweep import fingerprint
+
+    args = ("sweep", "--backend", "cpu", "--seeds", "4", "--steps", "5", "--chunk", "2", "--no-rerun", "--no-progress",
+            "--out", str(folder))
+    assert cli(*args).returncode == 0
+    table = read_table(folder / "per_seed.parquet")
+    (folder / "per_seed.parquet").unlink()
+    (folder / "summary.json").unlink()
+    (folder / ".parts").mkdir()
+    atomic_write_json(folder / ".parts" / "manifest.json", fingerprint(
+        np.arange(4), {"backend": "cpu", "break_it": "none", "steps": 5, "params": []}))
+    atomic_write_table(folder / ".parts" / "seeds-000000000000-000000000002.parquet", {k: v[:2] for k, v in table.items()})
+    return args, table
+
+
+def test_resume_of_a_damaged_unfinished_sweep_is_one_line_before_any_work(tmp_path):
+    """The hostile pass: a cut chunk file or an unreadable manifest in .parts raised pyarrow's or json's traceback
+    (the chunk only at the end, after every other seed had run). Now --resume refuses in one line naming the file,
+    and an undamaged one finishes the table."""
+    from mjx_pusht.io.outputs import read_table
+
+    args, table = _interrupted_sweep(tmp_path / "ok")
+    assert cli(*args, "--resume").returncode == 0
+    assert all(np.array_equal(read_table(tmp_path / "ok" / "per_seed.parquet")[k], table[k]) for k in table)
+    for damage in ("manifest.json", "seeds-000000000000-000000000002.parquet"):
+        folder = tmp_path / damage.split(".")[0]
+        _interrupted_sweep(folder)
+        (folder / ".parts" / damage).write_bytes(b"{cut")
+        r = cli(*args[:-1], str(folder), "--resume")
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and damage in r.stderr, r.stderr
+        assert "Traceback" not in r.stderr and not (folder / ".parts" / "seeds-000000000002-000000000004.parquet").exists()

@@ -120,7 +120,8 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
         who = owner.get("command")
         foreign = held if who != command else [n for n in held if n not in OWN[command]]  # a policy in an eval's folder
         if foreign:
-            what = (f"{who}'s results" if who in OWN else "files no mjx-pusht run wrote here") if who != command \
+            what = (f"{who}'s results" if who in OWN else f"results whose {RUN_FILE} is unreadable"
+                    if (path / RUN_FILE).exists() else "files no mjx-pusht run wrote here") if who != command \
                 else f"files {command} does not write"
             raise OutputError(f"--out {path} holds {what} ({', '.join(foreign)}); {command} never removes or "
                               "overwrites another command's results, whatever the flags: choose another --out")
