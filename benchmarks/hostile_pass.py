@@ -183,13 +183,15 @@ def main(argv=None) -> int:
     p.add_argument("--match", default=None, help="only the tries whose entry point or input contains this")
     p.add_argument("--timeout", type=float, default=120.0, help="seconds a try may run (default 120)")
     p.add_argument("--memory-gb", type=float, default=8.0,
-                   help="this process's data limit: a try that would allocate past it fails instead of taking the host")
+                   help="this process's data limit: a try that would allocate past it fails instead of taking the host "
+                        "(0: none)")
     args = p.parse_args(argv)
     import resource
     import tempfile
 
-    limit = int(args.memory_gb * 2**30)
-    resource.setrlimit(resource.RLIMIT_DATA, (limit, resource.getrlimit(resource.RLIMIT_DATA)[1]))
+    if args.memory_gb > 0:  # 0: no limit (inside a test process, which goes on after the pass)
+        limit = int(args.memory_gb * 2**30)
+        resource.setrlimit(resource.RLIMIT_DATA, (limit, resource.getrlimit(resource.RLIMIT_DATA)[1]))
 
     from benchmarks import hostile_api, hostile_cli
 
