@@ -115,8 +115,9 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
             if not isinstance(owner, dict):
                 raise ValueError(RUN_FILE)
         except (OSError, ValueError):
-            # results from before the run file existed are known by their name; a lone summary.json by nobody
-            owner = {"command": next((RESULTS[n] for n in held if n in RESULTS), None)}
+            # results from before the run file existed are known by their name, chunks by their manifest (whose
+            # seeds and settings the resume check compares); a lone summary.json by nobody
+            owner = {"command": next((RESULTS[n] for n in held if n in RESULTS), None) or _chunks_command(path)}
         who = owner.get("command")
         foreign = held if who != command else [n for n in held if n not in OWN[command]]  # a policy in an eval's folder
         if foreign:
@@ -153,6 +154,16 @@ def _results_in(path: Path) -> list[str]:
         elif p.exists():
             held.append(name)
     return held
+
+
+def _chunks_command(path: Path) -> str | None:
+    """The command whose unfinished chunks `path/.parts` holds, by the manifest run_sweep writes (an eval's config
+    names its command; a sweep's is the other); None without a readable one."""
+    try:
+        manifest = json.loads((path / ".parts" / "manifest.json").read_text())
+        return manifest["config"].get("command", "sweep")
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None
 
 
 def _refuse_to_remove_inputs(path: Path, command: str, reads) -> None:
