@@ -116,7 +116,9 @@ def tries(root: Path) -> list[Try]:
         *[a("PushT-v0", f"reset(options={{'reset_to_state': {s}}})",
             (lambda s=s: _gym().make(ID).reset(options={"reset_to_state": s}))) for s in
           ([5, 5, 0, 0, -0.25], [NAN, 0, 0, 0.1, 0.1], [0, 0, 0], [0, 0, 0, 0, 0, 0], "abc", [0.0, 0.0, 0.0, 0.0, 0.0],
-           [0, 0, 1e9, 0.2, 0.2], [0.01, 0.01, 0.0, 0.011, 0.011])],
+           [0.01, 0.01, 0.0, 0.011, 0.011])],
+        a("PushT-v0", "reset_to_state [0, 0, 1e9, 0.2, 0.2] (a yaw of 1e9 rad: wrapped, or refused)",
+          lambda: _gym().make(ID).reset(options={"reset_to_state": [0, 0, 1e9, 0.2, 0.2]}), "either"),
         a("PushT-v0", "reset_to_state [0.1, 0.1, 0.5, -0.2, -0.2] (valid)",
           lambda: _gym().make(ID).reset(options={"reset_to_state": [0.1, 0.1, 0.5, -0.2, -0.2]}), "honour"),
         *[a("PushT-v0", f"step({v!r}) (a list)", step_then(single, v)) for v in

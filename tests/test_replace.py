@@ -75,6 +75,7 @@ def test_compare_evals_onto_one_of_its_own_evals_is_refused_and_keeps_it(two_eva
     assert r.returncode == 0 and (tmp_path / "c" / "compare_episodes.json").exists(), r.stderr[-500:]
 
 
+@pytest.mark.slow
 def test_replace_removes_the_same_commands_own_files_only(tmp_path):
     out = tmp_path / "e"
     assert cli(*EVAL, "--seeds", "2", "--out", str(out)).returncode == 0
