@@ -21,6 +21,7 @@ import argparse
 import contextlib
 import dataclasses
 import io
+import os
 import signal
 import sys
 import time
@@ -200,8 +201,10 @@ def main(argv=None) -> int:
     except ImportError:  # a tree from before the banner moved (to run the pass against another branch)
         from mjx_pusht.cli.banner import tier
 
+    home, args.out = Path.cwd(), args.out.resolve()
     with tempfile.TemporaryDirectory(prefix="hostile-") as d:
         root = Path(d)
+        os.chdir(root)  # whatever a try writes by default (outputs/..., MUJOCO_LOG.TXT) lands in the temporary folder
         tries = ([] if args.only == "api" else hostile_cli.tries(root)) + \
                 ([] if args.only == "cli" else hostile_api.tries(root))
         if args.match:
@@ -211,6 +214,7 @@ def main(argv=None) -> int:
         seconds = time.perf_counter() - t0
         for r in rows:  # the temporary folder's name changes every run: the table says TMP
             r["input"], r["answer"] = (str(r[k]).replace(str(root), "TMP") for k in ("input", "answer"))
+        os.chdir(home)
     write_table(rows, args.out, tier(), seconds)
     bad = [r for r in rows if r["verdict"] != "ok"]
     print(f"{len(rows)} tries, {len(bad)} not ok; wrote {args.out}", file=sys.__stdout__)
