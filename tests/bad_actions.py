@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+from typing import ClassVar
 
 import numpy as np
 
@@ -45,3 +46,17 @@ def act(obs, t):
     if os.environ.get("BAD_TEE_X"):
         hit = hit & (xp.abs(state[..., 2] - float(os.environ["BAD_TEE_X"])) < 1e-4)
     return xp.where(hit[..., None], zero + float(os.environ.get("BAD_VALUE", "nan")), zero)
+
+
+@dataclasses.dataclass(frozen=True)
+class Looks(Controller):
+    """A controller that looks at the top camera's image (so MJX-Warp renders it every step, and runs the rollout
+    as a scan of the vmapped step) and returns NaN from control step 2 on."""
+
+    name: str = "bad_actions:Looks"
+    pixels: ClassVar[int] = 16
+
+    def act(self, carry, obs, t, key):
+        xp = array_namespace(obs["state"])
+        zero = obs["state"][..., :2] * 0.0 + xp.mean(obs["pixels"]) * 0.0
+        return xp.where((zero[..., 0] + t >= 2)[..., None], zero + math.nan, zero), carry

@@ -190,3 +190,18 @@ def test_compare_of_a_controller_returning_nan_is_one_line(tmp_path):
     line = _one_error_line(r)
     assert "controller bad_actions:act" in line and "control step 2 of seed 0" in line and "[-inf, -inf]" in line
     assert not (tmp_path / "c" / "compare_episodes.json").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.warp
+def test_on_mjx_warp_a_controller_that_looks_is_checked_in_its_own_scan_too():
+    # a pixel controller's rollout is a scan of the vmapped step (MJX-Warp renders the batch at once), not the
+    # vmapped scan: the record rides in that carry as well
+    from bad_actions import Looks
+
+    from mjx_pusht.backends.mjx import MjxBackend
+
+    backend = MjxBackend(Scenario(controller=Looks(), reset="task", episode=Episode(max_steps=4)), "warp")
+    with pytest.raises(NonFiniteActionError) as e:
+        backend.run(np.arange(2), batch=2)
+    assert (e.value.seed, e.value.step) == (0, 2) and all(math.isnan(v) for v in e.value.value)
