@@ -208,34 +208,31 @@ def _files(folder):
     return {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")}
 
 
-def test_a_folder_with_another_commands_results_is_refused_unless_replaced(tmp_path):
-    """Finding 3: a sweep into a finished eval folder replaced its summary.json and left
-    per_episode.parquet without one. Now it is one line and the folder is as it was; --replace says go."""
+def test_a_folder_with_another_commands_results_is_refused_whatever_the_flags(tmp_path):
+    """Finding 3: a sweep into a finished eval folder replaced its summary.json and left per_episode.parquet
+    without one. Issue 42: --replace then deleted the eval's table. Now it is one line naming what is there, with
+    or without --replace, and the folder is as it was."""
     out = tmp_path / "ev"
     assert cli("eval", "--backend", "cpu", "--seeds", "2", "--max-steps", "3", "--no-rerun", "--out", str(out)).returncode == 0
     before = _files(out)
-    r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--out", str(out))
-    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1
-    assert "another command's finished results (eval" in r.stderr and "--replace" in r.stderr
-    assert _files(out) == before
-    r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--replace", "--out", str(out))
-    assert r.returncode == 0, r.stderr
-    assert sorted(_files(out)) == ["per_seed.parquet", "summary.json"]  # no eval table left beside the sweep's
+    for extra in ([], ["--replace"]):
+        r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--out", str(out), *extra)
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert "holds eval's results (per_episode.parquet, summary.json)" in r.stderr and "whatever the flags" in r.stderr
+        assert _files(out) == before
 
 
 def test_a_summary_json_no_run_wrote_is_not_overwritten(tmp_path):
     """A folder holding someone's own summary.json (no mjx-pusht run's file beside it) was taken as empty, and the
-    run replaced the file. Now it is one line and the file stays; --replace says go."""
+    run replaced the file. Now it is one line and the file stays, --replace or not."""
     out = tmp_path / "mine"
     out.mkdir()
     (out / "summary.json").write_text("precious")
-    r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--out", str(out))
-    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1
-    assert "finished results (not mjx-pusht: summary.json)" in r.stderr and "--replace" in r.stderr
-    assert (out / "summary.json").read_text() == "precious"
-    r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--replace", "--out", str(out))
-    assert r.returncode == 0, r.stderr
-    assert (out / "summary.json").read_text() != "precious"
+    for extra in ([], ["--replace"]):
+        r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--out", str(out), *extra)
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1
+        assert "holds files no mjx-pusht run wrote here (summary.json)" in r.stderr
+        assert (out / "summary.json").read_text() == "precious"
 
 
 def test_a_finished_sweep_is_not_overwritten_by_other_seeds_but_may_be_rerun(tmp_path):
@@ -375,3 +372,39 @@ def test_a_video_that_cannot_be_written_is_one_line_before_the_episodes(tmp_path
         assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and needle in r.stderr, r.stderr
         assert not (out / "per_episode.parquet").exists()  # refused before any episode ran
     assert [p.name for p in tmp_path.iterdir() if "partial" in p.name] == []
+
+
+def _interrupted_sweep(folder):
+    """A sweep of seeds 0..3 in chunks of 2 stopped after its first chunk, as an interrupted run leaves it."""
+    from mjx_pusht.io.outputs import atomic_write_json, atomic_write_table, read_table
+    from mjx_pusht.study.sweep import fingerprint
+
+    args = ("sweep", "--backend", "cpu", "--seeds", "4", "--steps", "5", "--chunk", "2", "--no-rerun", "--no-progress",
+            "--out", str(folder))
+    assert cli(*args).returncode == 0
+    table = read_table(folder / "per_seed.parquet")
+    (folder / "per_seed.parquet").unlink()
+    (folder / "summary.json").unlink()
+    (folder / ".parts").mkdir()
+    atomic_write_json(folder / ".parts" / "manifest.json", fingerprint(
+        np.arange(4), {"backend": "cpu", "break_it": "none", "steps": 5, "params": []}))
+    atomic_write_table(folder / ".parts" / "seeds-000000000000-000000000002.parquet", {k: v[:2] for k, v in table.items()})
+    return args, table
+
+
+def test_resume_of_a_damaged_unfinished_sweep_is_one_line_before_any_work(tmp_path):
+    """The hostile pass: a cut chunk file or an unreadable manifest in .parts raised pyarrow's or json's traceback
+    (the chunk only at the end, after every other seed had run). Now --resume refuses in one line naming the file,
+    and an undamaged one finishes the table."""
+    from mjx_pusht.io.outputs import read_table
+
+    args, table = _interrupted_sweep(tmp_path / "ok")
+    assert cli(*args, "--resume").returncode == 0
+    assert all(np.array_equal(read_table(tmp_path / "ok" / "per_seed.parquet")[k], table[k]) for k in table)
+    for damage in ("manifest.json", "seeds-000000000000-000000000002.parquet"):
+        folder = tmp_path / damage.split(".")[0]
+        _interrupted_sweep(folder)
+        (folder / ".parts" / damage).write_bytes(b"{cut")
+        r = cli(*args[:-1], str(folder), "--resume")
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and damage in r.stderr, r.stderr
+        assert "Traceback" not in r.stderr and not (folder / ".parts" / "seeds-000000000002-000000000004.parquet").exists()

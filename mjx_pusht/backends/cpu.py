@@ -21,6 +21,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
+from mjx_pusht.backends import actions
 from mjx_pusht.backends.base import Backend
 from mjx_pusht.backends.results import Rollouts, Trace, from_carry
 from mjx_pusht.model.layout import QposLayout
@@ -201,6 +202,9 @@ class FeedbackPool:
         parts = np.array_split(np.arange(len(seeds)), min(len(seeds), 4 * self.workers))
         jobs = [self.pool.submit(run_cpu, scenario, seeds[i], nthread=1, combos=combos[i], poses=poses[i])
                 for i in parts if len(i)]
+        bad = [j.exception() for j in jobs if isinstance(j.exception(), actions.NonFiniteActionError)]
+        if bad:  # as one process would: the earliest control step of any slice, then the first slice
+            raise actions.earliest(bad)
         return Rollouts.concat([j.result() for j in jobs])
 
     def close(self) -> None:
@@ -278,6 +282,8 @@ def run_cpu(
     controller, episode = scenario.driver()
     fs = episode.frame_skip
     table = controller.open_loop(episode.max_steps, fs)
+    if table is not None and not np.isfinite(table).all():
+        table = None  # stepped world by world instead, so the step check below names the seed and step
     settle_step = scenario.schedule.settle_steps - 1
     poses = start_poses(seeds, reset=scenario.reset) if poses is None else poses  # a sweep draws them once
     parts, traces = [], []
@@ -306,6 +312,11 @@ def run_cpu(
                     break  # every episode has ended: the rest would change nothing
                 image = None if renderer is None else renderer(qpos)
                 action, carry = act(carry, qpos, k, key, controller, layout, np, image)
+                # every control step, before the physics: the first non-finite action stops the run
+                action, bad = actions.record_update(actions.record_init((n,), np.float64, np),
+                                                    actions.as_numbers(action, controller.name),
+                                                    ~carry["ep"]["done"], k, np)
+                actions.check(bad, seeds[lo : lo + n], controller.name)
                 qpos, carry, (_, qs) = control_step((stepper, None), carry, qpos, k, action, controller.action_type,
                                                     physics, layout, episode, np)
                 if trace:

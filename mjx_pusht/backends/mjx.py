@@ -7,9 +7,8 @@ the CPU through Warp. The rollout's body is `task.episode.control_step`, the sam
 backend and the environment run; the weld gap and its peak are reduced inside the scan, so
 there is no per-step host round trip and no trajectory unless a trace is asked for.
 
-Jobs live elsewhere: the parameter grid on the device (`grid.ModelGrid`), MJX-Warp's buffers
-(`warp.Buffers`), how a program is laid over devices (`launch`), process-wide JAX settings
-(`jax_setup`).
+Jobs live elsewhere: the parameter grid (`grid.ModelGrid`), MJX-Warp's buffers (`warp.Buffers`), laying a
+program over devices (`launch`), JAX settings (`jax_setup`), the check of the actions (`actions`).
 """
 
 from __future__ import annotations
@@ -21,6 +20,7 @@ from concurrent.futures import ThreadPoolExecutor
 import mujoco
 import numpy as np
 
+from mjx_pusht.backends import actions
 from mjx_pusht.backends import launch as launching
 from mjx_pusht.backends.base import Backend, BackendError
 from mjx_pusht.backends.grid import ModelGrid
@@ -58,6 +58,8 @@ class MjxConfig:
     # MJX-Warp only: collide box with box through MuJoCo Warp's primitive box_box, as MuJoCo C does
     # (mjc_BoxBox), by setting mjDSBL_NATIVECCD on the model MJX receives; see colliders.py
     match_c_colliders: bool = True
+    # each action checked for finiteness in the scan (actions.py); off only to time the check (benchmarks)
+    check_actions: bool = True
 
 
 def simulated_scene(scenario: Scenario, impl: str) -> SceneSpec:
@@ -189,19 +191,22 @@ class MjxRunner:
 
         model, layout, grid = self.model, self.layout, self.models
         controller, episode = self.scenario.driver()
-        warp = self.cfg.impl == "warp"
+        warp, check, n_dev = self.cfg.impl == "warp", self.cfg.check_actions, len(self.devices)
         fs, settle_step = episode.frame_skip, self.scenario.schedule.settle_steps - 1
-
-        n_dev = len(self.devices)
 
         def start(d0, qpos0, key):
             carry = begin(layout, qpos0, key, controller, episode, jnp)
+            if check:  # the row's first non-finite action: carried in the scan, read when the chunk is back
+                carry = {**carry, "bad_action": actions.record_init((), qpos0.dtype, jnp)}
             qs0 = jnp.zeros((episode.physics_steps, model.nq), qpos0.dtype) if trace else None
             return (d0.replace(qpos=qpos0), jnp.zeros((), jnp.int32), qs0), carry
 
         def advance(leaves, combo, key, sim, carry, k, image=None):
             physics = physics_for(grid.row(leaves, combo), fs, settle_step, layout, warp)
             action, carry = act(carry, sim[0].qpos, k, key, controller, layout, jnp, image)
+            if check:
+                action, bad = actions.record_update(carry["bad_action"], action, ~carry["ep"]["done"], k, jnp)
+                carry = {**carry, "bad_action": bad}
             _, carry, sim = control_step(sim, carry, sim[0].qpos, k, action, controller.action_type, physics,
                                          layout, episode, jnp)
             return sim, carry
@@ -293,6 +298,7 @@ class MjxRunner:
         self.buffers.check(ovf)
         trace, qpos0 = p.trace, p.qpos0
         carry = jax.tree.map(lambda a: np.asarray(a)[:n], carry)
+        actions.check(carry.pop("bad_action", None), seeds, self.scenario.driver()[0].name)  # padding cut by [:n]
         q0 = np.asarray(qpos0, np.float64)[:n]
         out = from_carry(seeds, poses, self.layout.pusher_xy(q0), carry)
         out.warnings = self.models.warnings[combos]  # MJX raises none of its own; a singular model is still one

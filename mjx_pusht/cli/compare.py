@@ -58,7 +58,8 @@ def _compare_evals(args) -> int:
     from mjx_pusht.study.closed_loop import evals_report, write_report
 
     report = evals_report(*args.evals)  # a refused pairing leaves no --out folder behind
-    out = claim_out_dir(args.out, "compare", {"evals": [str(p.resolve()) for p in args.evals]}, replace=args.replace)
+    out = claim_out_dir(args.out, "compare", {"evals": [str(p.resolve()) for p in args.evals]}, replace=args.replace,
+                        reads=args.evals)
     _print_episodes(write_report(out, report), out)
     return 0
 

@@ -19,8 +19,9 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-def _int_at_least(low: int):
-    """An argparse type: an integer >= low, with a one-line message otherwise."""
+def _int_at_least(low: int, high: int | None = None, why: str = ""):
+    """An argparse type: an integer >= low (and <= high, `why` saying what the bound keeps off), with a one-line
+    message otherwise."""
 
     def parse(text: str) -> int:
         try:
@@ -29,6 +30,8 @@ def _int_at_least(low: int):
             raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
         if v < low:
             raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {v}")
+        if high is not None and v > high:
+            raise argparse.ArgumentTypeError(f"must be an integer from {low} to {high:,}{why}, got {v:,}")
         return v
 
     return parse
@@ -36,6 +39,12 @@ def _int_at_least(low: int):
 
 _positive = _int_at_least(1)
 _nonneg = _int_at_least(0)
+# Bounds on what one run may ask for, checked before any work: past them a run does not finish in any time
+# anyone waits for, or its first array does not fit in memory (a 10**9-step schedule is a 16 GB control table,
+# allocated before the first step; the hostile pass found it killing the process).
+_steps = _int_at_least(1, 100_000, " (1,000 s of simulated time at 100 Hz)")
+_frame_skip = _int_at_least(1, 1_000, " physics steps a control step")
+_worlds = _int_at_least(1, 1 << 22, " episodes at once")
 
 
 def _positive_float(text: str) -> float:
@@ -66,9 +75,16 @@ def _widths(text: str) -> tuple[int, ...]:
         widths = tuple(int(w) for w in text.split(","))
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a list of integers like 256,256") from None
-    if not widths or min(widths) < 1:
-        raise argparse.ArgumentTypeError(f"layer widths must be positive, got {text!r}")
+    if not widths or min(widths) < 1 or max(widths) > 65536:
+        raise argparse.ArgumentTypeError(f"layer widths must be integers from 1 to 65,536, got {text!r}")
     return widths
+
+
+def _folder(text: str) -> Path:
+    """An argparse type: a folder's path, never empty (an empty --out was the current folder, written into)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("is empty: give a folder, such as outputs/run")
+    return Path(text)
 
 
 def _seed(text: str) -> int:
@@ -88,7 +104,7 @@ def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str)
     p.add_argument("--seeds", default=seeds, help=f"N (0..N-1), A:B, or a,b,c (default {seeds})")
     p.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
     p.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
-    p.add_argument("--out", type=Path, default=Path(f"outputs/{name}"))
+    p.add_argument("--out", type=_folder, default=Path(f"outputs/{name}"))
     p.add_argument("--chunk", type=_positive, default=None, help=f"{rows} per batch (default: by backend)")
     p.add_argument("--resume", action="store_true", help=f"finish an interrupted {name} in --out")
     p.add_argument("--replace", action="store_true", help=REPLACE_HELP)
@@ -108,9 +124,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("scene", help="the chapter's run: one seed, settle, push, weld check, recording")
     s.add_argument("--seed", type=_seed, default=0, help="seeds the block's start pose, like a PushT reset")
-    s.add_argument("--steps", type=_positive, default=120, help="nudge length in steps (default 120)")
+    s.add_argument("--steps", type=_steps, default=120, help="nudge length in steps (default 120)")
     s.add_argument("--smoke", action="store_true", help="fixed 120-step run; two runs match byte for byte")
-    s.add_argument("--out", type=Path, default=Path("outputs/scene"))
+    s.add_argument("--out", type=_folder, default=Path("outputs/scene"))
     s.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     s.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip the .rrd recording")
     s.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
@@ -127,7 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     w = sub.add_parser("sweep", help="many seeds at once on a backend; per_seed.parquet + summary.json")
     _batch_args(w, "sweep", "seeds", seeds="4096")
-    w.add_argument("--steps", type=_positive, default=120, help="nudge length in steps (default 120)")
+    w.add_argument("--steps", type=_steps, default=120, help="nudge length in steps (default 120)")
     w.add_argument("--audit", type=_fraction, default=0.01, metavar="FRACTION",
                    help="MJX backends: re-run this fraction of the rows (at least 64, at most 16,384) plus every "
                         "flagged row on the CPU reference and record whether they agree (default 0.01; 0 skips)")
@@ -146,12 +162,12 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--action", choices=("velocity", "position"), default=None,
                    help="what your controller's actions mean (default velocity; built-ins command velocities)")
     e.add_argument("--reset", choices=("task", "chapter"), default="task", help="start distribution (default task)")
-    e.add_argument("--max-steps", type=_positive, default=300, help="control steps before truncation (default 300)")
-    e.add_argument("--frame-skip", type=_positive, default=10, help="physics steps per control step (default 10)")
+    e.add_argument("--max-steps", type=_steps, default=300, help="control steps before truncation (default 300)")
+    e.add_argument("--frame-skip", type=_frame_skip, default=10, help="physics steps per control step (default 10)")
     e.add_argument("--video", type=Path, default=None, metavar="FILE.gif|FILE.mp4",
                    help="the first --video-episodes episodes as a grid of tiles, coverage on each (rendered on the CPU)")
     e.add_argument("--video-episodes", type=_positive, default=16, help="tiles in --video (default 16)")
-    e.add_argument("--video-size", type=_int_at_least(32), default=128, help="pixels per tile side (default 128)")
+    e.add_argument("--video-size", type=_int_at_least(32, 2048), default=128, help="pixels per tile side (default 128)")
 
     t = sub.add_parser("train", help="train a policy (DAgger from the expert, or Brax PPO): policy.msgpack, curve, summary")
     t.add_argument("--algo", choices=("dagger", "ppo"), default="dagger",
@@ -160,9 +176,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="what the policy sees (default state; pixels_agent_pos: the 96 x 96 top camera and the "
                         "pusher's position, DAgger only)")
     t.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
-    t.add_argument("--out", type=Path, default=Path("outputs/train"))
+    t.add_argument("--out", type=_folder, default=Path("outputs/train"))
     t.add_argument("--replace", action="store_true", help=REPLACE_HELP)
-    t.add_argument("--envs", type=_positive, default=4096, help="episodes rolled out per iteration (default 4096)")
+    t.add_argument("--envs", type=_worlds, default=4096, help="episodes rolled out per iteration (default 4096)")
     t.add_argument("--iterations", type=_positive, default=10,
                    help="DAgger iterations, or PPO's held-out judgements over the run (default 10)")
     t.add_argument("--timesteps", type=_positive, default=50_000_000, help="PPO: env control steps in all (default 50M)")
@@ -187,10 +203,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="DAgger: whom the student learns from: the expert paced for a student (its slowest actions "
                         "faster, its last trims coarser, so a student's small errors still move the T; default), or "
                         "the expert as is")
-    t.add_argument("--max-samples", type=_positive, default=8_000_000, help="dataset ring size (default 8,000,000)")
+    t.add_argument("--max-samples", type=_int_at_least(1, 1 << 30, " samples"), default=8_000_000, help="dataset ring size (default 8,000,000)")
     t.add_argument("--reset", choices=("task", "chapter"), default="task",
                    help="start distribution trained and judged on (default task)")
-    t.add_argument("--eval-envs", type=_positive, default=4096,
+    t.add_argument("--eval-envs", type=_worlds, default=4096,
                    help="held-out task seeds judged after every iteration (default 4096)")
     t.add_argument("--minutes", type=_positive_float, default=None, help="stop after the iteration that passes this")
     t.add_argument("--seed", type=_nonneg, default=0, help="initialisation and sampling seed (default 0)")
@@ -202,7 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("compare", help="CPU vs MJX fidelity report: compare.json, compare.md, compare.png")
     c.add_argument("--seeds", default="64", help="N, A:B or a,b,c (default 64)")
     c.add_argument("--backend", default="mjx-jax", help="mjx-jax or mjx-warp (default mjx-jax)")
-    c.add_argument("--out", type=Path, default=Path("outputs/compare"))
+    c.add_argument("--out", type=_folder, default=Path("outputs/compare"))
     c.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     c.add_argument("--no-root-cause", dest="root_cause", action="store_false",
                    help="skip the one-change-at-a-time runs (x64, solver, contact census)")
@@ -213,7 +229,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="compare closed-loop episodes of this controller instead (e.g. expert): success rates, "
                         "per-seed agreement, final poses")
     c.add_argument("--reset", choices=("task", "chapter"), default="task", help="closed loop: start distribution")
-    c.add_argument("--max-steps", type=_positive, default=300, help="closed loop: control steps per episode")
+    c.add_argument("--max-steps", type=_steps, default=300, help="closed loop: control steps per episode")
     c.add_argument("--evals", nargs=2, type=Path, metavar=("EVAL_DIR", "EVAL_DIR"), default=None,
                    help="pair two finished eval folders of the same controller and seeds, one run on the cpu backend "
                         "and one on MJX (e.g. on two machines), into the closed-loop report; runs nothing")

@@ -6,13 +6,11 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from mjx_pusht.cli.parser import UsageError
-
 
 def cmd_sweep(args) -> int:
     from mjx_pusht.backends.base import resolve
     from mjx_pusht.io.outputs import atomic_write_json
-    from mjx_pusht.model.params import parse_param
+    from mjx_pusht.model.params import parse_params
     from mjx_pusht.model.scene import SceneSpec
     from mjx_pusht.model.tree import read_tree
     from mjx_pusht.scenario import Scenario
@@ -23,9 +21,7 @@ def cmd_sweep(args) -> int:
     from mjx_pusht.task.schedule import Schedule
 
     seeds = parse_seeds(args.seeds)
-    params = tuple((n, tuple(v)) for n, v in (parse_param(t) for t in args.param))
-    if len({n for n, _ in params}) != len(params):
-        raise UsageError("each --param NAME may be given once")
+    params = parse_params(args.param)
     processes = Processes(args.process_id, args.num_processes, args.coordinator, args.peer_timeout)
     processes.initialize()  # before anything asks JAX for its devices
     name, why = resolve(args.backend)

@@ -77,45 +77,113 @@ def read_table(path: Path) -> dict:
     return {name: table.column(name).to_numpy() for name in table.column_names}
 
 
-# What a folder's finished results are, by the file each command writes last.
+# What a folder's finished results are, by the file each command writes last (a folder from before the run
+# file existed is known by these names).
 RESULTS = {"per_seed.parquet": "sweep", "per_episode.parquet": "eval", "metrics.json": "scene",
            "compare.json": "compare", "compare_episodes.json": "compare", "policy.msgpack": "train"}
+# Everything each command writes in its --out: what --replace may remove, and never anything else. A rerun
+# of the same command replaces its own results; another command's results are never touched.
+OWN = {
+    "sweep": ("per_seed.parquet", "summary.json", "sweep.rrd", "audit_cpu.parquet", ".parts"),
+    "eval": ("per_episode.parquet", "summary.json", "eval.rrd", ".parts"),
+    "scene": ("metrics.json", "scene.rrd", "walk.rrd"),
+    "compare": ("compare.json", "compare.md", "compare.png", "compare_episodes.json", "compare_episodes.md"),
+    "train": ("policy.msgpack", "summary.json", "curve.csv", "curve.png", "train.rrd", "checkpoints", "eval"),
+}
 RUN_FILE = ".run.json"  # which command, and which seeds and settings, the folder's results are from
 _HELD: dict[Path, object] = {}  # folders this process has locked, and their open lock files
 
 
-def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool = False) -> Path:
-    """Make `path` this run's folder: writable, locked against a second run, and holding no finished
-    results of another command or of other seeds or settings unless `replace` says to drop them.
+def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool = False, reads=()) -> Path:
+    """Make `path` this run's folder: writable, locked against a second run, and holding no results of another
+    command, nor of this command with other seeds or settings unless `replace` says to drop those.
 
-    One folder holds one run: a sweep into a finished eval folder would replace its summary.json
-    and leave its table without one, and a rerun with other seeds would overwrite a finished table.
-    A rerun of the same command with the same seeds and settings may overwrite its own results."""
+    One folder holds one run. Another command's results (an eval's table, a train's policy) are refused
+    whatever the flags: `--replace` removes only this command's own files (`OWN`), and never a file the run
+    reads (`reads`: the policy it evaluates, the evals it compares). A rerun of the same command with the same
+    seeds and settings may overwrite its own results."""
     import hashlib
 
     path = prepare_out_dir(path)
     _lock(path)
     mine = {"command": command,
             "fingerprint": hashlib.sha256(json.dumps(fingerprint, sort_keys=True, default=str).encode()).hexdigest()}
-    # a summary.json counts too: every command writes one, and one with no run file beside it is no run's here
-    held = [name for name in (*RESULTS, "summary.json") if (path / name).exists()]
+    held = _results_in(path)
     if held:
         try:
             owner = json.loads((path / RUN_FILE).read_text())
+            if not isinstance(owner, dict):
+                raise ValueError(RUN_FILE)
         except (OSError, ValueError):
-            # results from before this file existed are known by their name; a lone summary.json by nobody
-            owner = {"command": RESULTS.get(held[0], "not mjx-pusht")}
-        same = owner.get("command") == command and owner.get("fingerprint", mine["fingerprint"]) == mine["fingerprint"]
-        if not same and not replace:
-            what = ("another command's" if owner.get("command") != command else "other seeds' or settings'")
-            raise OutputError(f"--out {path} holds {what} finished results ({owner.get('command')}: {', '.join(held)}); "
-                              "pass --replace to overwrite them, or choose another --out")
-        if not same:
-            for f in [*(path / name for name in held), *path.glob("*.rrd")]:
-                f.unlink(missing_ok=True)
-            print(f"--replace: removed the earlier {owner.get('command')} results in {path} ({', '.join(held)})")
+            # results from before the run file existed are known by their name, chunks by their manifest (whose
+            # seeds and settings the resume check compares); a lone summary.json by nobody
+            owner = {"command": next((RESULTS[n] for n in held if n in RESULTS), None) or _chunks_command(path)}
+        who = owner.get("command")
+        foreign = held if who != command else [n for n in held if n not in OWN[command]]  # a policy in an eval's folder
+        if foreign:
+            what = (f"{who}'s results" if who in OWN else f"results whose {RUN_FILE} is unreadable"
+                    if (path / RUN_FILE).exists() else "files no mjx-pusht run wrote here") if who != command \
+                else f"files {command} does not write"
+            raise OutputError(f"--out {path} holds {what} ({', '.join(foreign)}); {command} never removes or "
+                              "overwrites another command's results, whatever the flags: choose another --out")
+        if owner.get("fingerprint", mine["fingerprint"]) != mine["fingerprint"]:
+            if not replace:
+                raise OutputError(f"--out {path} holds other seeds' or settings' finished results ({command}: "
+                                  f"{', '.join(held)}); pass --replace to overwrite them, or choose another --out")
+            _refuse_to_remove_inputs(path, command, reads)
+            for name in OWN[command]:
+                _remove(path / name)
+            print(f"--replace: removed the earlier {command} results in {path} ({', '.join(held)})")
+    _refuse_to_remove_inputs(path, command, reads)  # this run writes over its own files: none may be an input
     atomic_write_json(path / RUN_FILE, mine)
     return path
+
+
+def _results_in(path: Path) -> list[str]:
+    """The results a folder holds, by name: finished files, unfinished chunks, a training run's checkpoints.
+    (A train's eval/ folder is its own; an eval/ beside other results is not taken for one, as outputs/eval.)"""
+    held = []
+    for name in sorted({*RESULTS, *(n for own in OWN.values() for n in own)} - {"eval"}):
+        p = path / name
+        if name == ".parts":
+            if any(p.glob("seeds-*.parquet")):
+                held.append(name)
+        elif name == "checkpoints":
+            if p.is_dir() and any(p.iterdir()):
+                held.append(name)
+        elif p.exists():
+            held.append(name)
+    return held
+
+
+def _chunks_command(path: Path) -> str | None:
+    """The command whose unfinished chunks `path/.parts` holds, by the manifest run_sweep writes (an eval's config
+    names its command; a sweep's is the other); None without a readable one."""
+    try:
+        manifest = json.loads((path / ".parts" / "manifest.json").read_text())
+        return manifest["config"].get("command", "sweep")
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None
+
+
+def _refuse_to_remove_inputs(path: Path, command: str, reads) -> None:
+    """Refuse a run whose own files in `path` (removed by --replace, or written over) include a file it reads."""
+    own = [(path / name).resolve() for name in OWN.get(command, ())]
+    for r in reads:
+        r = Path(r).resolve()
+        for o in own:
+            if r == o or o in r.parents:
+                raise OutputError(f"--out {path}: this {command} reads {r}, which its own results would replace; "
+                                  "choose another --out")
+
+
+def _remove(p: Path) -> None:
+    import shutil
+
+    if p.is_dir() and not p.is_symlink():
+        shutil.rmtree(p)
+    else:
+        p.unlink(missing_ok=True)
 
 
 def _lock(path: Path) -> None:

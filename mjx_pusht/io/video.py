@@ -48,6 +48,23 @@ def check_path(path: Path) -> Path:
     return path
 
 
+MAX_FRAME_BYTES = 4 << 30  # every frame is held in memory before it is encoded
+
+
+def check_grid(size: int, episodes: int, max_steps: int) -> None:
+    """Fail before any work if the video's tiles could not be drawn: a tile side the renderer takes, and all the
+    frames (one a control step, at most `max_steps` + 1) within MAX_FRAME_BYTES."""
+    if int(size) != size or not 32 <= size <= 2048:
+        raise VideoError(f"--video-size must be an integer from 32 to 2048 pixels, got {size}")
+    cols = math.ceil(math.sqrt(episodes))
+    rows = math.ceil(episodes / cols)
+    need = (max_steps + 1) * rows * size * cols * size * 3
+    if need > MAX_FRAME_BYTES:
+        raise VideoError(f"--video-size {size} with {episodes} episodes of up to {max_steps} steps needs "
+                         f"{need / 2**30:.1f} GiB of frames (at most {MAX_FRAME_BYTES / 2**30:.0f}): give a smaller "
+                         "--video-size, fewer --video-episodes or --max-steps")
+
+
 def _label(tile: np.ndarray, text: str, success: bool) -> np.ndarray:
     from PIL import Image, ImageDraw
 

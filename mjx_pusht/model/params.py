@@ -57,6 +57,9 @@ class ParamError(MjxPushtError, ValueError):
 
 
 DRAW_SEED = 0  # random draws from a range come from this fixed generator, so a sweep is repeatable
+# Each combination of a grid is its own MjModel (and its own rows of every seed): a grid past this many is a
+# typo (lo:hi:100000000 was a MemoryError), refused before any array is made
+MAX_COMBINATIONS = 4096
 
 
 def parse_param(text: str) -> tuple[str, list[float]]:
@@ -69,22 +72,35 @@ def parse_param(text: str) -> tuple[str, list[float]]:
     try:
         if values.startswith("~"):
             lo, hi, n = values[1:].split(":")
-            if int(n) < 1 or not float(lo) < float(hi):
+            if not 1 <= int(n) <= MAX_COMBINATIONS or not float(lo) < float(hi):
                 raise ValueError
             rng = np.random.default_rng([DRAW_SEED, *name.encode()])
             out = [float(v) for v in rng.uniform(float(lo), float(hi), int(n))]
         elif ":" in values:
             lo, hi, n = values.split(":")
-            if int(n) < 1:
+            if not 1 <= int(n) <= MAX_COMBINATIONS:
                 raise ValueError
             out = list(np.linspace(float(lo), float(hi), int(n)))
         else:
             out = [float(v) for v in values.split(",")]
     except ValueError:
-        raise ParamError(f"--param {text!r}: values are a,b,c, lo:hi:n or ~lo:hi:n") from None
+        raise ParamError(f"--param {text!r}: values are a,b,c, lo:hi:n or ~lo:hi:n (n from 1 to "
+                         f"{MAX_COMBINATIONS})") from None
     if not out or not all(np.isfinite(out)) or min(out) < 0 or (name == "tee_mass" and min(out) <= 0):
         raise ParamError(f"--param {text!r}: values must be finite and non-negative (mass positive)")
     return name, out
+
+
+def parse_params(texts) -> tuple[tuple[str, tuple[float, ...]], ...]:
+    """Every `--param` of a command: each NAME once, the grid at most MAX_COMBINATIONS combinations."""
+    params = tuple((n, tuple(v)) for n, v in (parse_param(t) for t in texts))
+    if len({n for n, _ in params}) != len(params):
+        raise ParamError("each --param NAME may be given once")
+    combos = int(np.prod([len(v) for _, v in params]))
+    if combos > MAX_COMBINATIONS:
+        raise ParamError(f"--param: a grid of {combos:,} combinations; at most {MAX_COMBINATIONS:,} (each is its own "
+                         "model): sweep fewer values, or split the study")
+    return params
 
 
 def grid(params: dict[str, list[float]]) -> list[dict[str, float]]:

@@ -93,6 +93,9 @@ def episodes_report(mjx_r, cpu_r, jit=None, **meta) -> dict:
 
 # What two eval runs must share to be paired row by row: everything that makes an episode but the backend.
 _SAME = ("controller_sha256", "action", "reset", "break_it", "max_steps", "frame_skip", "params")
+# What the pairing reads from each eval's summary.json (and its config block)
+_NEEDS = ("backend", "controller")
+_NEEDS_CONFIG = ("backend", "controller", "reset", "max_steps", "frame_skip")
 
 
 def evals_report(first: Path, second: Path) -> dict:
@@ -118,6 +121,10 @@ def evals_report(first: Path, second: Path) -> dict:
             raise ConfigError(f"{summary} is not an mjx-pusht summary ({type(e).__name__}: {e})") from None
         if command != "eval":
             raise ConfigError(f"{folder} holds a {command} run, not an eval")
+        missing = [k for k in _NEEDS if not isinstance(s.get(k), str)] + \
+            [f"config.{k}" for k in _NEEDS_CONFIG if k not in s["config"]]
+        if missing:  # an eval's summary cut or edited by hand: the pairing would read these
+            raise ConfigError(f"{summary} lacks {', '.join(missing)}: not a finished eval's summary")
         try:  # a cut or foreign table (pyarrow's errors are ValueErrors; a missing column a KeyError)
             rows = Rollouts.from_columns(read_table(table))
         except (ValueError, KeyError, OSError) as e:

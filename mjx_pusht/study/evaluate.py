@@ -40,17 +40,19 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
     episode = Episode(frame_skip=frame_skip, max_steps=max_steps)
     spec, controller = controller, load(controller, action_type=action, frame_skip=frame_skip)
     if video is not None:
-        from mjx_pusht.io.video import check_path
+        from mjx_pusht.io.video import check_grid, check_path
 
-        check_path(video)  # a bad name or a missing encoder fails now, not after the episodes
+        check_path(video)  # a bad name, a missing encoder or a size too large fails now, not after the episodes
+        check_grid(video_size, min(video_episodes, len(seeds)), max_steps)
     name, why = resolve(backend)
     config = {"command": "eval", "backend": name, "controller": spec, "action": controller.action_type,
               "reset": reset, "break_it": break_it, "max_steps": max_steps,
               "frame_skip": frame_skip, "params": [[n, list(v)] for n, v in params],
               "controller_sha256": policy_sha256(spec)}
     scenario = Scenario(SceneSpec(break_it), params=params, reset=reset, controller=controller, episode=episode)
+    reads = [spec.removeprefix("policy:")] if spec.startswith("policy:") else []  # never replaced by this run
     row_seeds, combos, out, banner, clock, backend = start_batch("eval", out, seeds, name, why, config, scenario,
-                                                                 replace=replace, resume=resume)
+                                                                 replace=replace, resume=resume, reads=reads)
     print(f"controller: {describe(controller)}; reset: {reset}; {len(seeds)} episodes of at most "
           f"{max_steps} control steps x {frame_skip} physics steps; device: {backend.device}; "
           f"pusher shape: {backend.pusher}")

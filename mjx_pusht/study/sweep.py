@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mjx_pusht.backends.actions import NonFiniteActionError
 from mjx_pusht.backends.results import Rollouts
 from mjx_pusht.errors import MjxPushtError
 from mjx_pusht.io.outputs import atomic_write_json, atomic_write_table, read_table
@@ -71,8 +72,25 @@ def check_resumable(out: Path, seeds: np.ndarray, config: dict, resume: bool) ->
                 "pass --resume to finish it, or choose another --out"
             )
         return
-    if json.loads(manifest.read_text()) != fingerprint(seeds, config):
+    try:
+        theirs = json.loads(manifest.read_text())
+    except (OSError, ValueError) as e:
+        raise ResumeError(f"--resume: {manifest} is unreadable ({type(e).__name__}), so its chunks cannot be trusted; "
+                          f"choose another --out (or remove {parts} to run every seed again)") from None
+    if theirs != fingerprint(seeds, config):
         raise ResumeError(f"--resume: the unfinished sweep in {out} used other seeds or settings; choose another --out")
+    import pyarrow.parquet as pq
+
+    for lo, hi in done:  # before any work: a chunk cut or damaged on disk would only show at the end
+        chunk = parts / f"seeds-{lo:012d}-{hi:012d}.parquet"
+        try:
+            rows = pq.read_metadata(chunk).num_rows
+        except (OSError, ValueError) as e:
+            raise ResumeError(f"--resume: chunk file {chunk} is unreadable ({str(e).splitlines()[0]}); remove it "
+                              "and rerun with --resume to run its seeds again") from None
+        if rows != hi - lo:
+            raise ResumeError(f"--resume: chunk file {chunk} holds {rows} rows, not {hi - lo}; remove it and rerun "
+                              "with --resume to run its seeds again")
 
 
 def _is_out_of_memory(e: BaseException) -> bool:
@@ -196,6 +214,12 @@ def run_sweep(
             lo, hi, submitted = pending[0]
             try:
                 land(lo, hi, submitted)
+            except NonFiniteActionError as e:  # the chunks before it stay, and --resume picks up from them
+                for f in written:
+                    f.exception()
+                kept = len(list(parts.glob("seeds-*.parquet")))
+                raise NonFiniteActionError(*e.args[:4], f"; {kept} finished chunk files are kept in {parts}: "
+                                                        "fix the controller and rerun with --resume") from None
             except Exception as e:  # noqa: BLE001 - only memory errors are retried
                 if not _is_out_of_memory(e) or chunk <= 1:
                     raise
