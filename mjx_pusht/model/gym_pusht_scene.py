@@ -1,8 +1,27 @@
-"""The `gym-pusht` variant of the PushT scene: gym-pusht's walls, camera, colours and agent, as MJCF regions.
+"""The `gym-pusht` variant of the PushT scene: gym-pusht's walls, camera, colours, agent and physics, as MJCF regions.
 
 scene.scene_xml swaps these regions into the chapter's template; the numbers come from
 gym-pusht's frame (model/gym_pusht.py), and the target T from model/target.py, which the
 chapter's scene formats too. Nothing here imports the scene.
+
+The physics is gym-pusht's pymunk space (gym_pusht/envs/pusht.py, 0.1.8) in MuJoCo terms, all in
+the MJCF, so every backend steps it with the same control step (docs/dropin-physics.md measures it):
+- `space.damping = 0`: pymunk scales a body's velocity by damping ** dt before each step's contact
+  solve, so the block keeps no velocity between 0.01 s steps. Here each of the T's dofs has damping
+  d = mass / dt, applied explicitly (`eulerdamp` off): MuJoCo's Euler step v' = v + dt M^-1 (f - d v)
+  then starts every step's contact solve from zero velocity. That needs a diagonal mass matrix,
+  so the T turns about its centre of gravity (the yaw hinge sits there, layout.QposLayout.anchor).
+- Frictionless contacts (gym-pusht sets `friction` on its Body objects, which pymunk does not read;
+  a Shape's friction defaults to 0): condim 1 on every geom that collides.
+- Pymunk's contact solve with restitution 0 leaves no approach velocity, and its position bias
+  moves penetration out at 1 - collision_bias ** dt = 6.1% a step: a direct solref of damping
+  1 / dt and stiffness 0.0613 / dt^2 on near-hard contacts (impedance 0.9999) does both.
+- The T: mass 1, moment 2 * moment_for_poly(1, bar) = 3000 px^2 about its centre of gravity, the
+  mean of its two boxes' centroids, 45 px down its axis from gym-pusht's origin.
+- The agent is KINEMATIC (infinite mass: contacts cannot slow it): here 10,000 kg, 1e4 times the T,
+  on position servos that give gym-pusht's PD law; it collides through a sphere of radius 15 px at
+  the T's mid-height (a circle in the plane: MuJoCo's cylinder-box path returned a face normal at a
+  corner), drawn as gym-pusht draws its agent by two visual cylinders.
 """
 
 from __future__ import annotations
@@ -11,8 +30,19 @@ import math
 
 import numpy as np
 
-from mjx_pusht.model.gym_pusht import COLOURS, GOAL_PX, KP, KV, PX, WALL_INNER_PX, to_world
+from mjx_pusht.model.gym_pusht import AGENT_RADIUS_PX, COG_PX, COLOURS, GOAL_PX, KP, KV, ORIGIN_PX, PX, \
+    WALL_INNER_PX, to_world
 from mjx_pusht.model.target import target_mjcf
+
+DT = 0.01  # the scene's timestep (scene.SCENE_TEMPLATE), gym-pusht's dt
+TEE_MASS = 1.0  # kg, gym-pusht's `mass = 1`
+TEE_MOMENT = 3000.0 * PX * PX  # kg m^2: pymunk.moment_for_poly(1, vertices1) is 1500 px^2, added twice
+COG_Y = -(COG_PX - ORIGIN_PX) * PX  # the centre of gravity in the T's frame: 30 px from the bar's centre, stemwards
+# pymunk's contact bias: 1 - collision_bias ** dt of a penetration is moved out each step (collision_bias
+# = (1 - 0.1) ** 60, pymunk's default), as the stiffness of a constraint whose damping removes the approach
+# velocity in one step (MuJoCo's direct solref "-stiffness -damping")
+BIAS = 1.0 - (1.0 - 0.1) ** (60 * DT)
+CONTACT = f'condim="1" solref="-{BIAS / DT**2:.4f} -{1 / DT:.1f}" solimp="0.9999 0.9999 0.001"'
 
 
 def _rgba(name: str) -> str:
@@ -39,7 +69,7 @@ def ground_mjcf() -> str:
              ("wall_w", lo - out, lo, lo, hi), ("wall_e", hi, hi + out, lo, hi)]
     parts = [f'<geom name="table" type="plane" size="0.45 0.45 0.1" rgba="{_rgba("background")}" '
              'contype="0" conaffinity="0"/>']
-    parts += [_box_in_px(n, x0, x1, y0, y1, 0.03, 0.03, rgba) for n, x0, x1, y0, y1 in walls]
+    parts += [_box_in_px(n, x0, x1, y0, y1, 0.03, 0.03, rgba, " " + CONTACT) for n, x0, x1, y0, y1 in walls]
     return "\n    " + "\n    ".join(parts)
 
 
@@ -59,28 +89,31 @@ def camera_mjcf() -> str:
             f'{up[0]:.9f} {up[1]:.9f} 0" projection="orthographic" fovy="{512 * PX}"/>')
 
 
-# The T: the chapter's geoms (physics unchanged) in gym-pusht's lighter fill, over visual-only
-# outlines 2 px wider each side (gym-pusht draws each edge with a 4 px line); the block collides
-# with the walls and the pusher (bits 1 and 2).
+# The T: the chapter's geoms in gym-pusht's lighter fill, over visual-only outlines 2 px wider each side
+# (gym-pusht draws each edge with a 4 px line), with gym-pusht's mass and moment; the block collides with
+# the walls and the pusher (bits 1 and 2). Each dof's damping is its mass over dt (see the module's docstring).
 TEE_MJCF = """
     <body name="tee" pos="0 0 0.0152">
-      <joint name="tee_x" type="slide" axis="1 0 0" damping="4" frictionloss="1.2"/>
-      <joint name="tee_y" type="slide" axis="0 1 0" damping="4" frictionloss="1.2"/>
-      <joint name="tee_yaw" type="hinge" axis="0 0 1" damping="0.02" frictionloss="0.006"/>
-      <geom name="tee_bar" type="box" size="0.06 0.015 0.015" pos="0 0 0" rgba="{fill}" mass="0.06" conaffinity="3"/>
-      <geom name="tee_stem" type="box" size="0.015 0.045 0.015" pos="0 -0.06 0" rgba="{fill}" mass="0.045" conaffinity="3"/>
+      <inertial pos="0 {cog_y} 0" mass="{mass}" diaginertia="{moment} {moment} {moment}"/>
+      <joint name="tee_x" type="slide" axis="1 0 0" damping="{d_xy}"/>
+      <joint name="tee_y" type="slide" axis="0 1 0" damping="{d_xy}"/>
+      <joint name="tee_yaw" type="hinge" axis="0 0 1" pos="0 {cog_y} 0" damping="{d_yaw}"/>
+      <geom name="tee_bar" type="box" size="0.06 0.015 0.015" pos="0 0 0" rgba="{fill}" conaffinity="3" {contact}/>
+      <geom name="tee_stem" type="box" size="0.015 0.045 0.015" pos="0 -0.06 0" rgba="{fill}" conaffinity="3" {contact}/>
       <geom name="tee_bar_edge" type="box" size="0.062 0.017 0.014" pos="0 0 0" rgba="{edge}" contype="0" conaffinity="0" mass="0"/>
       <geom name="tee_stem_edge" type="box" size="0.017 0.047 0.014" pos="0 -0.06 0" rgba="{edge}" contype="0" conaffinity="0" mass="0"/>
     </body>"""
 
-# gym-pusht's agent is kinematic: nothing stops it, walls included. Here it is a heavy (10 kg)
-# cylinder that touches only the block (bit 2), drawn under the T as gym-pusht draws it.
-PUSHER_MASS = 10.0
+# gym-pusht's agent is kinematic: nothing stops it, walls included. Here a heavy body that touches only
+# the block (bit 2) through `pusher_tip`, a sphere kept out of the pictures (group 3); gym-pusht's circle
+# is drawn under the T by the two visual cylinders.
+PUSHER_MASS = 1e4
 PUSHER_MJCF = """
     <body name="pusher" pos="0 0 0.0152">
       <joint name="pusher_x" type="slide" axis="1 0 0"/>
       <joint name="pusher_y" type="slide" axis="0 1 0"/>
-      <geom name="pusher_tip" type="cylinder" size="0.015 0.012" rgba="{edge}" mass="{mass}" contype="2" conaffinity="2"/>
+      <geom name="pusher_tip" type="sphere" size="{radius}" rgba="{edge}" mass="{mass}" contype="2" conaffinity="2" group="3" {contact}/>
+      <geom name="pusher_edge" type="cylinder" size="{radius} 0.012" rgba="{edge}" contype="0" conaffinity="0" mass="0"/>
       <geom name="pusher_face" type="cylinder" size="0.011 0.0121" rgba="{fill}" contype="0" conaffinity="0" mass="0"/>
     </body>"""
 
@@ -92,17 +125,21 @@ ACTUATOR_MJCF = """
     <position name="pusher_py" joint="pusher_y" kp="{kp}" kv="{kv}"/>"""
 
 
-EXTRA_GEOMS = 3  # the T's two outlines and the agent's lighter face: drawn, never collided
+EXTRA_GEOMS = 4  # the T's two outlines and the agent's two cylinders: drawn, never collided
 
 
 def regions() -> dict[str, str]:
     """The variant's MJCF regions, by the names scene.SCENE_TEMPLATE fills."""
     return {
         "option": 'integrator="Euler"',
+        "flag": ' eulerdamp="disable"',  # the T's damping is its velocity reset: explicit, as the solver sees it
         "camera": camera_mjcf(),
         "ground": ground_mjcf(),
         "target": target_mjcf(_rgba("goal"), grow=PYGAME_OFFSET_PX * PX),
-        "tee": TEE_MJCF.format(fill=_rgba("tee"), edge=_rgba("tee_edge")),
-        "pusher": PUSHER_MJCF.format(edge=_rgba("agent_edge"), fill=_rgba("agent"), mass=PUSHER_MASS),
+        "tee": TEE_MJCF.format(fill=_rgba("tee"), edge=_rgba("tee_edge"), cog_y=f"{COG_Y:.6f}", mass=TEE_MASS,
+                               moment=f"{TEE_MOMENT:.6g}", d_xy=f"{TEE_MASS / DT:.6g}",
+                               d_yaw=f"{TEE_MOMENT / DT:.6g}", contact=CONTACT),
+        "pusher": PUSHER_MJCF.format(edge=_rgba("agent_edge"), fill=_rgba("agent"), mass=PUSHER_MASS,
+                                     radius=f"{AGENT_RADIUS_PX * PX:.6f}", contact=CONTACT),
         "actuator": ACTUATOR_MJCF.format(kp=KP * PUSHER_MASS, kv=KV * PUSHER_MASS),
     }

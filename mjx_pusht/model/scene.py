@@ -94,7 +94,7 @@ CAMERA_MJCF = """
 
 SCENE_TEMPLATE = """<mujoco model="pusht">
   <option timestep="0.01" {option}>
-    <flag autoreset="disable"/>
+    <flag autoreset="disable"{flag}/>
   </option>
   <worldbody>{camera}{ground}{target}{tee}{pusher}
   </worldbody>
@@ -138,6 +138,7 @@ def scene_xml(spec: SceneSpec) -> str:
     """The MJCF document for `spec`, assembled region by region."""
     regions = dict(
         option='integrator="implicitfast"',
+        flag="",
         camera=CAMERA_MJCF,
         ground=GROUND_MJCF,
         target=TARGET_MJCF,
