@@ -107,7 +107,7 @@ TEE_MJCF = """
 # gym-pusht's agent is kinematic: nothing stops it, walls included. Here a heavy body that touches only
 # the block (bit 2) through `pusher_tip`, a sphere kept out of the pictures (group 3); gym-pusht's circle
 # is drawn under the T by the two visual cylinders.
-PUSHER_MASS = 1e4
+PUSHER_MASS = 1e6
 PUSHER_MJCF = """
     <body name="pusher" pos="0 0 0.0152">
       <joint name="pusher_x" type="slide" axis="1 0 0"/>
