@@ -110,9 +110,10 @@ SCENE_TEMPLATE = """<mujoco model="pusht">
 class SceneSpec:
     """Which scene to author: the break mode, the pusher's collision shape, and the variant.
 
-    `variant="gym-pusht"` is gym-pusht's PushT in this project's physics (model/gym_pusht_scene.py):
-    its walls, goal, camera and colours, and its agent's PD law on position servos; the same
-    T, joints and sensors, so every backend, invariant and env runs it unchanged.
+    `variant="gym-pusht"` is gym-pusht's PushT (model/gym_pusht_scene.py): its walls, goal, camera
+    and colours, its agent's PD law on position servos, and its pymunk physics in MJCF (a T that
+    keeps no velocity between steps, frictionless contacts, an agent nothing pushes back); the same
+    joint names and sensors, so every backend, invariant and env runs it unchanged.
     """
 
     break_it: str = "none"
