@@ -19,7 +19,8 @@ Per driver: the block pose error (body origin, pixels; angle, degrees) after 10,
 control steps, median, 90th percentile and max, over the episodes neither side has ended by then
 (the drop-in stops an episode at its success, as gym-pusht's TimeLimit loop would); and per-episode
 `is_success` agreement (succeeded within the episode on both or on neither). With `--closed-loop`
-each driver also runs on the drop-in's own observations: the score a user would compare.
+each driver also runs on the drop-in's own observations (the score a user would compare), and those
+actions are replayed on gym-pusht (the same-actions agreement the other way round).
 """
 
 from __future__ import annotations
@@ -123,9 +124,10 @@ class Expert:
 DRIVERS = {"scripted": Scripted, "walk": Walk, "expert": Expert}
 
 
-def run_gym_pusht(source: str, seeds, states, steps: int) -> dict:
-    """gym-pusht closed loop under `source`'s driver: actions (N, steps, 2), block poses after each step
-    (N, steps, 3: origin px, angle) and the first step (1-based) that reported is_success (0: none)."""
+def run_gym_pusht(source: str, seeds, states, steps: int, actions=None) -> dict:
+    """gym-pusht closed loop under `source`'s driver (or replaying `actions`): actions (N, steps, 2), block
+    poses after each step (N, steps, 3: origin px, angle) and the first step (1-based) that reported
+    is_success (0: none)."""
     from gym_pusht.envs.pusht import PushTEnv
 
     env = PushTEnv(obs_type="state")
@@ -136,7 +138,7 @@ def run_gym_pusht(source: str, seeds, states, steps: int) -> dict:
         obs, _ = env.reset(options={"reset_to_state": st})
         drive = DRIVERS[source](int(seed))
         for k in range(steps):
-            a = np.asarray(drive(obs, k), np.float64)
+            a = np.asarray(drive(obs, k) if actions is None else actions[i, k], np.float64)
             obs, _, _, _, info = env.step(a)
             acts[i, k] = a
             poses[i, k] = (*env.block.position, env.block.angle)
@@ -147,16 +149,16 @@ def run_gym_pusht(source: str, seeds, states, steps: int) -> dict:
 
 
 def _gym_part(args):
-    source, seeds, states, steps = args
-    return run_gym_pusht(source, seeds, states, steps)
+    return run_gym_pusht(*args)
 
 
-def gym_pusht_pool(source: str, seeds, states, steps: int, workers: int) -> dict:
+def gym_pusht_pool(source: str, seeds, states, steps: int, workers: int, actions=None) -> dict:
     if workers <= 1:
-        return run_gym_pusht(source, seeds, states, steps)
+        return run_gym_pusht(source, seeds, states, steps, actions)
     import multiprocessing
 
-    parts = [(source, s, st, steps) for s, st in zip(np.array_split(seeds, workers), np.array_split(states, workers))]
+    idx = np.array_split(np.arange(len(seeds)), workers)
+    parts = [(source, seeds[i], states[i], steps, None if actions is None else actions[i]) for i in idx]
     with multiprocessing.get_context("spawn").Pool(workers) as pool:
         outs = pool.map(_gym_part, parts)
     return {k: np.concatenate([o[k] for o in outs]) for k in outs[0]}
@@ -273,6 +275,10 @@ def main(argv=None) -> int:
         if args.closed_loop:  # each side under the driver on its own observations: do the scores agree?
             own = run_dropin(states, ref["actions"], args.backend, source, seeds)
             row["closed_loop_is_success"] = success_agreement(ref, own)
+            # and the other way round: the drop-in's own actions replayed on gym-pusht (is the same-actions
+            # agreement the driver's, whichever side chose them?)
+            back = gym_pusht_pool(source, seeds, states, args.steps, args.workers, own["actions"])
+            row["dropin_actions_on_gym_pusht_is_success"] = success_agreement(back, own)
         row["seconds"] = {"gym_pusht": round(t1 - t0, 1), "dropin_replay": round(t2 - t1, 1),
                           "dropin_closed_loop": round(time.perf_counter() - t2, 1) if args.closed_loop else None}
         if source == "scripted":
