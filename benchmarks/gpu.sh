@@ -115,5 +115,10 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           MUJOCO_GL=egl python3 -m mjx_pusht compare --controller "policy:${POLICY:?POLICY=path of a policy.msgpack}" \
             --backend mjx-warp --seeds 1000000000:1000004096 --reset task --out "$OUT/transfer-mjx-warp" \
             > "$OUT/$stage.log" 2>&1 ;;
+  dropin-fidelity) # the drop-in's MJX-Warp batch against gym-pusht itself (needs gym-pusht 0.1.8, pymunk, pygame,
+            # shapely, opencv in the site); SOURCES=scripted,walk,expert EPISODES=1000 by default scripted only
+            python3 -m benchmarks.dropin_fidelity --backend mjx-warp --sources "${SOURCES:-scripted}" \
+            --episodes "${EPISODES:-1000}" --workers "${WORKERS:-14}" --closed-loop \
+            --json "$OUT/results/$tier-dropin-fidelity.json" > "$OUT/$stage.log" 2>&1 ;;
   *) echo "unknown stage $stage" >&2; exit 2 ;;
 esac
