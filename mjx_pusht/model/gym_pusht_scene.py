@@ -18,7 +18,7 @@ the MJCF, so every backend steps it with the same control step (docs/dropin-phys
   1 / dt and stiffness 0.0613 / dt^2 on near-hard contacts (impedance 0.9999) does both.
 - The T: mass 1, moment 2 * moment_for_poly(1, bar) = 3000 px^2 about its centre of gravity, the
   mean of its two boxes' centroids, 45 px down its axis from gym-pusht's origin.
-- The agent is KINEMATIC (infinite mass: contacts cannot slow it): here 10,000 kg, 1e4 times the T,
+- The agent is KINEMATIC (infinite mass: contacts cannot slow it): here 1e6 kg, a million times the T,
   on position servos that give gym-pusht's PD law; it collides through a sphere of radius 15 px at
   the T's mid-height (a circle in the plane: MuJoCo's cylinder-box path returned a face normal at a
   corner), drawn as gym-pusht draws its agent by two visual cylinders.
