@@ -119,5 +119,10 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
   finite-check) # the MJX-Warp rollout at 65,536 seeds with the finiteness check of the actions and without it, in turns
           python3 -m benchmarks.finite_check --backend mjx-warp --batch 65536 --repeats "${REPEATS:-5}" \
             --out "$OUT/results/$tier-finite-check.json" > "$OUT/$stage.log" 2>&1 ;;
+  dropin-fidelity) # the drop-in's MJX-Warp batch against gym-pusht itself (needs gym-pusht 0.1.8, pymunk, pygame,
+            # shapely, opencv in the site); SOURCES=scripted,walk,expert EPISODES=1000 by default scripted only
+            python3 -m benchmarks.dropin_fidelity --backend mjx-warp --sources "${SOURCES:-scripted}" \
+            --episodes "${EPISODES:-1000}" --workers "${WORKERS:-14}" --closed-loop \
+            --json "$OUT/results/$tier-dropin-fidelity.json" > "$OUT/$stage.log" 2>&1 ;;
   *) echo "unknown stage $stage" >&2; exit 2 ;;
 esac

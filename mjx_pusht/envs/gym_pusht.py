@@ -10,11 +10,11 @@ reward clip(coverage / 0.95, 0, 1), success coverage > 0.95, info keys, `reset_t
 its legacy placement quirk), registration with max_episode_steps=300 (gymnasium's TimeLimit, so
 the kwarg and `_max_episode_steps` behave as they do for gym-pusht), and render_fps 10.
 
-Underneath it is the `gym-pusht` scene variant (model/gym_pusht.py) on the one functional env:
+Underneath it is the `gym-pusht` scene variant (model/gym_pusht_scene.py) on the one functional env:
 this file only converts units at the boundary (`gym_view`). A single env is MuJoCo C; the vector
 env is `gym.PushTVectorEnv` (the batch, device autoreset, the full vector API), handing out
 NumPy by default, as a gym-pusht loop expects (`array_type="torch"` or `"jax"` to stay on the GPU).
-What differs from pymunk's physics is in docs/envs/dropin.md.
+What still differs from pymunk's physics, measured, is docs/dropin-physics.md.
 """
 
 from __future__ import annotations

@@ -15,13 +15,17 @@ class QposLayout:
     """Where the tee's pose and the pusher live in qpos, found by joint name.
 
     Planar variants read (x, y, yaw) from three joints; the free-tee variant reads
-    position and a quaternion from one free joint.
+    position and a quaternion from one free joint. A tee whose yaw hinge sits off its origin
+    (`anchor`, in the tee's frame: the gym-pusht variant turns its T about its centre of gravity)
+    keeps the hinge point in tee_x, tee_y (less the anchor), and its pose is still the origin's:
+    origin = (tee_x, tee_y) + anchor - R(yaw) anchor.
     """
 
     tee: tuple[int, int, int] | None  # planar: qpos addresses of tee_x, tee_y, tee_yaw
     tee_free: int | None  # free-tee: qpos address of the free joint
     pusher: tuple[int, int]
     nq: int
+    anchor: tuple[float, float] | None = None  # planar: the yaw hinge's point in the tee's frame, if not (0, 0)
 
     @classmethod
     def of(cls, model: mujoco.MjModel) -> "QposLayout":
@@ -29,17 +33,30 @@ class QposLayout:
             return int(model.joint(name).qposadr[0])
 
         names = {model.joint(j).name for j in range(model.njnt)}
+        anchor = None
         if "tee_free" in names:
             tee, free = None, adr("tee_free")
         else:
             tee, free = (adr("tee_x"), adr("tee_y"), adr("tee_yaw")), None
-        return cls(tee, free, (adr("pusher_x"), adr("pusher_y")), int(model.nq))
+            ax, ay = (float(v) for v in model.joint("tee_yaw").pos[:2])
+            anchor = (ax, ay) if (ax, ay) != (0.0, 0.0) else None
+        return cls(tee, free, (adr("pusher_x"), adr("pusher_y")), int(model.nq), anchor)
+
+    def _swing(self, yaw, xp):
+        """anchor - R(yaw) anchor: where the origin goes, relative to the hinge's joints, as the T turns."""
+        ax, ay = self.anchor
+        c, s = xp.cos(yaw), xp.sin(yaw)
+        return ax - (c * ax - s * ay), ay - (s * ax + c * ay)
 
     def tee_pose(self, qpos):
         """(..., 3) tee (x, y, yaw) from (..., nq) qpos; NumPy or JAX arrays alike."""
         xp = qpos.__array_namespace__()
         if self.tee is not None:
-            return qpos[..., list(self.tee)]
+            pose = qpos[..., list(self.tee)]
+            if self.anchor is None:
+                return pose
+            dx, dy = self._swing(pose[..., 2], xp)
+            return xp.stack([pose[..., 0] + dx, pose[..., 1] + dy, pose[..., 2]], axis=-1)
         a = self.tee_free
         w, x, y, z = (qpos[..., a + 3 + k] for k in range(4))
         yaw = xp.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
@@ -53,6 +70,9 @@ class QposLayout:
         the state's values in the tee's and the pusher's joints, qpos0's elsewhere; built by stacking, so it is
         exact and jittable in either namespace (the tee on slide and hinge joints only)."""
         xp = state.__array_namespace__()
+        if self.anchor is not None:
+            dx, dy = self._swing(state[..., 4], xp)
+            state = xp.stack([state[..., 0], state[..., 1], state[..., 2] - dx, state[..., 3] - dy, state[..., 4]], axis=-1)
         source = {**{c: 2 + i for i, c in enumerate(self.tee)}, **{c: i for i, c in enumerate(self.pusher)}}
         return xp.stack([state[..., source[c]] if c in source else xp.full(state.shape[:-1], qpos0[c], dtype=state.dtype)
                          for c in range(len(qpos0))], axis=-1)
@@ -67,6 +87,10 @@ class QposLayout:
         qpos = np.tile(model.qpos0, (len(poses), 1))
         if self.tee is not None:
             qpos[:, list(self.tee)] = poses[:, :3]
+            if self.anchor is not None:
+                dx, dy = self._swing(poses[:, 2], np)
+                qpos[:, self.tee[0]] -= dx
+                qpos[:, self.tee[1]] -= dy
         else:
             a = self.tee_free
             qpos[:, a], qpos[:, a + 1] = poses[:, 0], poses[:, 1]

@@ -12,6 +12,9 @@ from typing import Literal
 import mujoco
 
 from mjx_pusht.errors import ConfigError
+from mjx_pusht.model import gym_pusht_scene
+from mjx_pusht.model.target import target_mjcf
+from mjx_pusht.model.tree import check_tree
 
 BreakMode = Literal["none", "split-tee", "free-tee"]
 PusherShape = Literal["cylinder", "capsule"]
@@ -75,20 +78,6 @@ ACTUATOR_MJCF = """
     <velocity name="pusher_vx" joint="pusher_x" kv="20" ctrlrange="-1 1" forcerange="-30 30"/>
     <velocity name="pusher_vy" joint="pusher_y" kv="20" ctrlrange="-1 1" forcerange="-30 30"/>"""
 
-# The target T, drawn only. `grow` widens the drawing (metres a side: the gym-pusht variant's pygame fill).
-TARGET_TEMPLATE = """
-    <body name="target" pos="0 0 0.0005">
-      <site name="target_site" pos="0 0 0" size="0.005" rgba="0 0 0 0"/>
-      <geom name="target_bar" type="box" size="{bx} {by} 0.0005" pos="0 0.00 0" rgba="{rgba}" contype="0" conaffinity="0"/>
-      <geom name="target_stem" type="box" size="{sx} {sy} 0.0005" pos="0 -0.06 0" rgba="{rgba}" contype="0" conaffinity="0"/>
-    </body>"""
-
-
-def target_mjcf(rgba: str, grow: float = 0.0) -> str:
-    return TARGET_TEMPLATE.format(bx=round(0.06 + grow, 6), by=round(0.015 + grow, 6), sx=round(0.015 + grow, 6),
-                                  sy=round(0.045 + grow, 6), rgba=rgba)
-
-
 TARGET_MJCF = target_mjcf("0.35 0.8 0.4 0.5")
 
 # Instrumentation, not physics: the two tee geoms' world positions as sensors, so
@@ -105,7 +94,7 @@ CAMERA_MJCF = """
 
 SCENE_TEMPLATE = """<mujoco model="pusht">
   <option timestep="0.01" {option}>
-    <flag autoreset="disable"/>
+    <flag autoreset="disable"{flag}/>
   </option>
   <worldbody>{camera}{ground}{target}{tee}{pusher}
   </worldbody>
@@ -121,9 +110,10 @@ SCENE_TEMPLATE = """<mujoco model="pusht">
 class SceneSpec:
     """Which scene to author: the break mode, the pusher's collision shape, and the variant.
 
-    `variant="gym-pusht"` is gym-pusht's PushT in this project's physics (model/gym_pusht.py):
-    its walls, goal, camera and colours, and its agent's PD law on position servos; the same
-    T, joints and sensors, so every backend, invariant and env runs it unchanged.
+    `variant="gym-pusht"` is gym-pusht's PushT (model/gym_pusht_scene.py): its walls, goal, camera
+    and colours, its agent's PD law on position servos, and its pymunk physics in MJCF (a T that
+    keeps no velocity between steps, frictionless contacts, an agent nothing pushes back); the same
+    joint names and sensors, so every backend, invariant and env runs it unchanged.
     """
 
     break_it: str = "none"
@@ -149,6 +139,7 @@ def scene_xml(spec: SceneSpec) -> str:
     """The MJCF document for `spec`, assembled region by region."""
     regions = dict(
         option='integrator="implicitfast"',
+        flag="",
         camera=CAMERA_MJCF,
         ground=GROUND_MJCF,
         target=TARGET_MJCF,
@@ -158,9 +149,7 @@ def scene_xml(spec: SceneSpec) -> str:
         sensor=SENSOR_MJCF,
     )
     if spec.variant == "gym-pusht":
-        from mjx_pusht.model import gym_pusht
-
-        regions.update(gym_pusht.regions())
+        regions.update(gym_pusht_scene.regions())
     return SCENE_TEMPLATE.format(**regions)
 
 
@@ -171,8 +160,6 @@ def compile_xml(xml: str) -> mujoco.MjModel:
 
 def build_model(spec: SceneSpec, *, validate: bool = True) -> mujoco.MjModel:
     """Compile the scene and, by default, check the compiled tree against the authored one."""
-    from mjx_pusht.model.tree import check_tree  # tree depends on scene's names only
-
     model = compile_xml(scene_xml(spec))
     if validate:
         check_tree(model, spec.break_it, spec.variant)

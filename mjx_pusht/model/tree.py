@@ -13,6 +13,7 @@ import json
 import mujoco
 
 from mjx_pusht.errors import MjxPushtError
+from mjx_pusht.model.gym_pusht_scene import EXTRA_GEOMS
 
 JOINT_TYPE_NAME = {
     int(mujoco.mjtJoint.mjJNT_FREE): "free",
@@ -136,8 +137,6 @@ def check_tree(model: mujoco.MjModel, break_it: str, variant: str = "chapter") -
     """Return the compiled tree, or raise TreeMismatch naming every difference."""
     got, want = read_tree(model), EXPECTED_TREES[break_it]
     if variant == "gym-pusht":  # the same tree; three more geoms that are only drawn
-        from mjx_pusht.model.gym_pusht import EXTRA_GEOMS
-
         want = dataclasses.replace(want, n_geoms=want.n_geoms + EXTRA_GEOMS)
     diffs = tree_differences(got, want)
     if diffs:
