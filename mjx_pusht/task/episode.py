@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 
 from mjx_pusht.errors import ConfigError
-from mjx_pusht.task.invariants import invariants_init, invariants_update
+from mjx_pusht.task.invariants import invariants_fold, invariants_init, invariants_update
 from mjx_pusht.task.rules import (
     SUCCESS_COVERAGE,
     coverage,
@@ -108,6 +108,14 @@ def after_physics_step(carry, t, settle_step, layout, qpos, qvel, sensordata, xp
     """Fold physics step t into the invariants; an episode that has ended stops changing them."""
     acc = invariants_update(carry["inv"], t, settle_step, layout.tee_pose(qpos), qpos, qvel,
                             sensordata[..., 0:3], sensordata[..., 3:6])
+    return {**carry, "inv": _where(xp, carry["ep"]["done"], carry["inv"], acc)}
+
+
+def after_physics_steps(carry, t, settle_step, layout, qpos, qvel, sensordata, xp):
+    """`after_physics_step` over a leading axis of consecutive steps at once (`t` (S,) or (S, N)): the same
+    values to the bit, in a few array operations (the CPU's frame_skip steps of a control step)."""
+    acc = invariants_fold(carry["inv"], t, settle_step, layout.tee_pose(qpos), qpos, qvel,
+                          sensordata[..., 0:3], sensordata[..., 3:6])
     return {**carry, "inv": _where(xp, carry["ep"]["done"], carry["inv"], acc)}
 
 
