@@ -9,7 +9,8 @@ thread), for `mjx_pusht/PushT-v0`, the drop-in `mjx_pusht/PushT-gym-pusht-v0` an
 - `pixels_bare`: the bare loop with `obs_type="pixels"` at 96 x 96 (gym-pusht's and the drop-in's default);
 - `mj_step_limit`: the scene's bare `mj_step` x frame_skip, the physics' own rate of control steps (the limit).
 
-Each case runs `--repeats` times and reports the median and every repeat. Writes
+Each case runs `--repeats` times, the ids interleaved (repeat r runs every id back to back, so a shared
+machine's drifting load slows them alike), and reports the median and every repeat. Writes
 benchmarks/results/cpu-env.json with the machine named.
 
     python -m benchmarks.cpu_env            # a few minutes on one core
@@ -152,7 +153,7 @@ def _median(fn, repeats: int) -> dict:
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--quick", action="store_true", help="a smoke run: few steps, one repeat, no result file")
-    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--core", type=int, default=None, help="the core to pin to (default: the last one allowed)")
     p.add_argument("--out", default=str(RESULTS / "cpu-env.json"))
     p.add_argument("--skip-ppo", action="store_true", help="leave out SB3 PPO learning (the slowest case)")
@@ -166,19 +167,29 @@ def main(argv=None) -> dict:
     torch.set_num_threads(1)
     q = args.quick
     repeats = 1 if q else args.repeats
-    steps, ppo_steps = (300, 1024) if q else (3000, 8192)
+    steps, ppo_steps = (300, 1024) if q else (1500, 8192)
     out = {"machine": machine(), "versions": _versions(), "units": "env steps per second (one core)",
            "steps_per_case": steps, "ppo_timesteps": ppo_steps, "repeats": repeats, "cases": {}}
-    out["cases"]["mj_step_limit"] = mj_step_limit(0.5 if q else 3.0)
+    cases = {"bare": lambda name: bare(name, steps),
+             "sb3_dummy_x1": lambda name: sb3_dummy(name, 1, steps),
+             "sb3_dummy_x4": lambda name: sb3_dummy(name, 4, steps),
+             "pixels_bare": lambda name: bare(name, steps // 3, obs_type="pixels")}
+    if not args.skip_ppo:
+        cases["sb3_ppo_x4"] = lambda name: sb3_ppo(name, ppo_steps)
+    # Interleaved: repeat r of a case runs every id back to back, so a machine whose load drifts (a shared
+    # one) slows the ids alike, and the ids' ratios hold where their absolute rates do not.
+    runs = {name: {case: [] for case in cases} for name in IDS}
+    limit = []
+    for case, fn in cases.items():
+        for _ in range(1 if case == "sb3_ppo_x4" else repeats):
+            limit.append(mj_step_limit(0.3 if q else 1.0))
+            for name in IDS:
+                runs[name][case].append(fn(name))
+        print(case, {name: round(statistics.median(runs[name][case])) for name in IDS}, flush=True)
+    out["cases"]["mj_step_limit"] = {k: statistics.median(x[k] for x in limit) for k in limit[0]}
+    out["cases"]["mj_step_limit"]["runs_us_per_mj_step"] = [x["us_per_mj_step"] for x in limit]
     for name in IDS:
-        row = {"bare": _median(lambda: bare(name, steps), repeats),
-               "sb3_dummy_x1": _median(lambda: sb3_dummy(name, 1, steps), repeats),
-               "sb3_dummy_x4": _median(lambda: sb3_dummy(name, 4, steps), repeats),
-               "pixels_bare": _median(lambda: bare(name, steps // 3, obs_type="pixels"), repeats)}
-        if not args.skip_ppo:
-            row["sb3_ppo_x4"] = _median(lambda: sb3_ppo(name, ppo_steps), 1)
-        out["cases"][name] = row
-        print(name, {k: round(v["median"]) for k, v in row.items()}, flush=True)
+        out["cases"][name] = {case: {"median": statistics.median(r), "runs": r} for case, r in runs[name].items()}
     lim = out["cases"]["mj_step_limit"]
     print("mj_step limit:", round(lim["control_steps_per_s"]), "control steps/s",
           f"({lim['us_per_mj_step']:.2f} us per mj_step)")
