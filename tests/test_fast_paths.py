@@ -45,3 +45,7 @@ def test_the_coverage_of_a_few_poses_is_the_array_codes_to_the_bit():
     few = np.concatenate([_coverage_few(poses[i : i + 1]) for i in range(n)])
     np.testing.assert_array_equal(few, ref)
     assert (ref > 0).sum() > n // 5 and (ref == 1).sum() >= 50  # overlaps of every kind were compared
+    target = np.array([0.05, -0.02, 0.7])  # another target pose, given once for all rows and row by row
+    ref = _coverage(poses, np.broadcast_to(target, poses.shape))
+    np.testing.assert_array_equal(np.concatenate([_coverage_few(poses[i : i + 1], target) for i in range(n)]), ref)
+    np.testing.assert_array_equal(_coverage_few(poses[:3], np.broadcast_to(target, (3, 3))), ref[:3])

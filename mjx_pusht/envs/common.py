@@ -82,7 +82,8 @@ def functional(backend: str, obs_type: str, action_type: str, observation_size: 
                     pixels=observation_size if obs_type.startswith("pixels") else 0,
                     episode=Episode(frame_skip=validate.positive_int("frame_skip", frame_skip), max_steps=limit,
                                     end_covered_start=variant == "chapter"),
-                    scene=SceneSpec(variant=variant), threads=threads, keep_states=False)
+                    scene=SceneSpec(variant=variant), threads=threads, keep_states=False,
+                    keypoints=obs_type == "keypoints")
 
 
 class Pictures:

@@ -95,6 +95,7 @@ class PushTEnv:
     episode: Episode = Episode()
     scene: SceneSpec = SceneSpec()
     pixels: int = 0  # image size for obs["pixels"]; 0: no images
+    keypoints: bool = True  # obs["keypoints"]; False spares computing them where nothing reads them
     threads: int = 1  # cpu: worlds stepped on this many threads at once (same bits as one)
     # cpu: False steps the MjData in place (an old state is then stale): what a stateful vector env wants
     keep_states: bool = True
@@ -304,7 +305,7 @@ class PushTEnv:
                      state.key, state.dropped, state.info)
 
     def _observe(self, qpos, data, pixels=True, qvel=None):
-        obs = observe(self.layout.pusher_xy(qpos), self.layout.tee_pose(qpos))
+        obs = observe(self.layout.pusher_xy(qpos), self.layout.tee_pose(qpos), self.keypoints)
         if self.scene.variant == "gym-pusht":  # gym-pusht reports its agent's velocity (info["vel_agent"])
             if qvel is None:
                 qvel = data.qvel[-1] if self.backend == "cpu" else data.qvel

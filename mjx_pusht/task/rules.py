@@ -22,6 +22,7 @@ Conventions (metres, radians, world frame, z up, the target T at the origin with
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -109,10 +110,14 @@ def keypoints(pose):
     return xp.reshape(pts, pts.shape[:-2] + (KEYPOINTS_DIM,))
 
 
-def observe(pusher_xy, tee_pose) -> dict:
-    """The observation dict every controller receives: `state` (..., 5) and `keypoints` (..., 16)."""
+def observe(pusher_xy, tee_pose, with_keypoints: bool = True) -> dict:
+    """The observation dict every controller receives: `state` (..., 5) and `keypoints` (..., 16) (left out
+    with `with_keypoints=False`, for an env whose observations never show them)."""
     xp = array_namespace(tee_pose)
-    return {"state": xp.concat([pusher_xy, tee_pose], axis=-1), "keypoints": keypoints(tee_pose)}
+    obs = {"state": xp.concat([pusher_xy, tee_pose], axis=-1)}
+    if with_keypoints:
+        obs["keypoints"] = keypoints(tee_pose)
+    return obs
 
 
 def to_ctrl(action, pusher_xy, action_type: str):
@@ -212,25 +217,32 @@ _FEW = 4  # up to this many host poses, `_coverage_few` (about 20x faster than t
 def _coverage_few(pose, target=TARGET_POSE) -> np.ndarray:
     """`coverage` of a few host poses in plain Python floats: the array code's operations, one by one, in its
     order (its 8-slot sum is NumPy's pairwise sum), so the same bits (test: against `coverage_np`)."""
-    tgt = np.broadcast_to(np.asarray(target, np.float64), pose.shape)
     out = np.zeros(len(pose))
     cos, sin = np.cos(pose[:, 2]).tolist(), np.sin(pose[:, 2]).tolist()  # NumPy's cos/sin, as the array code's
-    tc, ts = np.cos(tgt[:, 2]).tolist(), np.sin(tgt[:, 2]).tolist()
-    for i, ((x, y, _), (gx, gy, _)) in enumerate(zip(pose.tolist(), tgt.tolist())):
+    tgts = [_target_few(tuple(target))] * len(pose) if np.ndim(target) == 1 else [
+        _target_few(tuple(t)) for t in np.broadcast_to(np.asarray(target, np.float64), pose.shape).tolist()]
+    for i, (x, y, _) in enumerate(pose.tolist()):
+        (gx, gy), quads = tgts[i]
         if math.hypot(x - gx, y - gy) >= 2 * T_REACH:
             continue  # too far apart to overlap (coverage_np's exact shortcut)
-        area = [_overlap_few(_corners_few(x, y, cos[i], sin[i], ra), _corners_few(gx, gy, tc[i], ts[i], rb))
-                if _may_meet(x, y, cos[i], sin[i], ra, gx, gy, tc[i], ts[i], rb) else 0.0
-                for ra in T_RECTS for rb in T_RECTS]
+        c, s = cos[i], sin[i]
+        area = [_overlap_few(_corners_few(x, y, c, s, ra), quad)
+                if math.hypot(c * ra[0] - s * ra[1] + x - centre[0], s * ra[0] + c * ra[1] + y - centre[1]) < reach
+                else 0.0  # the rectangles' circumcircles (widened by 1 um) apart: their overlap is exactly 0
+                for ra in T_RECTS for (quad, centre, reach) in
+                ((q, cen, math.hypot(ra[2], ra[3]) + r) for q, cen, r in quads)]
         out[i] = min(max((((area[0] + area[1]) + area[2]) + area[3]) / T_AREA, 0.0), 1.0)
     return out
 
 
-def _may_meet(x, y, c, s, ra, gx, gy, tc, ts, rb) -> bool:
-    """Whether two rectangles' circumcircles (widened by 1 um) meet: apart, their overlap is exactly 0."""
-    ax, ay = c * ra[0] - s * ra[1] + x, s * ra[0] + c * ra[1] + y
-    bx, by = tc * rb[0] - ts * rb[1] + gx, ts * rb[0] + tc * rb[1] + gy
-    return math.hypot(ax - bx, ay - by) < math.hypot(ra[2], ra[3]) + math.hypot(rb[2], rb[3]) + 1e-6
+@functools.lru_cache(maxsize=64)
+def _target_few(target: tuple):
+    """A target pose's origin and its two rectangles' corners, centres and reach (+1 um), as `_coverage_few`
+    uses them (NumPy's cos/sin of its yaw, as the array code's)."""
+    gx, gy, yaw = (float(v) for v in target)
+    tc, ts = float(np.cos(np.array([yaw]))[0]), float(np.sin(np.array([yaw]))[0])
+    return (gx, gy), [(_corners_few(gx, gy, tc, ts, rb), (tc * rb[0] - ts * rb[1] + gx, ts * rb[0] + tc * rb[1] + gy),
+                       math.hypot(rb[2], rb[3]) + 1e-6) for rb in T_RECTS]
 
 
 def _corners_few(px, py, c, s, rect):
