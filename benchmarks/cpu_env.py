@@ -9,7 +9,7 @@ thread), for `mjx_pusht/PushT-v0`, the drop-in `mjx_pusht/PushT-gym-pusht-v0` an
 - `pixels_bare`: the bare loop with `obs_type="pixels"` at 96 x 96 (gym-pusht's and the drop-in's default);
 - `mj_step_limit`: the scene's bare `mj_step` x frame_skip, the physics' own rate of control steps (the limit).
 
-Each case runs `--repeats` times, the ids interleaved (repeat r runs every id back to back, so a shared
+Each case runs `--repeats` times (PPO: 3 at most), the ids interleaved (repeat r runs every id back to back, so a shared
 machine's drifting load slows them alike), and reports the median and every repeat. Writes
 benchmarks/results/cpu-env.json with the machine named.
 
@@ -167,7 +167,7 @@ def main(argv=None) -> dict:
     torch.set_num_threads(1)
     q = args.quick
     repeats = 1 if q else args.repeats
-    steps, ppo_steps = (300, 1024) if q else (1500, 8192)
+    steps, ppo_steps = (300, 1024) if q else (1500, 4096)
     out = {"machine": machine(), "versions": _versions(), "units": "env steps per second (one core)",
            "steps_per_case": steps, "ppo_timesteps": ppo_steps, "repeats": repeats, "cases": {}}
     cases = {"bare": lambda name: bare(name, steps),
@@ -181,7 +181,7 @@ def main(argv=None) -> dict:
     runs = {name: {case: [] for case in cases} for name in IDS}
     limit = []
     for case, fn in cases.items():
-        for _ in range(1 if case == "sb3_ppo_x4" else repeats):
+        for _ in range(min(3, repeats) if case == "sb3_ppo_x4" else repeats):
             limit.append(mj_step_limit(0.3 if q else 1.0))
             for name in IDS:
                 runs[name][case].append(fn(name))

@@ -145,8 +145,9 @@ def starts(value, rows: int, lo, hi, what: str = "[tee x, y, yaw, pusher x, y]")
     out = ((a < lo) | (a > hi)) & check
     if out.any():
         r = np.flatnonzero(out.any(axis=1))
-        raise ConfigError(f"reset_to_state {what} puts a body outside the walls (positions run from {lo[check].min():g} "
-                          f"to {hi[check].max():g}); row(s) {_rows(out.any(axis=1))}: {_show(a[r[0]].tolist())}")
+        raise ConfigError(f"reset_to_state {what} puts a body outside the walls (positions run from "
+                          f"{lo[check].min():g} to {hi[check].max():g}); row(s) {_rows(out.any(axis=1))}: "
+                          f"{_show(a[r[0]].tolist())}")
     return a
 
 

@@ -39,7 +39,9 @@ def vec(env_id, n=2, **kw):
 @pytest.mark.parametrize("env_id", IDS)
 @pytest.mark.parametrize("kind", ["single", "vector"])
 def test_closing_one_pixel_env_leaves_anothers_images_unchanged(env_id, kind):
-    make = (lambda: gym.make(env_id, obs_type="pixels")) if kind == "single" else (lambda: vec(env_id, obs_type="pixels"))
+    def make():
+        return gym.make(env_id, obs_type="pixels") if kind == "single" else vec(env_id, obs_type="pixels")
+
     survivor = make()
     before = pixels_of(survivor.reset(seed=3)[0]).copy()
     other = make()

@@ -85,7 +85,8 @@ def invariants_fold(acc, t, settle_step, tee_pose, qpos, qvel, bar_pos, stem_pos
         "contained": acc["contained"] & xp.all(abs(tee_pose[..., :2]) < WORKSPACE, axis=(0, -1)),
     }
     at = xp.asarray(t == settle_step)
-    if isinstance(at, np.ndarray) and not at.any():  # the settle step is in the first control step only: nothing to pick in every other
+    # the settle step falls in the first control step only: in every other there is nothing to pick
+    if isinstance(at, np.ndarray) and not at.any():
         return out
     at = xp.broadcast_to(at.reshape(at.shape + (1,) * (gap.ndim - at.ndim)), gap.shape)
     hit = xp.any(at, axis=0)
