@@ -180,6 +180,17 @@ def test_a_start_on_the_goal_reports_success_and_its_first_step_is_rewarded_as_o
     assert terminated and not truncated and reward == info["coverage"] == 1.0  # PushT-v0's reward is the coverage
 
 
+@pytest.mark.parametrize("mode", ["next_step", "same_step"])
+def test_a_vector_envs_goal_start_reports_its_success_at_its_first_step(mode):
+    envs = vec(V0, autoreset_mode=mode)
+    _, info = envs.reset(options={"reset_to_state": [ON_GOAL_V0, [0.1, 0.1, 0.5, -0.2, 0.2]]})
+    assert info["is_success"].tolist() == [True, False]
+    _, reward, terminated, _, _ = envs.step(np.zeros((2, 2)))
+    assert terminated.tolist() == [True, False] and reward[0] == 1.0  # as the single env reports it
+    _, reward, terminated, _, info = envs.step(np.zeros((2, 2)))
+    assert not terminated[0] and info["steps"][0] == (0 if mode == "next_step" else 1)  # a new episode
+
+
 def test_the_drop_ins_goal_start_is_rewarded_as_gym_pusht_rewards_it():
     gym_pusht = pytest.importorskip("gym_pusht")  # noqa: F841
     results = []
