@@ -71,10 +71,11 @@ def gym_view(obs_type: str, obs: dict, coverage, terminated, xp, dtype):
     s = obs["state"]
     agent = frame.to_px(s[..., 0:2], xp)
     origin, angle = frame.pose_to_px(s[..., 2:5], xp)
+    corners = frame.keypoints_px(origin, angle, xp)
     if obs_type == "state":
         out = xp.concatenate([agent, origin, angle[..., None]], axis=-1).astype(dtype)
     elif obs_type == "environment_state_agent_pos":
-        out = {"environment_state": frame.keypoints_px(origin, angle, xp).astype(dtype), "agent_pos": agent.astype(dtype)}
+        out = {"environment_state": corners.astype(dtype), "agent_pos": agent.astype(dtype)}
     elif obs_type == "pixels":
         out = obs["pixels"]
     else:
@@ -84,24 +85,22 @@ def gym_view(obs_type: str, obs: dict, coverage, terminated, xp, dtype):
         "vel_agent": frame.velocity_to_px(obs["pusher_vel"], xp),
         "block_pose": xp.concatenate([origin, angle[..., None]], axis=-1),
         "goal_pose": xp.broadcast_to(xp.asarray(frame.GOAL_PX, dtype=agent.dtype), origin.shape[:-1] + (3,)),
-        "n_contacts": n_contacts(agent, origin, angle, xp),
+        "n_contacts": n_contacts(s[..., 0:2], s[..., 2:5], corners, xp),
         "is_success": terminated,
         "coverage": coverage,
     }
     return out, info
 
 
-def n_contacts(agent, origin, angle, xp):
+def n_contacts(pusher_xy, tee_pose, corners_px, xp):
     """gym-pusht's n_contacts, which its formula makes 1 when anything touched in the step and 0 otherwise
     (contact points / 1000, rounded up): here 1 when the pusher touches the T or a corner of the T
-    touches a wall (within CONTACT_PX), from the poses."""
+    touches a wall (within CONTACT_PX), from the world poses and the T's corners in pixels."""
     from mjx_pusht.task.rules import distance_to_tee
 
-    pose = frame.pose_to_world(origin, angle, xp)
-    pusher = distance_to_tee(frame.to_world(agent, xp), pose) <= (frame.AGENT_RADIUS_PX + CONTACT_PX) * frame.PX
-    k = frame.keypoints_px(origin, angle, xp)
+    pusher = distance_to_tee(pusher_xy, tee_pose) <= (frame.AGENT_RADIUS_PX + CONTACT_PX) * frame.PX
     lo, hi = frame.WALL_INNER_PX
-    wall = xp.any((k <= lo + CONTACT_PX) | (k >= hi - CONTACT_PX), axis=-1)
+    wall = xp.any((corners_px <= lo + CONTACT_PX) | (corners_px >= hi - CONTACT_PX), axis=-1)
     return (pusher | wall).astype(xp.int64 if xp is np else xp.int32)
 
 
