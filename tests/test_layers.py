@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parent.parent / "mjx_pusht"
 # Lowest first. A name is a subpackage or a top-level module of mjx_pusht; "" is the package's own
 # __init__ (the public API, which imports from everywhere and is imported by nothing inside).
 LAYERS = (
-    ("errors",),
+    ("errors", "validate"),  # the one error base, and the one validation layer every entry point checks through
     ("model",),
     ("task", "scenario"),  # the scenario is what to simulate: a scene, a reset, a controller, an episode
     ("render",),

@@ -28,7 +28,7 @@ from mjx_pusht.model.layout import QposLayout
 from mjx_pusht.model.scene import build_model
 from mjx_pusht.scenario import Scenario
 from mjx_pusht.task.controllers import seed_key
-from mjx_pusht.task.episode import act, after_physics_step, begin, control_step
+from mjx_pusht.task.episode import act, after_physics_steps, begin, control_step
 from mjx_pusht.task.reset import start_poses
 
 _STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -153,11 +153,14 @@ def cpu_physics(layout, frame_skip: int, settle_step: int):
     `frame_skip` times and folds each physics step into the invariants. `k` may be per world (an env's rows
     are at different steps). The sim it hands back is (stepper, the (frame_skip, N, nq) qpos of this step)."""
 
+    steps = np.arange(frame_skip)
+
     def physics(sim, u, carry, k):
         stepper = sim[0]
         qs, vs, ss = stepper.advance(u, ~carry["ep"]["done"])
-        for j in range(frame_skip):
-            carry = after_physics_step(carry, k * frame_skip + j, settle_step, layout, qs[j], vs[j], ss[j], np)
+        # the frame_skip physics steps folded into the invariants at once (the same bits as one by one)
+        t = np.asarray(k)[None] * frame_skip + (steps[:, None] if np.ndim(k) else steps)
+        carry = after_physics_steps(carry, t, settle_step, layout, qs, vs, ss, np)
         return qs[-1].copy(), carry, (stepper, qs)
 
     return physics

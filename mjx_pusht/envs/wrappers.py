@@ -178,8 +178,9 @@ class AutoReset:
         stepped = jax.vmap(env.advance_one)(state._replace(info=None), action)  # info's pool is not per world
         if self.mode == "same_step":
             ended = stepped.terminated | stepped.truncated
-        else:  # next_step: the rows that ended last step start now, in place of this step
-            ended = state.terminated | state.truncated
+        else:  # next_step: the rows that ended last step start now, in place of this step; a start on the goal
+            # (terminated at reset, step 0) first reports its end in this step, as the env's own step does
+            ended = (state.terminated | state.truncated) & (state.step > 0)
         q, k, cov, used = self._slot(info, ended, jnp)
         fresh = jax.vmap(lambda qp, kk, c: env.fresh_one(d0, qp, kk, c))(q, k, cov)
         out = jax.vmap(_merge)(ended, fresh, stepped)
@@ -206,7 +207,7 @@ class AutoReset:
     def _step_cpu(self, state, action):
         env = self.env
         if self.mode == "next_step":
-            ended = np.asarray(state.terminated | state.truncated)
+            ended = np.asarray((state.terminated | state.truncated) & (state.step > 0))
             stepped = env.step(state, action)
         else:
             stepped = env.step(state, action)

@@ -192,7 +192,9 @@ def run_sweep(
         timing["rollout_and_compile"] += t_score - t_run
         cols = rows.columns(episodes=episodes)
         tables[lo] = cols
-        _stop_at_failed_write(written, parts)  # a chunk that could not be written stops the run now, not at 100%
+        if written:  # the previous chunk's file has had this chunk's rollout to land: at most one write in flight,
+            written[-1].exception()  # so a chunk that could not be written stops the run at the next, not at 100%
+        _stop_at_failed_write(written, parts)
         written.append(writer.submit(atomic_write_table, parts / f"seeds-{lo:012d}-{hi:012d}.parquet", cols))
         timing["scoring_and_chunk_writing"] += time.perf_counter() - t_score
         done[lo:hi] = True

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from mjx_pusht.task.rules import array_namespace
 
 WELD_GAP = 0.06  # bar centre to stem centre in the authored T, metres
@@ -66,3 +68,30 @@ def invariants_update(acc, t, settle_step, tee_pose, qpos, qvel, bar_pos, stem_p
         # a tee outside the walls means a contact was missed (or the state diverged)
         "contained": acc["contained"] & xp.all(abs(tee_pose[..., :2]) < WORKSPACE, axis=-1),
     }
+
+
+def invariants_fold(acc, t, settle_step, tee_pose, qpos, qvel, bar_pos, stem_pos):
+    """`invariants_update` over consecutive steps at once: every array has a leading axis of steps (the CPU's
+    `frame_skip` physics steps of one control step; `t` (S,) or (S, N)). The same values to the bit as S
+    updates in turn: maxima and conjunctions do not depend on grouping, and the settled values are picked
+    from the step that is `settle_step`, never computed. One call of a few array operations instead of S."""
+    xp = array_namespace(qpos)
+    gap = weld_gap(bar_pos, stem_pos)  # (S, N)
+    out = {
+        "tee_settled": acc["tee_settled"],
+        "gap_settled": acc["gap_settled"],
+        "gap_max_dev": xp.maximum(acc["gap_max_dev"], xp.max(abs(gap - WELD_GAP), axis=0)),
+        "finite": acc["finite"] & xp.all(sane(qpos) & sane(qvel), axis=0),
+        "contained": acc["contained"] & xp.all(abs(tee_pose[..., :2]) < WORKSPACE, axis=(0, -1)),
+    }
+    at = xp.asarray(t == settle_step)
+    # the settle step falls in the first control step only: in every other there is nothing to pick
+    if isinstance(at, np.ndarray) and not at.any():
+        return out
+    at = xp.broadcast_to(at.reshape(at.shape + (1,) * (gap.ndim - at.ndim)), gap.shape)
+    hit = xp.any(at, axis=0)
+    j = xp.argmax(at, axis=0)
+    gap_at = xp.take_along_axis(gap, j[None], axis=0)[0]
+    tee_at = xp.take_along_axis(tee_pose, j[None, ..., None], axis=0)[0]
+    return {**out, "tee_settled": xp.where(hit[..., None], tee_at, acc["tee_settled"]),
+            "gap_settled": xp.where(hit, gap_at, acc["gap_settled"])}
