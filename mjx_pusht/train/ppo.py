@@ -39,7 +39,7 @@ from mjx_pusht.errors import ConfigError
 from mjx_pusht.io.outputs import atomic_write_bytes
 from mjx_pusht.train.dagger import held_out_seeds
 from mjx_pusht.train.policy import OBS_SIZE
-from mjx_pusht.train.run import TrainError, config_dict, resume_tree
+from mjx_pusht.train.resume import TrainError, config_dict, resume_tree
 
 SUCCESS_BONUS = 10.0
 SHAPING = 10.0
@@ -165,7 +165,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     from mjx_pusht.study.stats import wilson
     from mjx_pusht.task.episode import Episode
     from mjx_pusht.train.policy import save
-    from mjx_pusht.train.run import write_curve
+    from mjx_pusht.train.curve import write_curve
 
     ckpt = out / "checkpoints"
     restored, curve = _load_resume(ckpt / RESUME, cfg) if resume else (None, [])
