@@ -31,6 +31,7 @@ FPS = 10  # gym-pusht's control rate
 TASK = "Push the T-shaped block onto the T-shaped target."  # the task text of LeRobot's lerobot/pusht
 IMAGE_SIZE = 96
 LEAD = frame.KV / frame.KP  # s: a PD-tracked pusher moving at v settles this far behind its target
+SAMPLE = 10  # every 10th frame of an episode goes into the image statistics (LeRobot samples its own too)
 
 
 def targets_px(ctrl, carry, obs_px: dict, info: dict, t: int, key):
@@ -52,20 +53,33 @@ def targets_px(ctrl, carry, obs_px: dict, info: dict, t: int, key):
     return np.clip(px, 0.0, 512.0).astype(np.float32), carry
 
 
-def rollout_batch(env, ctrl, seeds: np.ndarray, max_steps: int) -> list[dict]:
-    """One batch of episodes (one per seed) on the drop-in's vector env; each episode's frames up to its end."""
+def _encode(images: np.ndarray, sample: bool):
+    """PNG files of a step's images (one a live row), and their histogram if the step is in the stats' sample."""
+    from mjx_pusht.io.lerobot_dataset import histogram, png
+
+    return [png(img) for img in images], histogram(images) if sample else None
+
+
+def rollout_batch(env, ctrl, seeds: np.ndarray, max_steps: int, encoder, writer: LeRobotDatasetWriter,
+                  keep: int) -> list[dict]:
+    """One batch of episodes (one per seed) on the drop-in's vector env; the first `keep` episodes' frames up to
+    their ends (the rest pad the batch to its compiled shape).
+    Each step's images of the live rows are PNG-encoded on `encoder`'s threads while the batch steps on; every
+    SAMPLE-th frame of an episode counts into the writer's image statistics."""
     from mjx_pusht.task.controllers import seed_key
 
     n = env.num_envs
     key = seed_key(seeds)
     carry = ctrl.init(key)
     obs, info = env.reset(seed=[int(s) for s in seeds])
-    frames = {k: [] for k in ("image", "state", "action", "reward", "done", "success")}
+    frames = {k: [] for k in ("state", "action", "reward", "done", "success")}
+    encoded = []  # (live rows, future of their PNGs)
     live = np.ones(n, bool)
     ends = np.full(n, max_steps)
     for t in range(max_steps):
         action, carry = targets_px(ctrl, carry, obs, info, t, key)
-        frames["image"].append(np.asarray(obs["pixels"]))
+        rows = np.flatnonzero(live[:keep])
+        encoded.append((rows, encoder.submit(_encode, np.asarray(obs["pixels"])[rows], t % SAMPLE == 0)))
         frames["state"].append(np.asarray(obs["agent_pos"], np.float32))
         frames["action"].append(action)
         obs, reward, terminated, truncated, info = env.step(action)
@@ -77,8 +91,16 @@ def rollout_batch(env, ctrl, seeds: np.ndarray, max_steps: int) -> list[dict]:
         live &= ~done
         if not live.any():
             break
+    pngs: list[list[bytes]] = [[] for _ in range(keep)]
+    for rows, future in encoded:
+        files, hist = future.result()
+        for i, f in zip(rows, files, strict=True):
+            pngs[i].append(f)
+        if hist is not None:
+            writer.image_histogram += hist
+            writer.image_frames += len(rows)
     stacked = {k: np.stack(v, axis=1) for k, v in frames.items()}  # (n, T, ...)
-    return [{k: v[i, : ends[i]] for k, v in stacked.items()} for i in range(n)]
+    return [{"png": pngs[i], **{k: v[i, : ends[i]] for k, v in stacked.items()}} for i in range(keep)]
 
 
 def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str = "auto", batch: int | None = None,
@@ -112,13 +134,13 @@ def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str =
     shutil.rmtree(partial, ignore_errors=True)
     t0 = time.perf_counter()
     successes = 0
+    writer = LeRobotDatasetWriter(partial, FPS, TASK, IMAGE_SIZE)
     with ThreadPoolExecutor() as encoder:
-        writer = LeRobotDatasetWriter(partial, FPS, TASK, IMAGE_SIZE, encoder)
         for lo in range(0, len(seeds), batch):
             rows = seeds[lo : lo + batch]
             # the last batch is padded with the seeds after it: one batch shape, one compiled program
             pad = np.arange(rows[-1] + 1, rows[-1] + 1 + batch - len(rows), dtype=np.int64)
-            episodes = rollout_batch(env, ctrl, np.concatenate([rows, pad]), max_steps)[: len(rows)]
+            episodes = rollout_batch(env, ctrl, np.concatenate([rows, pad]), max_steps, encoder, writer, len(rows))
             successes += sum(bool(ep["success"][-1]) for ep in episodes)
             writer.add(episodes)
             if progress:

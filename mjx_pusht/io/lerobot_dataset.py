@@ -12,7 +12,9 @@ image features (tests/lerobot/ reads them back with lerobot 0.6.1 and trains on 
 
 A frame is (the observation before the action, the action, what the step gave): `next.reward`,
 `next.done`, `next.success`, as lerobot-eval records episodes. Per-episode statistics columns
-(`stats/...` in meta/episodes), which LeRobotDataset drops on loading, are not written.
+(`stats/...` in meta/episodes), which LeRobotDataset drops on loading, are not written. The image
+statistics are of a sample of frames (as LeRobot's own are): those the caller counts into
+`image_histogram`, every 10th frame of an episode in `io.demos`.
 """
 
 from __future__ import annotations
@@ -21,7 +23,6 @@ import json
 import os
 import struct
 import zlib
-from concurrent.futures import Executor
 from pathlib import Path
 
 import numpy as np
@@ -54,6 +55,11 @@ def pusht_features(image_size: int = 96) -> dict:
 
 def _chunk(kind: bytes, data: bytes) -> bytes:
     return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+
+def histogram(images: np.ndarray) -> np.ndarray:
+    """(3, 256) counts of each byte value per channel in (..., 3) uint8 images."""
+    return np.stack([np.bincount(images[..., c].ravel(), minlength=256) for c in range(3)])
 
 
 def png(image: np.ndarray) -> bytes:
@@ -112,27 +118,24 @@ class LeRobotDatasetWriter:
     """Writes episodes into `root` as a LeRobot v3.0 dataset: `add` a batch of finished episodes (one data
     file), then `finish` (metadata last, so a folder without meta/info.json is no dataset)."""
 
-    def __init__(self, root: Path, fps: int, task: str, image_size: int = 96, encoder: Executor | None = None):
-        self.root, self.fps, self.task, self.encoder = Path(root), int(fps), task, encoder
+    def __init__(self, root: Path, fps: int, task: str, image_size: int = 96):
+        self.root, self.fps, self.task = Path(root), int(fps), task
         self.features = pusht_features(image_size)
         self.episodes: list[dict] = []
         self.frames = 0
         self.files = 0
         self._numeric: dict[str, list] = {k: [] for k, f in self.features.items() if f["dtype"] != "image"}
-        self._hist = np.zeros((3, 256), np.int64)
+        self.image_histogram = np.zeros((3, 256), np.int64)  # the image statistics' sample, counted by the caller
+        self.image_frames = 0  # frames in that sample
 
     def add(self, episodes: list[dict]) -> None:
-        """Episodes, each a dict of per-frame arrays: image (T, H, W, 3) uint8, state (T, 2), action (T, 2),
+        """Episodes, each a dict of per-frame values: png (T PNG files, `png`), state (T, 2), action (T, 2),
         reward (T,), done (T,), success (T,); written as one data file."""
         import pyarrow as pa
 
         if not episodes:
             return
-        images = [img for ep in episodes for img in ep["image"]]
-        pngs = list(self.encoder.map(png, images) if self.encoder is not None else map(png, images))
-        for ep in episodes:
-            for c in range(3):
-                self._hist[c] += np.bincount(ep["image"][..., c].ravel(), minlength=256)
+        pngs = [b for ep in episodes for b in ep["png"]]
         lengths = [len(ep["action"]) for ep in episodes]
         n = sum(lengths)
         cols = {
@@ -198,7 +201,7 @@ class LeRobotDatasetWriter:
         tasks = pa.table({"task_index": pa.array([0], pa.int64()), "task": pa.array([self.task], pa.string())})
         _write_parquet(tasks.replace_schema_metadata({"pandas": json.dumps(pandas_meta)}), self.root / "meta/tasks.parquet")
         stats = {k: _numeric_stats(np.concatenate(v)) for k, v in self._numeric.items()}
-        stats["observation.image"] = _image_stats(self._hist, self.frames)
+        stats["observation.image"] = _image_stats(self.image_histogram, self.image_frames)
         _write_json(self.root / "meta/stats.json", stats)
         info = {
             "codebase_version": CODEBASE_VERSION, "fps": self.fps, "features": self.features,
