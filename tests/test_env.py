@@ -39,14 +39,17 @@ def test_pixel_frame_puts_the_walls_on_the_image_edges_and_round_trips():
     np.testing.assert_allclose(from_pixels(to_pixels(xy, 96), 96), xy, atol=1e-15)
 
 
-def test_an_episode_that_starts_covered_terminates_at_once():
+def test_an_episode_that_starts_covered_terminates_at_once_and_its_first_step_reports_the_success():
     env = PushTEnv(backend="cpu")
     s = env.reset_to([[0.0, 0.0, 0.0, 0.2, 0.2], [0.1, 0.1, 0.0, 0.2, -0.2]])
     assert s.terminated.tolist() == [True, False]
     s2 = env.step(s, np.full((2, 2), 0.5))
-    assert s2.reward[0] == 0.0 and s2.metrics["return"][0] == 0.0 and s2.step[0] == 0
+    # the step that reports the end carries the reward of the covered start (coverage 1 on the goal)
+    assert s2.terminated[0] and s2.reward[0] == 1.0 and s2.step[0] == 1
     assert s2.step[1] == 1
     np.testing.assert_array_equal(s2.obs["state"][0], s.obs["state"][0])  # an ended episode holds still
+    s3 = env.step(s2, np.full((2, 2), 0.5))  # after that it earns nothing until it is reset
+    assert s3.reward[0] == 0.0 and s3.step[0] == 1 and s3.terminated[0]
 
 
 def test_terminated_episodes_stop_accumulating_reward():

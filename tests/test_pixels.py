@@ -117,7 +117,7 @@ def test_bad_sizes_and_missing_gl_are_one_line(model, monkeypatch):
     def broken(*a, **k):
         raise RuntimeError("eglInitialize failed\nmore")
 
-    monkeypatch.setattr(mujoco, "Renderer", broken)
+    monkeypatch.setattr(mujoco, "GLContext", broken)
     with pytest.raises(PixelsError, match="apt-get install") as e:
         CpuRenderer(model, SIZE)
     assert "\n" not in str(e.value)

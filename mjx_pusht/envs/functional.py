@@ -29,6 +29,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from mjx_pusht import validate
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model.layout import QposLayout
 from mjx_pusht.model.scene import SceneSpec
@@ -123,10 +124,7 @@ class PushTEnv:
 
             self.model = cpu_model(self.scenario)
             self._xp = np
-            if self.pixels:
-                from mjx_pusht.envs.pixels import CpuRenderer
-
-                self.renderer = CpuRenderer(self.model, self.pixels)
+            self._cpu_renderer = None
         else:
             import jax.numpy as jnp
 
@@ -171,18 +169,34 @@ class PushTEnv:
             self.step = self._step_mjx
         self.layout = QposLayout.of(self.model)
 
+    @property
+    def renderer(self):
+        """cpu: the renderer of obs["pixels"], made on first use (no GL context before then, so an env made in a
+        parent process can be forked) and again after `close`."""
+        if self._cpu_renderer is None:
+            from mjx_pusht.envs.pixels import CpuRenderer
+
+            self._cpu_renderer = CpuRenderer(self.model, self.pixels)
+        return self._cpu_renderer
+
+    def close(self) -> None:
+        """Free this env's GL context (cpu pixels); the next image makes a new one."""
+        r, self._cpu_renderer = getattr(self, "_cpu_renderer", None), None
+        if r is not None:
+            r.close()
+
     # -- reset ------------------------------------------------------------------------------------
     def reset(self, seeds) -> State:
         """A fresh episode per seed, from the reset distribution's start pose for that seed."""
-        seeds = np.asarray(seeds, np.int64).reshape(-1)
+        seeds = validate.seed_array(seeds)
         return self.reset_to(start_poses(seeds, reset=self.reset_kind), seeds)
 
     def reset_to(self, starts, seeds=None) -> State:
         """Episodes from given (N, 5) starts: tee x, y, yaw and pusher x, y (seeds key random controllers)."""
-        starts = np.atleast_2d(np.asarray(starts, np.float64))
-        if starts.ndim != 2 or starts.shape[1] not in (3, 5):
-            raise ConfigError(f"starts must be (N, 5) tee x, y, yaw, pusher x, y (or (N, 3) tee only), got {starts.shape}")
-        seeds = np.zeros(len(starts), np.int64) if seeds is None else np.asarray(seeds, np.int64).reshape(-1)
+        starts = self._starts(starts)
+        seeds = np.zeros(len(starts), np.int64) if seeds is None else validate.seed_array(seeds)
+        if len(seeds) != len(starts):
+            raise ConfigError(f"seeds: {len(seeds)} seeds for {len(starts)} start states")
         qpos0 = self.layout.initial_qpos(self.model, starts)
         key = seed_key(seeds)
         if self.backend == "cpu":
@@ -191,6 +205,20 @@ class PushTEnv:
             data = _Lockstep(self.model, self.model, qpos0, self.episode.frame_skip, self.threads)
             return self._state(data, begin(self.layout, qpos0, key, self._ctrl, self.episode, np), qpos0, key, 0)
         return self._reset_mjx(qpos0, key)
+
+    def _starts(self, starts) -> np.ndarray:
+        """(N, 5) tee x, y, yaw, pusher x, y (or (N, 3) tee only), finite, the positions inside the walls
+        (the validation layer's rule; the gym-pusht variant's walls are its own frame's)."""
+        a = np.atleast_2d(np.asarray(starts, np.float64))
+        if a.ndim != 2 or a.shape[1] not in (3, 5):
+            raise ConfigError(f"starts must be (N, 5) tee x, y, yaw, pusher x, y (or (N, 3) tee only), got {a.shape}")
+        if self.scene.variant != "chapter" or a.shape[1] == 3:  # the tee alone: finite only (its yaw is free)
+            if not np.isfinite(a).all():
+                raise ConfigError("starts must be finite numbers")
+            return a
+        from mjx_pusht.envs.common import START_HI, START_LO
+
+        return validate.starts(a, len(a), START_LO, START_HI)
 
     def _reset_mjx(self, qpos0, key) -> State:
         import jax.numpy as jnp
@@ -244,33 +272,9 @@ class PushTEnv:
         """A jittable function: (n, 5) observation states (pusher x, y, tee x, y, yaw) -> the (n, size, size, 3)
         uint8 images `obs["pixels"]` shows of them, on this env's renderer (a learner renders its minibatches
         again from the states, rather than keeping their images: train/dagger.py)."""
-        import jax
-        import jax.numpy as jnp
+        from mjx_pusht.envs.pixels import state_images
 
-        if not self.pixels or self.layout.tee is None:
-            raise ConfigError("images() needs an env with pixels and the tee on slide and hinge joints")
-        q0 = np.asarray(self.model.qpos0, np.float64)
-
-        shape = jax.ShapeDtypeStruct((n, self.pixels, self.pixels, 3), jnp.uint8)
-        if self.backend == "cpu":  # MuJoCo C's OpenGL renderer, on the host
-            from concurrent.futures import ThreadPoolExecutor
-
-            from mjx_pusht.envs.pixels import CpuRenderer
-
-            # JAX calls back on threads of its own, where a GL context cannot be made current (EGL_BAD_ACCESS, or a
-            # crash): the images are rendered on one thread of ours, with a renderer of its own
-            pool = ThreadPoolExecutor(1, thread_name_prefix="images")
-            renderer = pool.submit(CpuRenderer, self.model, self.pixels).result()
-
-            def render(st):
-                return pool.submit(renderer, self.layout.qpos_of_state(q0, np.asarray(st, np.float64))).result()
-
-            return lambda states: jax.pure_callback(render, shape, states)
-        from mjx_pusht.envs.pixels import WarpRenderer
-
-        renderer, d0 = WarpRenderer(self.model, n, self.pixels), self.template(n)
-        return lambda states: jax.vmap(lambda q: renderer(d0.replace(qpos=q)))(
-            self.layout.qpos_of_state(q0, states.astype(self.runner.dtype)))
+        return state_images(self, n)
 
     def advance_one(self, state: State, action) -> State:
         """One world's control step without the image (pure)."""
@@ -286,11 +290,13 @@ class PushTEnv:
         return new if state.dropped is None else new._replace(dropped=state.dropped | ovf)
 
     def _after(self, state, data, carry, xp, pixels=True, qvel=None) -> State:
-        was_done = state.carry["ep"]["done"]
+        # An episode over at reset (a start on the goal) reports its end at its first step, with the reward of the
+        # coverage it ended at: terminated and reward agree. After that an ended episode holds still, earning 0.
+        held = state.carry["ep"]["done"] & ~((state.step == 0) & state.terminated)
         qpos = data.qpos if not isinstance(data, np.ndarray) else data
         ep = carry["ep"]
-        step = xp.where(was_done, state.step, state.step + 1)
-        reward = xp.where(was_done, 0.0, ep["coverage"])
+        step = xp.where(held, state.step, state.step + 1)
+        reward = xp.where(held, 0.0, ep["coverage"])
         terminated = ep["done"] & ep["success"]
         truncated = ~terminated & (step >= self.episode.max_steps)
         carry = {**carry, "ep": {**ep, "done": ep["done"] | truncated}}
@@ -313,7 +319,7 @@ class PushTEnv:
 
     def _step_cpu(self, state: State, action) -> State:
         """The batch's control step on MuJoCo C: the same episode.py functions on NumPy arrays."""
-        action = _check_actions(np.asarray(action, np.float64), len(state.step))
+        action = validate.actions(action, (len(state.step), 2), -np.inf, np.inf)
         from mjx_pusht.backends.cpu import cpu_physics
 
         worlds = state.data.copy() if self.keep_states else state.data
@@ -340,9 +346,12 @@ class PushTEnv:
         return self._jitted[n]
 
     def _step_mjx(self, state: State, action) -> State:
+        import jax
         import jax.numpy as jnp
 
         action = _check_actions(jnp.asarray(action), len(state.step))
+        if not isinstance(action, jax.core.Tracer):
+            validate.actions_on_device(action, len(state.step), jnp)
         return self._batch_fns(len(state.step))[0](state, action)
 
     def check(self, state: State) -> State:
@@ -360,48 +369,6 @@ class PushTEnv:
     def reset_where(self, state: State, mask, seeds=None, starts=None) -> State:
         """`state` with the rows where `mask` holds started afresh (from `seeds`' start poses, or `starts`),
         every other row untouched: how a vector env resets the episodes that ended."""
-        mask = np.asarray(mask, bool).reshape(-1)
-        rows = np.flatnonzero(mask)
-        if not len(rows):
-            return state
-        if state.info is not None:  # a wrapper's arrays are not per world: they pass through
-            return self.reset_where(state._replace(info=None), mask, seeds, starts)._replace(info=state.info)
-        if starts is None:
-            seeds = np.asarray(seeds, np.int64).reshape(-1)
-            starts = start_poses(seeds, reset=self.reset_kind)
-            starts_seeds = seeds
-        else:
-            starts = np.atleast_2d(np.asarray(starts, np.float64))
-            starts_seeds = np.zeros(len(starts), np.int64) if seeds is None else np.asarray(seeds, np.int64)
-        if len(starts) != len(rows):
-            raise ConfigError(f"{len(rows)} rows to reset but {len(starts)} start states")
-        if self.backend == "cpu":
-            fresh = self.reset_to(starts, starts_seeds)
+        from mjx_pusht.envs.partial import reset_where
 
-            def put(old, new):
-                out = np.array(old, copy=True)
-                out[rows] = new
-                return out
-
-            import jax
-
-            merged = jax.tree.map(put, state._replace(data=None), fresh._replace(data=None))
-            return merged._replace(data=state.data.splice(rows, fresh.data, inplace=not self.keep_states))
-        import jax
-        import jax.numpy as jnp
-
-        n = len(state.step)
-        full = np.zeros((n, starts.shape[1]))
-        full[rows] = starts
-        full_seeds = np.zeros(n, np.int64)
-        full_seeds[rows] = starts_seeds
-        fresh = self.reset_to(full, full_seeds)
-        m = jnp.asarray(mask)
-
-        def pick(old, new):
-            if new.ndim == 0 or new.shape[0] != n:
-                return old  # not a per-world array (MJX-Warp's shared contact buffers, recomputed every step)
-            c = m.reshape(m.shape + (1,) * (new.ndim - 1))
-            return jnp.where(c, new, old)
-
-        return jax.tree.map(pick, state, fresh)
+        return reset_where(self, state, mask, seeds, starts)

@@ -22,31 +22,31 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
+from mjx_pusht import validate
 from mjx_pusht.envs import gym as base
-from mjx_pusht.envs.gym import (
-    PushTVectorEnv,
-    _check_options,
-    _check_seed,
-    _Pictures,
-    _warn_broken,
-)
+from mjx_pusht.envs.common import Pictures, functional, warn_broken
+from mjx_pusht.envs.vector import PushTVectorEnv
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model import gym_pusht as frame
 from mjx_pusht.task.rules import SUCCESS_COVERAGE
 
 ENV_ID = "mjx_pusht/PushT-gym-pusht-v0"
 OBS_TYPES = ("state", "environment_state_agent_pos", "pixels", "pixels_agent_pos")
-NEVER = 2**31 - 1  # a single env's own step limit: gymnasium's TimeLimit ends its episodes, as gym-pusht's
+TARGET_BOUNDS = (0.0, 512.0)  # the action space: targets are clipped to it, as PushT-v0 clips its actions
+# reset_to_state [agent x, y, block x, y, angle] in pixels: both bodies in gym-pusht's 512-pixel window (its own
+# docstring's example puts the agent at x = 0, in the wall, and gym-pusht takes it); the angle is unbounded
+START_LO = np.array([0.0] * 4 + [np.nan])
+START_HI = np.array([512.0] * 4 + [np.nan])
 CONTACT_PX = 1.0  # a gap this small counts as touching (n_contacts)
 
 
 def _check_kwargs(obs_type, width, height, render_mode, block_cog, damping) -> None:
-    if obs_type not in OBS_TYPES:
-        raise ConfigError(f"unknown obs_type {obs_type!r}; choose from {', '.join(OBS_TYPES)}")
+    validate.choice("obs_type", obs_type, OBS_TYPES)
+    validate.image_size(width, "observation_width")
+    validate.image_size(height, "observation_height")
     if width != height:
         raise ConfigError(f"images are square here: observation_width {width} != observation_height {height}")
-    if render_mode not in (None, "rgb_array"):
-        raise ConfigError(f"render_mode must be 'rgb_array' (or None), got {render_mode!r}")
+    validate.render_mode(render_mode)
     if block_cog is not None or damping is not None:
         raise ConfigError("block_cog and damping are pymunk settings: this physics is MuJoCo's "
                           "(see the README, 'Coming from gym-pusht / LeRobot')")
@@ -110,14 +110,10 @@ def reward_of(coverage, xp):
 
 
 def _check_state(state, rows: int) -> np.ndarray:
-    """reset_to_state in gym-pusht's convention: [agent x, y, block x, y, angle], pixels and radians."""
-    a = np.asarray(state, np.float64)
-    if a.shape not in ((5,), (rows, 5)):
-        raise ConfigError(f"reset_to_state is [agent x, y, block x, y, block angle]: shape (5,) or ({rows}, 5), "
-                          f"got {a.shape}")
-    if not np.isfinite(a).all():
-        raise ConfigError("reset_to_state must be finite numbers")
-    return frame.legacy_state_to_world(np.broadcast_to(a, (rows, 5)))
+    """reset_to_state in gym-pusht's convention: [agent x, y, block x, y, angle], pixels and radians, both
+    bodies in the window; returned in the world frame."""
+    a = validate.starts(state, rows, START_LO, START_HI, "[agent x, y, block x, y, block angle] in pixels")
+    return frame.legacy_state_to_world(a)
 
 
 def _marker(img: np.ndarray, action, size: int) -> np.ndarray:
@@ -131,7 +127,7 @@ def _marker(img: np.ndarray, action, size: int) -> np.ndarray:
     return img
 
 
-class GymPushTEnv(_Pictures, base.gym.Env):
+class GymPushTEnv(Pictures, base.gym.Env):
     """One episode at a time on MuJoCo C, with gym-pusht's interface. Resets draw from the env's generator
     exactly as gym-pusht's do, so `reset(seed=s)` and every later reset start where gym-pusht's start."""
 
@@ -141,6 +137,8 @@ class GymPushTEnv(_Pictures, base.gym.Env):
                  observation_width: int = 96, observation_height: int = 96, visualization_width: int = 680,
                  visualization_height: int = 680):
         _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping)
+        validate.image_size(visualization_width, "visualization_width")
+        validate.image_size(visualization_height, "visualization_height")
         if visualization_width != visualization_height:
             raise ConfigError(f"renders are square here: visualization_width {visualization_width} != "
                               f"visualization_height {visualization_height}")
@@ -151,15 +149,15 @@ class GymPushTEnv(_Pictures, base.gym.Env):
         self.observation_space, self.action_space = gym_pusht_spaces(obs_type, observation_width, observation_height)
         self.k_p, self.k_v, self.control_hz, self.dt = frame.KP, frame.KV, 10, 0.01  # as gym-pusht names them
         self.success_threshold = SUCCESS_COVERAGE
-        self._env = base._functional("cpu", obs_type, "target", observation_width, "gym-pusht", NEVER, 10,
-                                     variant="gym-pusht")
+        self._env = functional("cpu", obs_type, "target", observation_width, "gym-pusht", None, 10,
+                               variant="gym-pusht")
         self._state, self._last_action = None, None
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        _check_seed(seed)
-        options = _check_options(options or {}, ("reset_to_state",))
+        seed = validate.seed(seed)
+        options = validate.reset_options(options, ("reset_to_state",), type(self).__name__)
         super().reset(seed=seed)
-        if options.get("reset_to_state") is not None:
+        if "reset_to_state" in options:
             start = _check_state(options["reset_to_state"], 1)
         else:  # gym-pusht's draws, in its order, from this env's generator
             r = self.np_random
@@ -172,7 +170,7 @@ class GymPushTEnv(_Pictures, base.gym.Env):
         return obs, info
 
     def step(self, action):
-        a = base.one_action(self._state, action, "target in pixels")
+        a = base.one_action(self._state, action, "(x, y) target in pixels", *TARGET_BOUNDS)
         self._last_action = a
         self._state = self._env.step(self._state, frame.to_world(a)[None])
         obs, info = self._view()
@@ -185,7 +183,8 @@ class GymPushTEnv(_Pictures, base.gym.Env):
                              bool(s.terminated[0]), np, np.float64)
         info = {**info, "n_contacts": int(info["n_contacts"]), "reward": float(reward_of(m["coverage"][0], np)),
                 "finite": bool(m["finite"][0]), "contained": bool(m["contained"][0])}
-        _warn_broken(info)
+        if not (info["finite"] and info["contained"]):
+            warn_broken(info)
         return obs, info
 
     def render(self):
@@ -225,6 +224,9 @@ class GymPushTVectorEnv(PushTVectorEnv):
     @staticmethod
     def _starts_in(starts, rows):
         return _check_state(starts, rows)
+
+    def _bounds(self) -> tuple[float, float]:
+        return TARGET_BOUNDS
 
     def _actions_in(self, actions):
         xp = np if isinstance(actions, np.ndarray) or not hasattr(actions, "__array_namespace__") else \

@@ -14,7 +14,7 @@ chapter wrote it; `view_model` derives what the pixels show from it:
 - each colour sits a quarter step above an 8-bit level, so OpenGL (which rounds) and the ray
   tracer (which truncates) write the same byte.
 
-`CpuRenderer` renders (N, nq) positions with `mujoco.Renderer` (headless through EGL or
+`CpuRenderer` renders (N, nq) positions with MuJoCo's OpenGL renderer (headless through EGL or
 OSMesa: `MUJOCO_GL`); `WarpRenderer` renders one world's `mjx.Data` inside a vmapped, jitted
 program (MJX-Warp's batched ray tracer), so images never leave the device per step.
 """
@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import copy
 import os
+import sys
 
 import numpy as np
 
@@ -71,8 +72,32 @@ def _check_size(size: int) -> int:
     return int(size)
 
 
+_EGL_FROM_PARENT = False  # set in a forked child whose parent had initialised EGL
+
+
+def _after_fork_in_child() -> None:
+    """EGL cannot render in a forked child once its parent initialised it: Mesa's rendering threads are not
+    forked, and the child's first draw waits for them forever (gymnasium's AsyncVectorEnv under `fork` hung).
+    Remember it here, so the child's first renderer refuses in one line instead."""
+    global _EGL_FROM_PARENT
+    egl = sys.modules.get("mujoco.egl")
+    _EGL_FROM_PARENT = _EGL_FROM_PARENT or (egl is not None and getattr(egl, "EGL_DISPLAY", None) is not None)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
 class CpuRenderer:
-    """(N, nq) positions -> (N, size, size, 3) uint8 images, through MuJoCo C's OpenGL renderer."""
+    """(N, nq) positions -> (N, size, size, 3) uint8 images, through MuJoCo C's OpenGL renderer.
+
+    Each renderer owns its GL context and makes it current before every GL call it makes, freeing
+    included. `mujoco.Renderer` frees its MjrContext on whatever context is current, so closing one
+    renderer while another's context was current deleted the other's framebuffer and textures (GL
+    object names are per context, and both number theirs from 1): the survivor then rendered
+    garbage, differently on every call, with no error. Here the same calls are made in the same
+    order as `mujoco.Renderer` makes them (the same pixels), each on this renderer's own context.
+    """
 
     def __init__(self, model, size: int = IMAGE_SIZE):
         import mujoco
@@ -84,44 +109,120 @@ class CpuRenderer:
                    "osmesa": "OSMesa (apt-get install libosmesa6)"}[missing]
             raise PixelsError(f"MUJOCO_GL={missing} but {lib} is not installed: install it, or set MUJOCO_GL "
                               "to a GL this machine has (pixels only; everything else runs without GL)")
+        if _EGL_FROM_PARENT:
+            raise PixelsError("EGL was initialised in this process's parent before it forked, and a forked child "
+                              "cannot render with it (it hangs): start workers with 'forkserver' or 'spawn', e.g. "
+                              "gym.make_vec(..., vectorization_mode='async', vector_kwargs={'context': 'forkserver'})")
         self.view = view_model(model, self.size)
         self.data = mujoco.MjData(self.view)
+        self._gl = None
         try:
-            self.renderer = mujoco.Renderer(self.view, self.size, self.size)
+            self._gl, self._mjr = _open_context(self.view, self.size)
         except Exception as e:  # GL missing or unusable: say what to install, not a traceback
             gl = os.environ.get("MUJOCO_GL", "") or "glfw"
             raise PixelsError(
                 f"the CPU renderer needs OpenGL without a screen (MUJOCO_GL={gl} failed: {str(e).splitlines()[0]}); "
                 "install EGL (Debian: apt-get install libegl1 libgl1-mesa-dri) and set MUJOCO_GL=egl, "
                 "or OSMesa (apt-get install libosmesa6) and MUJOCO_GL=osmesa") from None
-        self._camera = self.view.camera(CAMERA).id
+        self._scene = mujoco.MjvScene(self.view, maxgeom=10000)
+        self._option = mujoco.MjvOption()
+        self._cam = mujoco.MjvCamera()
+        self._cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
+        self._cam.fixedcamid = self.view.camera(CAMERA).id
+        self._rect = mujoco.MjrRect(0, 0, self.size, self.size)
+        self._frame = np.empty((self.size, self.size, 3), np.uint8)
         import atexit
         import weakref
 
-        # Closed when this renderer goes, or at exit before EGL is torn down (else its destructor complains). MuJoCo
-        # terminates the EGL display in an exit hook it registers with the first GL context; weakref's own exit hook
-        # may have been registered before that, and exit hooks run last-registered first, so a finalizer left to it
-        # ran after the display was gone (EGL_NOT_INITIALIZED tracebacks at exit). Registered here, after the
-        # context, it runs before. (Once it has run, it holds nothing.)
-        close = weakref.finalize(self, self.renderer.close)
-        close.atexit = False
-        atexit.register(close)
+        # Freed when this renderer goes, or at exit before EGL is torn down. MuJoCo terminates the EGL display in
+        # an exit hook it registers with the first GL context, and exit hooks run last-registered first:
+        # registered here, after the context, this one runs before it. (Once it has run, it holds nothing.)
+        self._finalizer = weakref.finalize(self, _free, self._gl, self._mjr)
+        self._finalizer.atexit = False
+        atexit.register(self._finalizer)
+
+    @property
+    def closed(self) -> bool:
+        return not self._finalizer.alive
 
     def __call__(self, qpos) -> np.ndarray:
         import mujoco
 
+        if self.closed:
+            raise PixelsError("this renderer was closed")
         qpos = np.atleast_2d(np.asarray(qpos, np.float64))
         out = np.empty((len(qpos), self.size, self.size, 3), np.uint8)
+        self._gl.make_current()  # another renderer's context may be current: never draw into it
         for i, q in enumerate(qpos):
             self.data.qpos[:] = q
             mujoco.mj_kinematics(self.view, self.data)
             mujoco.mj_camlight(self.view, self.data)
-            self.renderer.update_scene(self.data, camera=self._camera)
-            out[i] = self.renderer.render()
+            mujoco.mjv_updateScene(self.view, self.data, self._option, None, self._cam,
+                                   mujoco.mjtCatBit.mjCAT_ALL.value, self._scene)
+            mujoco.mjr_render(self._rect, self._scene, self._mjr)
+            mujoco.mjr_readPixels(self._frame, None, self._rect, self._mjr)
+            out[i] = self._frame[::-1]  # OpenGL's rows run bottom-up
         return out
 
     def close(self) -> None:
-        self.renderer.close()
+        """Free this renderer's GL objects on its own context, then the context (idempotent)."""
+        self._finalizer()
+
+
+def _open_context(view, size: int):
+    """A GL context of our own, current, and MuJoCo's render context on it, as `mujoco.Renderer` makes them."""
+    import mujoco
+
+    gl = mujoco.GLContext(size, size)
+    try:
+        gl.make_current()
+        mjr = mujoco.MjrContext(view, mujoco.mjtFontScale.mjFONTSCALE_150.value)
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, mjr)
+    except Exception:
+        gl.free()
+        raise
+    return gl, mjr
+
+
+_STRANDED = []  # render contexts whose GL context is current on another thread: kept, never freed on a wrong one
+
+
+def _free(gl, mjr) -> None:
+    """mjr_freeContext deletes GL objects by name in the current context: make ours current first."""
+    try:
+        gl.make_current()
+    except RuntimeError:  # current on another thread (EGL_BAD_ACCESS): destroying the context frees its objects,
+        _STRANDED.append(mjr)  # and this MjrContext must never free names in whatever context is current here
+    else:
+        mjr.free()
+    gl.free()  # releases this thread's current context; every render makes its own current again
+
+
+def state_images(env, n: int):
+    """`PushTEnv.images`: a jittable function from (n, 5) observation states to env's (n, size, size, 3) images."""
+    import jax
+    import jax.numpy as jnp
+
+    if not env.pixels or env.layout.tee is None:
+        raise ConfigError("images() needs an env with pixels and the tee on slide and hinge joints")
+    q0 = np.asarray(env.model.qpos0, np.float64)
+
+    shape = jax.ShapeDtypeStruct((n, env.pixels, env.pixels, 3), jnp.uint8)
+    if env.backend == "cpu":  # MuJoCo C's OpenGL renderer, on the host
+        from concurrent.futures import ThreadPoolExecutor
+
+        # JAX calls back on threads of its own, where a GL context cannot be made current (EGL_BAD_ACCESS, or a
+        # crash): the images are rendered on one thread of ours, with a renderer of its own
+        pool = ThreadPoolExecutor(1, thread_name_prefix="images")
+        renderer = pool.submit(CpuRenderer, env.model, env.pixels).result()
+
+        def render(st):
+            return pool.submit(renderer, env.layout.qpos_of_state(q0, np.asarray(st, np.float64))).result()
+
+        return lambda states: jax.pure_callback(render, shape, states)
+    renderer, d0 = WarpRenderer(env.model, n, env.pixels), env.template(n)
+    return lambda states: jax.vmap(lambda q: renderer(d0.replace(qpos=q)))(
+        env.layout.qpos_of_state(q0, states.astype(env.runner.dtype)))
 
 
 def unpack_rgb(packed):

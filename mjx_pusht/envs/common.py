@@ -1,0 +1,111 @@
+"""What the gymnasium envs share: spaces, the functional env behind them, pictures, and the broken-world warning.
+
+NumPy only at import and on the CPU path: a CPU env neither needs nor initialises JAX, so it
+can be made in a parent process and forked (gymnasium's AsyncVectorEnv under `fork`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from gymnasium import spaces
+
+from mjx_pusht import validate
+from mjx_pusht.envs.functional import PushTEnv
+from mjx_pusht.envs.pixels import IMAGE_SIZE
+from mjx_pusht.task.episode import Episode
+from mjx_pusht.task.rules import ACTION_TYPES, CTRL_LIMIT, WORKSPACE_HALF
+
+OBS_TYPES = ("state", "keypoints", "pixels", "pixels_agent_pos")
+TABLE_HALF = 0.45  # every position in an observation lies on the table (the walls stop the bodies sooner)
+NEVER = 2**31 - 1  # an env's own step limit when gymnasium's TimeLimit ends its episodes
+# reset_to_state [tee x, y, yaw, pusher x, y] in metres: both positions inside the walls (yaw unbounded)
+START_LO = np.array([-WORKSPACE_HALF, -WORKSPACE_HALF, np.nan, -WORKSPACE_HALF, -WORKSPACE_HALF])
+START_HI = -START_LO
+
+
+def check_kwargs(obs_type: str, action_type: str, observation_size: int = IMAGE_SIZE) -> None:
+    validate.choice("obs_type", obs_type, OBS_TYPES)
+    validate.choice("action_type", action_type, ACTION_TYPES)
+    if obs_type.startswith("pixels"):
+        validate.image_size(observation_size, "observation_size")
+
+
+def check_starts(starts, rows: int) -> np.ndarray:
+    """reset_to_state in this env's units: [tee x, y, yaw, pusher x, y], metres and radians, inside the walls."""
+    return validate.starts(starts, rows, START_LO, START_HI)
+
+
+def action_bounds(action_type: str) -> tuple[float, float]:
+    limit = CTRL_LIMIT if action_type == "velocity" else WORKSPACE_HALF
+    return -limit, limit
+
+
+def single_spaces(obs_type: str, action_type: str, size: int, dtype) -> tuple[spaces.Space, spaces.Box]:
+    """The observation and action space of one environment."""
+    img = spaces.Box(0, 255, (size, size, 3), np.uint8)
+    agent = spaces.Box(-TABLE_HALF, TABLE_HALF, (2,), dtype)
+    if obs_type == "state":
+        hi = np.array([TABLE_HALF] * 4 + [math.pi])
+        obs = spaces.Box(-hi, hi, (5,), dtype)
+    elif obs_type == "keypoints":
+        obs = spaces.Box(-TABLE_HALF, TABLE_HALF, (16,), dtype)
+    elif obs_type == "pixels":
+        obs = img
+    else:
+        obs = spaces.Dict({"pixels": img, "agent_pos": agent})
+    lo, hi = action_bounds(action_type)
+    return obs, spaces.Box(lo, hi, (2,), np.float32)
+
+
+def warn_broken(info: dict) -> None:
+    """A diverged or escaped world is physics gone wrong: say so, never just hand its numbers on."""
+    bad = ~(np.asarray(info["finite"], bool) & np.asarray(info["contained"], bool))
+    if np.any(bad):
+        import warnings
+
+        warnings.warn(f"mjx_pusht: {int(np.sum(bad))} environment(s) went non-finite or left the walls "
+                      "(info['finite'], info['contained'] are False): their observations are not physics",
+                      RuntimeWarning, stacklevel=3)
+
+
+def functional(backend: str, obs_type: str, action_type: str, observation_size: int, reset_kind: str,
+               max_episode_steps: int | None, frame_skip: int, threads: int = 1, variant: str = "chapter") -> PushTEnv:
+    """The functional env behind the gymnasium envs; stepped in place (a gymnasium env keeps no old states).
+    The gym-pusht variant's episodes run as gym-pusht's do: a start on the goal is scored by the first step.
+    `max_episode_steps` None: no limit of the env's own (gymnasium's TimeLimit truncates)."""
+    from mjx_pusht.model.scene import SceneSpec
+
+    limit = NEVER if max_episode_steps is None else validate.positive_int("max_episode_steps", max_episode_steps)
+    return PushTEnv(backend=backend, reset_kind=reset_kind, action_type=action_type,
+                    pixels=observation_size if obs_type.startswith("pixels") else 0,
+                    episode=Episode(frame_skip=validate.positive_int("frame_skip", frame_skip), max_steps=limit,
+                                    end_covered_start=variant == "chapter"),
+                    scene=SceneSpec(variant=variant), threads=threads, keep_states=False)
+
+
+class Pictures:
+    """rgb_array pictures for the envs (the CPU renderer at `render_size`, made on demand), and closing what
+    renders: only this env's own GL contexts, so closing one env never touches another's images."""
+
+    _viewer = None
+
+    def _draw(self, qpos) -> np.ndarray:
+        if self._viewer is None:
+            from mjx_pusht.envs.pixels import CpuRenderer
+
+            self._viewer = CpuRenderer(self._env.model, self.render_size)
+        return self._viewer(np.asarray(qpos, np.float64))
+
+    def _close_renderers(self) -> None:
+        """Free this env's GL contexts (only its own); rendering after this makes new ones."""
+        if self._viewer is not None:
+            self._viewer.close()
+        self._viewer = None
+        if getattr(self, "_env", None) is not None and self._env.backend == "cpu":
+            self._env.close()
+
+    @property
+    def _fps(self) -> int:
+        return round(1 / (self._env.episode.frame_skip * self._env.model.opt.timestep))

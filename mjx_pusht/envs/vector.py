@@ -1,0 +1,304 @@
+"""The batched vector env behind `gym.make_vec("mjx_pusht/PushT-v0", n)`: N worlds stepped as one batch.
+
+One functional env (envs/functional.py) steps every world: one compiled program on MJX, MuJoCo C
+on `threads` threads on the CPU, never N copies in subprocesses. Its inputs are checked by the one
+validation layer (mjx_pusht/validate.py), as the single env's are. On the CPU backend nothing
+here touches JAX.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from mjx_pusht import validate
+from mjx_pusht.envs.common import (
+    Pictures,
+    action_bounds,
+    check_kwargs,
+    check_starts,
+    functional,
+    single_spaces,
+    warn_broken,
+)
+from mjx_pusht.envs.handoff import check_array_type, from_user, hand_off
+from mjx_pusht.envs.pixels import IMAGE_SIZE
+from mjx_pusht.errors import ConfigError
+from mjx_pusht.task.rules import wrap_angle
+
+_METRICS = ("coverage", "gap_max_dev", "finite", "contained")
+
+
+def _jnp():
+    import jax.numpy as jnp
+
+    return jnp
+
+
+class PushTVectorEnv(Pictures, VectorEnv):
+    """N PushT episodes stepped as one batch on any backend (`auto`: MJX-Warp on a GPU, else MuJoCo C).
+
+    Autoreset follows gymnasium's modes: `next_step` (the default: the step after an episode
+    ends resets it and ignores its action), `same_step` (reset at once; the ended episode's
+    observation and info go in info["final_obs"] / info["final_info"]) or `disabled`
+    (reset(options={"reset_mask": mask}) resets the ones you pick). On MJX the autoreset runs
+    on the device inside the jitted step (wrappers.AutoReset), from start poses drawn ahead
+    by each env's own generator, so the episodes are those of gymnasium's SyncVectorEnv.
+
+    `array_type`: what observations, rewards, flags and infos come out as: "jax" (the default
+    on MJX: arrays on the device, no copy), "torch" (tensors on the same device through DLPack,
+    no copy) or "numpy" (copied to the host; the only choice on cpu). Actions may be any of
+    the three. Physics gone wrong is checked on the device and raised or warned about at least
+    every `depth` // 2 steps (every step with NumPy output): a dropped contact (BufferOverflow),
+    a non-finite or escaped world (RuntimeWarning).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int = 1, backend: str = "auto", obs_type: str = "state",
+                 action_type: str = "velocity", render_mode: str | None = None, observation_size: int = IMAGE_SIZE,
+                 render_size: int = 512, reset_kind: str = "task", max_episode_steps: int = 300,
+                 frame_skip: int = 10, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
+                 threads: int | None = None, array_type: str | None = None, depth: int = 8,
+                 variant: str = "chapter"):
+        from mjx_pusht.backends.base import resolve
+        from mjx_pusht.backends.cpu import default_threads
+        from mjx_pusht.envs.wrappers import AutoReset, StartPool
+
+        self._check_args(obs_type, action_type, observation_size)
+        self.num_envs = validate.positive_int("num_envs", num_envs)
+        validate.render_mode(render_mode)
+        validate.image_size(render_size, "render_size")
+        max_episode_steps = validate.positive_int("max_episode_steps", max_episode_steps)
+        self.backend, _ = resolve(backend)
+        self.obs_type, self.action_type, self.render_mode = obs_type, action_type, render_mode
+        # by enum, by value ("SameStep"), by name ("SAME_STEP") or in snake case ("same_step")
+        names = {k: m for m in AutoresetMode for k in (m, m.value, m.name, m.name.lower())}
+        if autoreset_mode not in names:
+            raise ConfigError(f"unknown autoreset_mode {autoreset_mode!r}; choose from "
+                              f"{', '.join(m.name.lower() for m in AutoresetMode)}")
+        self.autoreset_mode = names[autoreset_mode]
+        self.array_type = check_array_type(array_type or ("numpy" if self.backend == "cpu" else "jax"))
+        if self.backend == "cpu" and self.array_type != "numpy":
+            raise ConfigError("the cpu backend steps MuJoCo C on the host: its arrays are NumPy (array_type='numpy')")
+        self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
+        self.render_size = render_size
+        threads = threads or (min(default_threads(), max(1, self.num_envs // 64)) if self.backend == "cpu" else 1)
+        self._env = functional(self.backend, obs_type, action_type, observation_size, reset_kind,
+                                max_episode_steps, frame_skip, threads, variant)
+        self._dtype = np.float64 if self.backend == "cpu" else np.dtype(self._env.runner.dtype)
+        self.single_observation_space, self.single_action_space = self._single_spaces(
+            obs_type, action_type, observation_size, self._dtype)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.metadata["render_fps"] = self._fps
+        # each env's next episode seeds, from its own generator, seeded as SyncVectorEnv seeds its copies
+        # (seed + i), so this batch and N single envs agree
+        self._pool = StartPool(self._env, self.num_envs, depth)
+        self._ar = None
+        if self.backend != "cpu" and self.autoreset_mode != AutoresetMode.DISABLED:
+            mode = "same_step" if self.autoreset_mode == AutoresetMode.SAME_STEP else "next_step"
+            self._ar = AutoReset(self._env, mode, depth, final_pixels=obs_type.startswith("pixels"))
+            self._ar.pool = self._pool
+        self._state = None
+        self._needs_reset = np.zeros(self.num_envs, bool)
+        self._since_check = 0
+        self._viewer = self._view_jit = None
+
+    _check_args = staticmethod(check_kwargs)  # noqa: E303
+    _single_spaces = staticmethod(single_spaces)
+    _starts_in = staticmethod(check_starts)  # reset_to_state, in the env's units
+
+    def _actions_in(self, actions):
+        """Actions in the functional env's units (this env's are those already)."""
+        return actions
+
+    def _checked(self, actions):
+        """(num_envs, 2) finite actions, clipped to the action space: NumPy on the host, device arrays (JAX, or
+        torch through DLPack) by one reduction on their device."""
+        actions = from_user(actions)
+        if isinstance(actions, (np.ndarray, list, tuple, int, float)) or not hasattr(actions, "__array_namespace__"):
+            return validate.actions(actions, (self.num_envs, 2), *self._bounds())
+        xp = actions.__array_namespace__()
+        validate.actions_on_device(actions, self.num_envs, xp)
+        return xp.clip(actions, *self._bounds())
+
+    def _bounds(self) -> tuple[float, float]:
+        """The action space's bounds in float64 (the single env clips to the same numbers)."""
+        return action_bounds(self.action_type)
+
+    def reset(self, *, seed=None, options: dict | None = None):
+        """Every env, or those in options["reset_mask"]; options["reset_to_state"] starts them from given states.
+        Other options are ignored (as gym-pusht ignores them), seeds as SyncVectorEnv's (seed + i)."""
+        seeds = validate.seed_list(seed, self.num_envs)
+        options = validate.reset_options(options, ("reset_mask", "reset_to_state"), type(self).__name__)
+        mask = validate.mask(options.get("reset_mask", np.ones(self.num_envs, bool)), self.num_envs)
+        starts = options.get("reset_to_state")
+        if self._state is None and not mask.all():
+            raise ConfigError("the first reset starts every environment: reset_mask applies once they are running")
+        rows = np.flatnonzero(mask)
+        episode_seeds = self._episode_seeds(rows, [seeds[i] for i in rows])
+        if starts is not None:
+            starts = self._starts_in(starts, len(rows))
+        if self._state is None or mask.all():
+            if starts is not None:
+                self._state = self._env.reset_to(starts, episode_seeds)
+            else:
+                self._state = self._env.reset(episode_seeds)
+        else:
+            self._state = self._env.reset_where(self._state, mask, episode_seeds, starts)
+        if self._ar is not None:
+            self._pool.refill(self._pool.used)
+            self._state = self._ar._with_pool(self._state, self._pool.used)
+        self._needs_reset[rows] = False
+        self._since_check = 0
+        return self._outputs(self._state, reset=True)
+
+    def _episode_seeds(self, rows, given) -> np.ndarray:
+        """The seed of each reset row's episode: the one given (its generator reseeded by it), else the
+        row's next one, from the queue of seeds drawn ahead if there is one (so the sequence stays its own)."""
+        pool = self._pool
+        if self._ar is not None and self._state is not None:
+            pool.used = np.asarray(self._state.info["used"], np.int64).copy()
+        out = []
+        for i, s in zip(rows, given):
+            if s is not None:
+                pool.restart([i], [s])
+                out.append(int(s))
+            elif pool.filled[i] > pool.used[i]:  # drawn ahead: take it, so the row's sequence is unchanged
+                out.append(int(pool.seeds[pool.used[i] % pool.depth, i]))
+                pool.used[i] += 1
+            else:
+                out.append(int(pool.next_seeds([i])[0]))
+                pool.filled[i] = pool.used[i] = 0
+        return np.array(out, np.int64)
+
+    def step(self, actions):
+        if self._state is None:
+            raise RuntimeError("call reset() before step()")
+        actions = self._checked(actions)
+        actions = self._actions_in(actions)
+        if self._ar is not None:
+            return self._step_device(actions)
+        actions = np.asarray(actions, np.float64) if self.backend == "cpu" else actions
+        self._state = self._env.check(self._env.step(self._state, actions))
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP and self._needs_reset.any():
+            # the episodes that ended last step start again now; this step's action is not theirs
+            rows = np.flatnonzero(self._needs_reset)
+            self._state = self._env.reset_where(self._state, self._needs_reset, self._pool.next_seeds(rows))
+        obs, reward, terminated, truncated, info = self._outputs(self._state)
+        terminated, truncated, reward = np.array(terminated), np.array(truncated), np.array(reward)
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            reset_rows = self._needs_reset
+            terminated[reset_rows], truncated[reset_rows], reward[reset_rows] = False, False, 0.0
+            self._needs_reset = terminated | truncated
+            return obs, reward, terminated, truncated, info
+        ended = terminated | truncated
+        if self.autoreset_mode == AutoresetMode.SAME_STEP and ended.any():
+            rows = np.flatnonzero(ended)
+            final_obs, final_info = obs, info
+            self._state = self._env.reset_where(self._state, ended, self._pool.next_seeds(rows))
+            obs, _, _, _, info = self._outputs(self._state)
+            info = {**info, "final_obs": final_obs, "final_info": final_info, "_final_obs": ended,
+                    "_final_info": ended}
+        return obs, reward, terminated, truncated, info
+
+    def _step_device(self, actions):
+        """MJX with autoreset: one jitted call; the host looks at the flags only every depth // 2 steps."""
+        self._state = self._ar.step(self._state, actions)
+        self._since_check += 1
+        if self.array_type == "numpy" or self._since_check >= max(1, self._pool.depth // 2):
+            self._since_check = 0
+            self._state = self._ar.refill(self._env.check(self._state))
+            warn_broken({"finite": ~np.asarray(self._state.info["broken"]), "contained": True})
+        out = self._outputs(self._state)
+        if self._ar.mode == "same_step":
+            final = self._state.info["final"]
+            ended = self._state.terminated | self._state.truncated
+            fs = {"obs": {**final["obs"], "state": final["obs"]["state"]}, "reward": self._state.reward,
+                  "terminated": self._state.terminated, "truncated": self._state.truncated,
+                  "step": final["step"], **{k: final["metrics"][k] for k in _METRICS}}
+            f_obs, _, _, _, f_info = self._arrays(fs)
+            out[4].update({"final_obs": f_obs, "final_info": f_info, "_final_obs": ended, "_final_info": ended})
+        return out
+
+    def _outputs(self, state, reset: bool = False):
+        """obs, reward, terminated, truncated, info of `state`, as `array_type` (reset: obs, info)."""
+        m = state.metrics
+        flat = {"obs": state.obs, "reward": state.reward, "terminated": state.terminated,
+                "truncated": state.truncated, "step": state.step, **{k: m[k] for k in _METRICS}}
+        obs, reward, terminated, truncated, info = self._arrays(flat)
+        if self.array_type == "numpy":
+            warn_broken(info)
+        return (obs, info) if reset else (obs, reward, terminated, truncated, info)
+
+    def _arrays(self, flat: dict):
+        """The gymnasium view of a state's arrays, then handed off: on the device in one jitted call,
+        copied to the host first for NumPy."""
+        keys = {"state", "pusher_vel"} | ({"keypoints"} if self.obs_type == "keypoints" else set()) | (
+            {"pixels"} if self.obs_type.startswith("pixels") else set())
+        flat = {**flat, "obs": {k: v for k, v in flat["obs"].items() if k in keys}}
+        if self.array_type == "numpy":  # MuJoCo C's arrays are on the host already: no JAX on the cpu path
+            return self._view(flat if self.backend == "cpu" else hand_off(flat, "numpy"), np)
+        if self._view_jit is None:
+            import jax
+
+            self._view_jit = jax.jit(lambda f: self._view(f, _jnp()))
+        out = self._view_jit(flat)
+        return hand_off(out, "torch") if self.array_type == "torch" else out
+
+    def _view(self, flat: dict, xp):
+        o, s = flat["obs"], flat["obs"]["state"]
+        if self.obs_type == "state":
+            obs = xp.concatenate([s[..., :4], wrap_angle(s[..., 4:5])], axis=-1).astype(self._dtype)
+        elif self.obs_type == "keypoints":
+            obs = o["keypoints"].astype(self._dtype)
+        elif self.obs_type == "pixels":
+            obs = o["pixels"]
+        else:
+            obs = {"pixels": o["pixels"], "agent_pos": s[..., 0:2].astype(self._dtype)}
+        every = xp.ones(self.num_envs, dtype=bool)
+        info = {
+            "coverage": flat["coverage"], "is_success": flat["terminated"], "steps": flat["step"],
+            "block_pose": s[..., 2:5], "pos_agent": s[..., 0:2],
+            "weld_gap_max_dev": flat["gap_max_dev"],
+            "finite": flat["finite"],  # every state of the episode finite and bounded
+            "contained": flat["contained"],  # the block never left the walls (no missed contact)
+        }
+        if xp is np:  # the host's convention, as the single env and SyncVectorEnv give them
+            info = {k: np.asarray(v, np.float64 if np.asarray(v).dtype.kind == "f" else
+                                  (bool if np.asarray(v).dtype == bool else np.int64)) for k, v in info.items()}
+            out = (obs, np.asarray(flat["reward"], np.float64), np.asarray(flat["terminated"], bool),
+                   np.asarray(flat["truncated"], bool))
+        else:
+            out = (obs, flat["reward"], flat["terminated"], flat["truncated"])
+        return out + (info | {f"_{k}": every for k in info},)
+
+    def render(self):
+        """One picture per environment, as a tuple (gymnasium's convention), drawn on the CPU renderer:
+        about 4 ms each at 512 x 512 on this project's 2-core machine, so mind it for thousands of envs."""
+        if self.render_mode != "rgb_array":
+            return None
+        return tuple(self._draw(self._state.data.qpos[-1] if self.backend == "cpu" else self._state.data.qpos))
+
+    def close_extras(self, **kwargs):
+        self._close_renderers()
+
+    # gymnasium's vector API, as SyncVectorEnv offers it: one batch, so an attribute is the same for every env
+    def call(self, name: str, *args, **kwargs) -> tuple:
+        """`name` called (or read, if not callable) on the env, once per sub-environment, as SyncVectorEnv does."""
+        attr = self._env.episode.max_steps if name == "_max_episode_steps" else getattr(self, name)
+        value = attr(*args, **kwargs) if callable(attr) else attr
+        return (value,) * self.num_envs
+
+    def get_attr(self, name: str) -> tuple:
+        return self.call(name)
+
+    def set_attr(self, name: str, values) -> None:
+        values = values if isinstance(values, (list, tuple)) else [values] * self.num_envs
+        if len(values) != self.num_envs or any(v != values[0] for v in values[1:]):
+            raise ConfigError(f"the {self.num_envs} environments are one batch: set_attr needs one value for all")
+        setattr(self, name, values[0])
+
+

@@ -1,0 +1,195 @@
+"""One validation layer for what users hand the environments: the same input gets the same answer everywhere.
+
+The gymnasium single and vector envs, the gym-pusht drop-in and the functional env all check
+their inputs here: seeds, start states, reset masks and options, actions (shape, dtype,
+finiteness, bounds), image sizes, render modes, counts and episode limits. A bad value is a
+`ConfigError` (an `MjxPushtError` and a `ValueError`) whose one line names the argument and the
+value; nothing is reshaped, cast from a wrong kind or silently replaced. Bounds are applied as
+the action space says: actions are clipped to it (as gym-pusht's targets and the servos'
+ctrlrange are), a start outside the walls is refused.
+
+NumPy only: a CPU env must not need JAX (it may be forked). Device arrays are checked by a
+reduction on their device (`actions_on_device`).
+"""
+
+from __future__ import annotations
+
+import logging
+import numbers
+
+import numpy as np
+
+from mjx_pusht.errors import ConfigError
+
+SEED_MAX = 2**63 - 1  # task.reset.SEED_MAX (a seed is a non-negative int64)
+RENDER_MODES = (None, "rgb_array")
+log = logging.getLogger("mjx_pusht")
+
+
+def _show(value, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def choice(name: str, value, options) -> object:
+    """`value` if it is one of `options`, else a one-line error listing them."""
+    try:
+        ok = value in options
+    except TypeError:  # an unhashable value (a list) against a set of names
+        ok = False
+    if not ok:
+        raise ConfigError(f"unknown {name} {_show(value)}; choose from {', '.join(map(str, options))}")
+    return value
+
+
+def render_mode(value) -> str | None:
+    if value not in RENDER_MODES:
+        raise ConfigError(f"render_mode must be None or 'rgb_array', got {_show(value)}")
+    return value
+
+
+def positive_int(name: str, value, low: int = 1, high: int | None = None) -> int:
+    """An integer in [low, high] (bools and floats are refused, never truncated)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low or (
+            high is not None and value > high):
+        span = f"from {low}" + (f" to {high}" if high is not None else "")
+        raise ConfigError(f"{name} must be an integer {span}, got {_show(value)}")
+    return int(value)
+
+
+def image_size(value, name: str = "image size") -> int:
+    """An image side in pixels, 8 to 2048."""
+    if isinstance(value, numbers.Real) and not isinstance(value, bool) and float(value).is_integer():
+        value = int(value)
+    return positive_int(name, value, 8, 2048)
+
+
+def episode_limit(value, name: str = "max_episode_steps") -> int | None:
+    """A positive number of control steps, or None (no limit of the env's own: gymnasium's TimeLimit's)."""
+    return None if value is None else positive_int(name, value)
+
+
+def seed(value, name: str = "seed") -> int | None:
+    """None or an integer from 0 to 2**63-1."""
+    if value is not None and (isinstance(value, bool) or not isinstance(value, numbers.Integral)
+                              or not 0 <= int(value) <= SEED_MAX):
+        raise ConfigError(f"{name} must be an integer from 0 to 2**63-1, got {_show(value)}")
+    return None if value is None else int(value)
+
+
+def seed_list(value, n: int) -> list:
+    """A vector env's seeds: None (each env's own), one integer s (env i gets s + i, as SyncVectorEnv seeds
+    its copies) or a sequence of n (None or integer) seeds."""
+    if value is None:
+        return [None] * n
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+        seed(value)
+        return [seed(int(value) + i, "seed + env index") for i in range(n)]
+    if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__len__"):
+        raise ConfigError(f"seed must be None, an integer or {n} integers, got {_show(value)}")
+    out = list(np.asarray(value, object).reshape(-1)) if isinstance(value, np.ndarray) else list(value)
+    if len(out) != n:
+        raise ConfigError(f"seed: {len(out)} seeds for {n} environments")
+    return [seed(s, f"seed[{i}]") for i, s in enumerate(out)]
+
+
+def seed_array(value, name: str = "seeds") -> np.ndarray:
+    """The functional env's seeds: integers from 0 to 2**63-1, as a 1-D int64 array."""
+    a = np.asarray(value)
+    if a.dtype == object:
+        a = np.asarray([seed(s, name) for s in a.reshape(-1)], np.int64)
+    if a.dtype.kind not in "iu" or a.ndim > 1:
+        raise ConfigError(f"{name} must be integers (a 1-D array), got {a.dtype} of shape {a.shape}")
+    if a.size and (a.min() < 0 or (a.dtype.kind == "u" and a.max() > SEED_MAX)):
+        bad = a[(a < 0) | (a > SEED_MAX)][0] if a.dtype.kind == "i" else a.max()
+        raise ConfigError(f"{name} must be integers from 0 to 2**63-1, got {bad}")
+    return a.astype(np.int64).reshape(-1)
+
+
+def mask(value, n: int, name: str = "reset_mask") -> np.ndarray:
+    """(n,) booleans (a 0/1 integer array is accepted; anything else is refused, never cast)."""
+    a = np.asarray(value)
+    if a.shape != (n,) or not (a.dtype == bool or (a.dtype.kind in "iu" and np.isin(a, (0, 1)).all())):
+        raise ConfigError(f"{name} must be ({n},) booleans, got {a.dtype} of shape {a.shape}")
+    return a.astype(bool)
+
+
+def reset_options(options, known: tuple, where: str) -> dict:
+    """The reset options this env uses; any other key is ignored (logged at debug level), as gym-pusht
+    ignores what it does not read: LeRobot's rollout passes {"lerobot_new_rollout": True}."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise ConfigError(f"options must be a dict (or None), got {_show(options)}")
+    unused = sorted(map(str, set(options) - set(known)))
+    if unused:
+        log.debug("%s.reset ignores option(s) it does not use: %s", where, ", ".join(unused))
+    return {k: v for k, v in options.items() if k in known and v is not None}
+
+
+def starts(value, rows: int, lo, hi, what: str = "[tee x, y, yaw, pusher x, y]") -> np.ndarray:
+    """reset_to_state: (5,) for every reset row or (rows, 5), finite, positions within [lo, hi] per column
+    (the walls; NaN bounds for columns that are angles). Returns (rows, 5) float64."""
+    try:
+        a = np.asarray(value, np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"reset_to_state is {what}: numbers, got {_show(value)}") from None
+    if a.shape not in ((5,), (rows, 5)):
+        raise ConfigError(f"reset_to_state is {what}: shape (5,) or ({rows}, 5), got {a.shape}")
+    a = np.broadcast_to(a, (rows, 5))
+    bad = ~np.isfinite(a).all(axis=1)
+    if bad.any():
+        raise ConfigError(f"reset_to_state must be finite numbers; row(s) {_rows(bad)}: {_show(a[bad][0].tolist())}")
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    check = ~np.isnan(lo)
+    out = ((a < lo) | (a > hi)) & check
+    if out.any():
+        r = np.flatnonzero(out.any(axis=1))
+        raise ConfigError(f"reset_to_state {what} puts a body outside the walls (positions run from {lo[check].min():g} "
+                          f"to {hi[check].max():g}); row(s) {_rows(out.any(axis=1))}: {_show(a[r[0]].tolist())}")
+    return a
+
+
+def _rows(bad: np.ndarray) -> str:
+    r = np.flatnonzero(bad)
+    return ", ".join(map(str, r[:8])) + (f" and {len(r) - 8} more" if len(r) > 8 else "")
+
+
+def actions(value, shape: tuple, low, high, what: str = "(x, y)") -> np.ndarray:
+    """Host actions: the exact `shape` (never reshaped: that would scramble environments), real numbers,
+    finite (a NaN or inf names its rows: a policy bug must not look like a pusher standing still),
+    clipped to the action space [low, high]. Returns float64."""
+    a = np.asarray(value)
+    if a.shape != shape:
+        n = f"one {what} per environment" if len(shape) == 2 else f"one {what}"
+        raise ConfigError(f"actions must have shape {shape}, {n}; got shape {a.shape} "
+                          "(never reshaped: that would scramble the environments)" if len(shape) == 2 else
+                          f"an action is {n}, shape {shape}; got shape {a.shape}")
+    if a.dtype.kind not in "fiu":
+        raise ConfigError(f"actions must be real numbers, got dtype {a.dtype}")
+    a = a.astype(np.float64)
+    finite = np.isfinite(a)
+    if not finite.all():
+        raise ConfigError(f"actions must be finite: {_nonfinite(finite, a)}")
+    return np.clip(a, low, high)
+
+
+def _nonfinite(finite: np.ndarray, a) -> str:
+    if finite.ndim == 1:
+        return f"got {_show(np.asarray(a).tolist())}"
+    bad = ~finite.all(axis=1)
+    first = np.asarray(a)[np.flatnonzero(bad)[0]]
+    return f"row(s) {_rows(bad)} (of {len(bad)}) hold non-finite values, e.g. {_show(first.tolist())}"
+
+
+def actions_on_device(a, n: int, xp) -> None:
+    """A device batch of actions (JAX): shape (n, 2) and finite, checked by one reduction on the device."""
+    if tuple(a.shape) != (n, 2):
+        raise ConfigError(f"actions must have shape ({n}, 2), one (x, y) per environment; got {tuple(a.shape)} "
+                          "(never reshaped: that would scramble the environments)")
+    if not np.issubdtype(np.dtype(a.dtype), np.number) or np.dtype(a.dtype).kind == "c":
+        raise ConfigError(f"actions must be real numbers, got dtype {a.dtype}")
+    finite = xp.isfinite(a)
+    if not bool(xp.all(finite)):
+        f = np.asarray(finite)
+        raise ConfigError(f"actions must be finite: {_nonfinite(f, np.asarray(a))}")
