@@ -59,6 +59,10 @@ def main(argv=None) -> int:
     p.add_argument("--json", type=Path, default=None)
     a = p.parse_args(argv)
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
+    # the plugin registers mjx_pusht on import; imported here too, so it need not be pip-installed (a GPU
+    # machine without a registry) for register_third_party_plugins to have found it
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "plugins" / "lerobot_env_mjx_pusht"))
+    import lerobot_env_mjx_pusht  # noqa: F401
     import lerobot.envs as envs_pkg
     import lerobot.scripts.lerobot_eval as lerobot_eval
 
