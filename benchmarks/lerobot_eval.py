@@ -2,6 +2,7 @@
 
     python -m benchmarks.lerobot_eval --policy POLICY_DIR --env pusht --episodes 500 --batch 500 --json out.json
     python -m benchmarks.lerobot_eval --policy POLICY_DIR --env mjx_pusht --episodes 500 --batch 500 --json out.json
+    python -m benchmarks.lerobot_eval ... --env.episode_length=50     # any other argument goes to lerobot-eval
 
 Runs LeRobot's own `lerobot.scripts.lerobot_eval.main` (the `lerobot-eval` console script, plugins
 registered as it registers them) in this process with the arguments a user passes, after wrapping
@@ -55,9 +56,8 @@ def main(argv=None) -> int:
     p.add_argument("--batch", type=int, default=500)
     p.add_argument("--device", default="cuda")
     p.add_argument("--out", type=Path, default=Path("outputs/bench-lerobot-eval"))
-    p.add_argument("--extra", nargs="*", default=[], help="more lerobot-eval arguments, e.g. --env.episode_length=50")
     p.add_argument("--json", type=Path, default=None)
-    a = p.parse_args(argv)
+    a, extra = p.parse_known_args(argv)  # the rest go to lerobot-eval as they are, e.g. --env.episode_length=50
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     # the plugin registers mjx_pusht on import; imported here too, so it need not be pip-installed (a GPU
     # machine without a registry) for register_third_party_plugins to have found it
@@ -79,7 +79,7 @@ def main(argv=None) -> int:
     out = a.out / f"{a.env}-{a.batch}-{int(time.time())}"
     args = [f"--policy.path={a.policy}", f"--policy.device={a.device}", "--policy.use_amp=false",
             f"--env.type={a.env}", f"--eval.n_episodes={a.episodes}", f"--eval.batch_size={a.batch}",
-            "--eval.use_async_envs=false", f"--output_dir={out}", *a.extra]
+            "--eval.use_async_envs=false", f"--output_dir={out}", *extra]
     if a.env == "mjx_pusht":
         args += ["--env.observation_height=96", "--env.observation_width=96"]
     sys.argv = ["lerobot-eval", *args]
