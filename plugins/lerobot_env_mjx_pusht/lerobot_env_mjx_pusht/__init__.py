@@ -48,8 +48,8 @@ def _name_task(env) -> None:
 class BatchRenders(gym.vector.VectorWrapper):
     """The drop-in's batch as lerobot-eval drives it: `call("render")` gives one frame per env for the first
     RENDERED envs (lerobot-eval keeps `call("render")[:n]` with n <= 10), taken from the observation images
-    the batch already rendered on the device, instead of drawing every env of the batch on the CPU each step.
-    Everything else is the batch's own."""
+    the batch already rendered on the device, instead of drawing every env of the batch on the CPU each step
+    (which a state obs_type still does, having no images). Everything else is the batch's own."""
 
     def __init__(self, env):
         super().__init__(env)
@@ -71,8 +71,8 @@ class BatchRenders(gym.vector.VectorWrapper):
 
     def call(self, name: str, *args, **kwargs):
         if name == "render":
-            if self._frames is None:
-                raise AttributeError("this obs_type has no images to render: use obs_type pixels_agent_pos")
+            if self._frames is None:  # no images observed (a state obs_type): the env draws every env's picture
+                return tuple(self.env.render() or ())[:RENDERED]
             return tuple(self._frames)
         return self.env.call(name, *args, **kwargs)
 
