@@ -39,18 +39,17 @@ def test_lerobot_eval_runs_the_policy_on_gym_pusht(tiny_policy, tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.warp
-def test_lerobot_eval_runs_the_policy_on_the_plugins_batch(tiny_policy, tmp_path):
-    info = lerobot_eval(tiny_policy, tmp_path / "mjx", "--env.type=mjx_pusht", "--env.backend=mjx-warp",
-                        "--env.observation_height=96", "--env.observation_width=96")
-    assert list(info["per_group"]) == ["mjx_pusht"]
-
-
-@pytest.mark.slow
-def test_lerobot_eval_runs_the_policy_on_the_plugins_per_env_vector_env(tiny_policy, tmp_path):
-    # LeRobot's defaults on a machine without a GPU: AsyncVectorEnv workers (forkserver) of MuJoCo C envs
-    info = lerobot_eval(tiny_policy, tmp_path / "mjx_cpu", "--env.type=mjx_pusht", "--env.backend=cpu",
-                        "--env.observation_height=96", "--env.observation_width=96")
-    assert list(info["per_group"]) == ["mjx_pusht"]
+def test_lerobot_eval_on_the_plugins_batch_scores_as_on_its_per_env_vector_env(tiny_policy, tmp_path):
+    """The same policy and seeds through lerobot-eval: the batch on MJX-Warp (float32) and LeRobot's defaults on
+    a machine without a GPU (AsyncVectorEnv workers of MuJoCo C envs, float64) give the same episodes."""
+    small = ("--env.type=mjx_pusht", "--env.observation_height=96", "--env.observation_width=96")
+    batch = lerobot_eval(tiny_policy, tmp_path / "mjx", *small, "--env.backend=mjx-warp")
+    per_env = lerobot_eval(tiny_policy, tmp_path / "mjx_cpu", *small, "--env.backend=cpu")
+    for info in (batch, per_env):
+        assert list(info["per_group"]) == ["mjx_pusht"]
+    (b,), (c,) = batch["per_task"], per_env["per_task"]
+    assert b["metrics"]["successes"] == c["metrics"]["successes"]
+    assert np.allclose(b["metrics"]["sum_rewards"], c["metrics"]["sum_rewards"], rtol=1e-3, atol=1e-4)
 
 
 def test_lerobot_reads_the_demos_as_its_own_writer_would_write_them(demos, tmp_path):
