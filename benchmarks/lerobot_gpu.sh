@@ -26,7 +26,10 @@ for stage in $stages; do
 import json, subprocess, sys, time
 n, rc, t0, t1, root = int(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4]), sys.argv[5]
 info = json.load(open(f"{root}/meta/info.json")) if rc == 0 else {}
-gpu = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"], capture_output=True, text=True).stdout.strip()
+try:
+    gpu = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"], capture_output=True, text=True).stdout.strip()
+except FileNotFoundError:
+    gpu = None
 du = subprocess.run(["du", "-sb", root], capture_output=True, text=True).stdout.split()[:1]
 print(json.dumps({"command": f"mjx-pusht demos --seeds {n}", "rc": rc, "wall_s": t1 - t0, "episodes": info.get("total_episodes"),
                   "frames": info.get("total_frames"), "bytes": int(du[0]) if du else None, "gpu": gpu,
