@@ -2,6 +2,7 @@
 
     python -m benchmarks.env_loop --envs 4096,16384,65536,131072 [--obs state] [--steps 50] [--json out.json]
     python -m benchmarks.env_loop --envs 4096,16384 --obs pixels
+    python -m benchmarks.env_loop --envs 16384 --obs pixels --cases scan_autoreset,scan_autoreset_ends --ends 10
 
 For each N (one process each, so that one size failing to fit is recorded, not fatal), on MJX-Warp:
 - `raw`: the physics alone: a jitted scan of `steps` control steps, each 10 `mjx.step`s of all N
@@ -20,6 +21,10 @@ For each N (one process each, so that one size failing to fit is recorded, not f
 - `dropin_numpy` / `dropin_torch`: the gym-pusht drop-in's vector env
   (`gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", ...)`, `pixels_agent_pos` with `--obs pixels`),
   random pixel targets, NumPy out (its default, what a gym-pusht loop reads) or torch tensors.
+- `*_ends` (`scan_autoreset_ends`, `gym_torch_ends`, `gym_numpy_ends`, `dropin_numpy_ends`,
+  `dropin_torch_ends`): the same loops with episodes of `--ends` control steps (default 10), so every
+  row ends and restarts several times in the timed steps (5 times in 50): the rate with resets in it.
+Every env case reports `episodes_reset`, the episodes that ended (and so were reset) in the timed steps.
 Each figure is N x steps / seconds after one warm-up (compile) call or 3 warm-up steps, timed until
 the results are ready on the device. Memory: the GPU's used bytes (nvidia-smi, every allocator:
 XLA, Warp, torch) after each case, and JAX's peak bytes in use.
@@ -38,15 +43,16 @@ import time
 ONE = r"""
 import json, os, subprocess, sys, time
 import numpy as np
-n, steps, obs_kind, cases = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], sys.argv[4].split(",")
+n, steps, obs_kind, cases, ends = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], sys.argv[4].split(","), int(sys.argv[5])
 import jax, jax.numpy as jnp
 import mjx_pusht
 from mujoco import mjx
 from mjx_pusht.envs.functional import PushTEnv
 from mjx_pusht.envs.wrappers import AutoReset
+from mjx_pusht.task.episode import Episode
 
 pixels = 96 if obs_kind == "pixels" else 0
-row = {"envs": n, "obs": obs_kind, "steps": steps, "graph_mode": os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE") or "default"}
+row = {"envs": n, "obs": obs_kind, "steps": steps, "ends": ends, "graph_mode": os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE") or "default"}
 
 def gpu_used():
     try:
@@ -113,8 +119,9 @@ def raw_zero_pose():
     jax.block_until_ready(run(d, jax.random.PRNGKey(1)))
     t0 = time.perf_counter(); jax.block_until_ready(run(d, jax.random.PRNGKey(2))); record("raw_zero_pose", time.perf_counter() - t0)
 
-def scan_autoreset():
-    ar = AutoReset(env, mode="same_step")
+def scan_autoreset(max_steps=None):
+    e = env if max_steps is None else PushTEnv(backend="mjx-warp", pixels=pixels, episode=Episode(max_steps=max_steps))
+    ar = AutoReset(e, mode="same_step")
     s = ar.reset(np.arange(n))
     @jax.jit
     def run(s):
@@ -123,17 +130,19 @@ def scan_autoreset():
             return ar.step(s, a), s.reward
         return jax.lax.scan(body, s, None, steps)
     s1, _ = jax.block_until_ready(run(s))
+    if max_steps is not None:  # fresh start queues: the warm-up's resets used them up
+        s1 = jax.block_until_ready(ar.refill(s1))
     t0 = time.perf_counter(); s2, r = jax.block_until_ready(run(s1)); dt = time.perf_counter() - t0
-    env.check(s2)
-    ended = int(np.asarray(s2.info["used"]).sum())
+    e.check(s2)
+    ended = int(np.asarray(s2.info["used"]).sum()) - int(np.asarray(s1.info["used"]).sum())
     # compiles 1: the timed call reused the first call's program (change 13's timed call compiled a second one)
-    record("scan_autoreset", dt, {"episodes_reset": ended, "max_resets_per_row": int(np.asarray(s2.info["used"]).max()),
+    record("scan_autoreset" + ("" if max_steps is None else "_ends"), dt, {"episodes_reset": ended, "max_resets_per_row": int(np.asarray(s2.info["used"]).max()),
                                   "compiles": run._cache_size()})
 
-def gym_loop(array_type, mode="same_step"):
+def gym_loop(array_type, mode="same_step", max_steps=None):
     import gymnasium as gym
     envs = gym.make_vec("mjx_pusht/PushT-v0", num_envs=n, backend="mjx-warp", obs_type="state" if not pixels else "pixels_agent_pos",
-                        array_type=array_type, autoreset_mode=mode)
+                        array_type=array_type, autoreset_mode=mode, max_episode_steps=max_steps or 300)
     obs, _ = envs.reset(seed=0)
     if array_type == "torch":
         import torch
@@ -150,19 +159,22 @@ def gym_loop(array_type, mode="same_step"):
     for _ in range(3):
         obs, r, te, tr, info = envs.step(act(obs))
     sync(); jax.block_until_ready(envs.unwrapped._state.reward) if hasattr(envs, "unwrapped") else None
+    ended = 0
     t0 = time.perf_counter()
     for _ in range(steps):
         obs, r, te, tr, info = envs.step(act(obs))
+        ended = ended + (te | tr).sum()
     sync(); jax.block_until_ready(envs._state.reward)
-    record("gym_" + array_type + ("" if mode == "same_step" else "_" + mode), time.perf_counter() - t0,
-           {"output": type(r).__module__.split(".")[0], "autoreset_mode": mode})
+    record("gym_" + array_type + ("" if mode == "same_step" else "_" + mode) + ("" if max_steps is None else "_ends"),
+           time.perf_counter() - t0, {"output": type(r).__module__.split(".")[0], "autoreset_mode": mode,
+                                      "episodes_reset": int(ended)})
     envs.close()
 
-def dropin(array_type):
+def dropin(array_type, max_steps=None):
     import gymnasium as gym
     envs = gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", num_envs=n, backend="mjx-warp",
                         obs_type="pixels_agent_pos" if pixels else "state", array_type=array_type,
-                        autoreset_mode="same_step")
+                        autoreset_mode="same_step", max_episode_steps=max_steps or 300)
     envs.reset(seed=0)
     rng = np.random.default_rng(0)
     acts = [rng.uniform(0, 512, (n, 2)).astype(np.float32) for _ in range(4)]
@@ -172,20 +184,26 @@ def dropin(array_type):
     for i in range(3):
         envs.step(acts[i % 4])
     jax.block_until_ready(envs._state.reward)
+    ended = 0
     t0 = time.perf_counter()
     for i in range(steps):
         obs, r, te, tr, info = envs.step(acts[i % 4])
+        ended = ended + (te | tr).sum()
     if array_type == "torch":
         torch.cuda.synchronize()
     jax.block_until_ready(envs._state.reward)
-    record("dropin_" + array_type, time.perf_counter() - t0, {"output": type(r).__module__.split(".")[0]})
+    record("dropin_" + array_type + ("" if max_steps is None else "_ends"), time.perf_counter() - t0,
+           {"output": type(r).__module__.split(".")[0], "episodes_reset": int(ended)})
     envs.close()
 
 for c in cases:
     attempt(c, {"raw": raw, "raw_zero_pose": raw_zero_pose, "scan_autoreset": scan_autoreset,
                 "gym_torch": lambda: gym_loop("torch"), "gym_torch_next_step": lambda: gym_loop("torch", "next_step"),
                 "gym_numpy": lambda: gym_loop("numpy"), "dropin_numpy": lambda: dropin("numpy"),
-                "dropin_torch": lambda: dropin("torch")}[c])
+                "dropin_torch": lambda: dropin("torch"), "scan_autoreset_ends": lambda: scan_autoreset(ends),
+                "gym_torch_ends": lambda: gym_loop("torch", max_steps=ends),
+                "gym_numpy_ends": lambda: gym_loop("numpy", max_steps=ends),
+                "dropin_numpy_ends": lambda: dropin("numpy", ends), "dropin_torch_ends": lambda: dropin("torch", ends)}[c])
 if "raw" in row and "control_steps_per_s" in row["raw"]:
     for c in cases:
         if c != "raw" and "control_steps_per_s" in row.get(c, {}):
@@ -202,12 +220,14 @@ def main(argv=None) -> int:
     p.add_argument("--obs", default="state", choices=["state", "pixels"])
     p.add_argument("--steps", type=int, default=50)
     p.add_argument("--cases", default=CASES)
+    p.add_argument("--ends", type=int, default=10,
+                   help="control steps an episode in the *_ends cases (default 10: 5 resets a row in 50 steps)")
     p.add_argument("--json", default=None)
     args = p.parse_args(argv)
     rows = []
     for n in (int(x) for x in args.envs.split(",")):
         t0 = time.perf_counter()
-        r = subprocess.run([sys.executable, "-c", ONE, str(n), str(args.steps), args.obs, args.cases],
+        r = subprocess.run([sys.executable, "-c", ONE, str(n), str(args.steps), args.obs, args.cases, str(args.ends)],
                            capture_output=True, text=True)
         try:
             row = json.loads(r.stdout.strip().splitlines()[-1])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.metadata
 import os
 
 import numpy as np
@@ -13,6 +14,15 @@ from mjx_pusht.model.scene import SceneSpec  # noqa: E402
 from mjx_pusht.scenario import Scenario  # noqa: E402
 
 SEEDS = np.arange(8)
+
+# tests/lerobot/ runs LeRobot's own lerobot-eval and lerobot-train (lerobot 0.6.1 needs Python 3.12): it is
+# collected only where lerobot is installed, the venv `make test-lerobot` builds (asked of the installed
+# distributions: `import lerobot` would find tests/lerobot/ itself, a namespace package, where it is not)
+try:
+    importlib.metadata.version("lerobot")
+    collect_ignore = []
+except importlib.metadata.PackageNotFoundError:
+    collect_ignore = ["lerobot"]
 
 
 def pytest_collection_modifyitems(config, items):

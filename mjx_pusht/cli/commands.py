@@ -7,6 +7,7 @@ import os
 import sys
 
 from mjx_pusht.cli.compare import cmd_compare
+from mjx_pusht.cli.demos import cmd_demos
 from mjx_pusht.cli.eval import cmd_eval
 from mjx_pusht.cli.parser import UsageError, build_parser
 from mjx_pusht.cli.scene import cmd_scene, cmd_tree
@@ -23,7 +24,7 @@ def cmd_train(args) -> int:
 
 
 COMMANDS = {"scene": cmd_scene, "tree": cmd_tree, "sweep": cmd_sweep, "eval": cmd_eval, "compare": cmd_compare,
-            "train": cmd_train}
+            "train": cmd_train, "demos": cmd_demos}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -233,4 +233,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--evals", nargs=2, type=Path, metavar=("EVAL_DIR", "EVAL_DIR"), default=None,
                    help="pair two finished eval folders of the same controller and seeds, one run on the cpu backend "
                         "and one on MJX (e.g. on two machines), into the closed-loop report; runs nothing")
+
+    from mjx_pusht.cli.demos import add_parser as add_demos
+
+    add_demos(sub, positive=_positive, replace_help=REPLACE_HELP)
     return p

@@ -1,0 +1,157 @@
+"""Demonstrations for LeRobot: a controller's episodes on the gym-pusht drop-in, written as a LeRobot dataset.
+
+    write_demos("expert", seeds=np.arange(1000), out=Path("outputs/demos"))
+    lerobot-train --dataset.repo_id=local/mjx_pusht_demos --dataset.root=outputs/demos --policy.type=diffusion ...
+
+The episodes run on the drop-in's vector env (`mjx_pusht/PushT-gym-pusht-v0`, the batch on the GPU
+where there is one), and what is written is what a LeRobot user of gym-pusht records: the 96 x 96
+image and `agent_pos` before each action, the action in gym-pusht's units (an absolute target in
+pixels), and the step's reward, done and success. The env is stepped with the action exactly as
+written (float32 pixels), so replaying an episode's actions in the drop-in reproduces its states.
+
+The controllers are this project's (world frame, metres): a velocity command v becomes the target
+a PD-tracked pusher settles to that velocity with, pusher + (kv / kp) v (gym-pusht's law,
+kp 100, kv 20); a position action (`--action position`) is the target itself.
+"""
+
+from __future__ import annotations
+
+import shutil
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from mjx_pusht.errors import ConfigError
+from mjx_pusht.io.lerobot_dataset import LeRobotDatasetWriter
+from mjx_pusht.model import gym_pusht as frame
+
+FPS = 10  # gym-pusht's control rate
+TASK = "Push the T-shaped block onto the T-shaped target."  # the task text of LeRobot's lerobot/pusht
+IMAGE_SIZE = 96
+LEAD = frame.KV / frame.KP  # s: a PD-tracked pusher moving at v settles this far behind its target
+SAMPLE = 10  # every 10th frame of an episode goes into the image statistics (LeRobot samples its own too)
+
+
+def targets_px(ctrl, carry, obs_px: dict, info: dict, t: int, key):
+    """The controller's actions for a batch as gym-pusht targets (float32 pixels), and its next carry."""
+    from mjx_pusht.task.rules import observe
+
+    pusher = frame.to_world(np.asarray(info["pos_agent"], np.float64))
+    pose = np.asarray(info["block_pose"], np.float64)
+    tee = frame.pose_to_world(pose[:, 0:2], pose[:, 2])
+    obs = observe(pusher, tee)
+    action, carry = ctrl.act(carry, obs, t, key)
+    action = np.asarray(action, np.float64)
+    target = pusher + LEAD * action if ctrl.action_type == "velocity" else action
+    px = frame.to_px(target)
+    # a non-finite action is the controller's bug: said, never recorded as a pusher standing still
+    if not np.isfinite(px).all():
+        rows = np.flatnonzero(~np.isfinite(px).all(-1))
+        raise ConfigError(f"controller {ctrl.name} gave non-finite actions at step {t} in rows {rows[:8].tolist()}")
+    return np.clip(px, 0.0, 512.0).astype(np.float32), carry
+
+
+def _encode(images: np.ndarray, sample: bool):
+    """PNG files of a step's images (one a live row), and their histogram if the step is in the stats' sample."""
+    from mjx_pusht.io.lerobot_dataset import histogram, png
+
+    return [png(img) for img in images], histogram(images) if sample else None
+
+
+def rollout_batch(env, ctrl, seeds: np.ndarray, max_steps: int, encoder, writer: LeRobotDatasetWriter,
+                  keep: int) -> list[dict]:
+    """One batch of episodes (one per seed) on the drop-in's vector env; the first `keep` episodes' frames up to
+    their ends (the rest pad the batch to its compiled shape).
+    Each step's images of the live rows are PNG-encoded on `encoder`'s threads while the batch steps on; every
+    SAMPLE-th frame of an episode counts into the writer's image statistics."""
+    from mjx_pusht.task.controllers import seed_key
+
+    n = env.num_envs
+    key = seed_key(seeds)
+    carry = ctrl.init(key)
+    obs, info = env.reset(seed=[int(s) for s in seeds])
+    frames = {k: [] for k in ("state", "action", "reward", "done", "success")}
+    encoded = []  # (live rows, future of their PNGs)
+    live = np.ones(n, bool)
+    ends = np.full(n, max_steps)
+    for t in range(max_steps):
+        action, carry = targets_px(ctrl, carry, obs, info, t, key)
+        rows = np.flatnonzero(live[:keep])
+        encoded.append((rows, encoder.submit(_encode, np.asarray(obs["pixels"])[rows], t % SAMPLE == 0)))
+        frames["state"].append(np.asarray(obs["agent_pos"], np.float32))
+        frames["action"].append(action)
+        obs, reward, terminated, truncated, info = env.step(action)
+        done = np.asarray(terminated) | np.asarray(truncated)
+        frames["reward"].append(np.asarray(reward, np.float32))
+        frames["done"].append(done)
+        frames["success"].append(np.asarray(terminated, bool))
+        ends[live & done] = t + 1
+        live &= ~done
+        if not live.any():
+            break
+    pngs: list[list[bytes]] = [[] for _ in range(keep)]
+    for rows, future in encoded:
+        files, hist = future.result()
+        for i, f in zip(rows, files, strict=True):
+            pngs[i].append(f)
+        if hist is not None:
+            writer.image_histogram += hist
+            writer.image_frames += len(rows)
+    stacked = {k: np.stack(v, axis=1) for k, v in frames.items()}  # (n, T, ...)
+    return [{"png": pngs[i], **{k: v[i, : ends[i]] for k, v in stacked.items()}} for i in range(keep)]
+
+
+def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str = "auto", batch: int | None = None,
+                max_steps: int = 300, action: str | None = None, replace: bool = False, progress: bool = True) -> dict:
+    """Roll out `controller` from each seed's gym-pusht start on the drop-in and write the episodes to `out` as a
+    LeRobot dataset. An existing dataset in `out` is replaced only with `replace`, and only once the new one is
+    complete. Returns a summary (episodes, frames, success rate, seconds)."""
+    import gymnasium as gym
+
+    import mjx_pusht  # noqa: F401 - registers the drop-in
+    from mjx_pusht.backends.base import resolve
+    from mjx_pusht.io.outputs import OutputError, claim_out_dir
+    from mjx_pusht.task.controllers import ControllerError, load
+
+    ctrl = load(controller, action_type=action)
+    if ctrl.pixels:
+        raise ControllerError(f"controller {controller!r} looks at the chapter scene's camera; the demos run "
+                              "gym-pusht's scene: give a controller that reads the state")
+    out = Path(out)
+    if (out / "meta" / "info.json").exists() and not replace:
+        raise OutputError(f"--out {out} holds a LeRobot dataset; pass --replace to overwrite it, or choose another --out")
+    name, _ = resolve(backend)
+    out = claim_out_dir(out, "demos", {"controller": controller, "seeds": seeds.tolist(), "backend": name,
+                                       "max_steps": max_steps, "action": action}, replace=replace)
+    batch = min(len(seeds), batch or (64 if name == "cpu" else 1024))
+    env = gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", num_envs=batch, vectorization_mode="vector_entry_point",
+                       backend=name, obs_type="pixels_agent_pos", observation_width=IMAGE_SIZE,
+                       observation_height=IMAGE_SIZE, render_mode=None, max_episode_steps=max_steps,
+                       autoreset_mode="disabled", array_type="numpy")
+    partial = out / ".demos-partial"
+    shutil.rmtree(partial, ignore_errors=True)
+    t0 = time.perf_counter()
+    successes = 0
+    writer = LeRobotDatasetWriter(partial, FPS, TASK, IMAGE_SIZE)
+    with ThreadPoolExecutor() as encoder:
+        for lo in range(0, len(seeds), batch):
+            rows = seeds[lo : lo + batch]
+            # the last batch is padded with the seeds after it: one batch shape, one compiled program
+            pad = np.arange(rows[-1] + 1, rows[-1] + 1 + batch - len(rows), dtype=np.int64)
+            episodes = rollout_batch(env, ctrl, np.concatenate([rows, pad]), max_steps, encoder, writer, len(rows))
+            successes += sum(bool(ep["success"][-1]) for ep in episodes)
+            writer.add(episodes)
+            if progress:
+                print(f"demos: {lo + len(rows)}/{len(seeds)} episodes, {writer.frames} frames, "
+                      f"{time.perf_counter() - t0:.1f} s", flush=True)
+        writer.finish()
+    env.close()
+    for part in ("data", "meta"):  # the new dataset replaces the old one whole, only now that it is complete
+        shutil.rmtree(out / part, ignore_errors=True)
+        (partial / part).rename(out / part)
+    partial.rmdir()
+    seconds = time.perf_counter() - t0
+    return {"episodes": len(seeds), "frames": writer.frames, "success_rate": successes / len(seeds),
+            "backend": name, "batch": batch, "seconds": round(seconds, 2), "root": str(out)}

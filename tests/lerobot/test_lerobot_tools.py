@@ -1,0 +1,103 @@
+"""lerobot 0.6.1's own `lerobot-eval` and `lerobot-train`, unchanged, on mjx_pusht: eval of a small policy on
+gym-pusht and on the plugin's env (the batch on MJX-Warp, and LeRobot's usual vector env of MuJoCo C envs),
+and training on `mjx-pusht demos` output, whose files LeRobot's own writer would lay out alike."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from conftest import run
+
+EPISODE = 20  # control steps an eval episode (gym-pusht's 300 would take minutes on two CPU cores)
+
+
+def lerobot_eval(policy, out, *env_args):
+    run("lerobot-eval", f"--policy.path={policy}", "--policy.device=cpu", "--policy.use_amp=false",
+        "--eval.batch_size=2", "--eval.n_episodes=2", f"--output_dir={out}", f"--env.episode_length={EPISODE}",
+        *env_args, cwd=out.parent)
+    info = json.loads((out / "eval_info.json").read_text())
+    (task,) = info["per_task"]
+    episodes = [dict(zip(("sum_reward", "success"), x, strict=True))
+                for x in zip(task["metrics"]["sum_rewards"], task["metrics"]["successes"], strict=True)]
+    assert info["overall"]["n_episodes"] == 2 and len(episodes) == 2
+    assert all(np.isfinite(e["sum_reward"]) and e["sum_reward"] >= 0 for e in episodes)
+    videos = sorted(out.glob("videos/*/eval_episode_*.mp4"))
+    assert len(videos) == 2 and all(v.stat().st_size > 0 for v in videos)
+    return info
+
+
+@pytest.mark.slow
+def test_lerobot_eval_runs_the_policy_on_gym_pusht(tiny_policy, tmp_path):
+    # lerobot 0.6.1's default AsyncVectorEnv cannot make gym_pusht/PushT-v0 in its workers: sync, as users must
+    info = lerobot_eval(tiny_policy, tmp_path / "pusht", "--env.type=pusht", "--eval.use_async_envs=false")
+    assert list(info["per_group"]) == ["pusht"]
+
+
+@pytest.mark.slow
+@pytest.mark.warp
+def test_lerobot_eval_on_the_plugins_batch_scores_as_on_its_per_env_vector_env(tiny_policy, tmp_path):
+    """The same policy and seeds through lerobot-eval: the batch on MJX-Warp (float32) and LeRobot's defaults on
+    a machine without a GPU (AsyncVectorEnv workers of MuJoCo C envs, float64) give the same episodes."""
+    small = ("--env.type=mjx_pusht", "--env.observation_height=96", "--env.observation_width=96")
+    batch = lerobot_eval(tiny_policy, tmp_path / "mjx", *small, "--env.backend=mjx-warp")
+    per_env = lerobot_eval(tiny_policy, tmp_path / "mjx_cpu", *small, "--env.backend=cpu")
+    for info in (batch, per_env):
+        assert list(info["per_group"]) == ["mjx_pusht"]
+    (b,), (c,) = batch["per_task"], per_env["per_task"]
+    assert b["metrics"]["successes"] == c["metrics"]["successes"]
+    assert np.allclose(b["metrics"]["sum_rewards"], c["metrics"]["sum_rewards"], rtol=1e-3, atol=1e-4)
+
+
+def test_lerobot_reads_the_demos_as_its_own_writer_would_write_them(demos, tmp_path):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    ours = LeRobotDataset("local/mjx_pusht_demos", root=demos)
+    table = pq.read_table(sorted(demos.glob("data/*/*.parquet"))[0])
+    assert ours.num_episodes == 2 and ours.num_frames == table.num_rows and ours.fps == 10
+    last = ours[ours.num_frames - 1]
+    assert bool(last["next.done"]) and int(last["episode_index"]) == 1
+    row = table.slice(5, 1).to_pylist()[0]
+    frame = ours[5]
+    assert np.array_equal(frame["observation.state"].numpy(), np.float32(row["observation.state"]))
+    assert np.array_equal(frame["action"].numpy(), np.float32(row["action"]))
+    assert frame["task"] == "Push the T-shaped block onto the T-shaped target."
+    # LeRobot's own writer, given the same features and one frame of ours, writes the same schema
+    info = json.loads((demos / "meta/info.json").read_text())
+    features = {k: v for k, v in info["features"].items()
+                if k not in ("timestamp", "frame_index", "episode_index", "index", "task_index")}
+    theirs = LeRobotDataset.create("local/theirs", fps=10, features=features, root=tmp_path / "theirs",
+                                   use_videos=False)
+    theirs.add_frame({k: (frame[k].permute(1, 2, 0).numpy() * 255).round().astype(np.uint8) if k == "observation.image"
+                      else np.atleast_1d(frame[k].numpy()) for k in features} | {"task": frame["task"]})
+    theirs.save_episode()
+    theirs.finalize()
+    their_info = json.loads((tmp_path / "theirs/meta/info.json").read_text())
+    assert their_info["features"] == info["features"]
+    assert {k: their_info[k] for k in ("codebase_version", "data_path", "video_path", "chunks_size")} == \
+        {k: info[k] for k in ("codebase_version", "data_path", "video_path", "chunks_size")}
+    their_table = pq.read_table(sorted((tmp_path / "theirs").glob("data/*/*.parquet"))[0])
+    assert their_table.schema.remove_metadata() == table.schema.remove_metadata()
+    stats = json.loads((tmp_path / "theirs/meta/stats.json").read_text())
+    assert set(stats) == set(json.loads((demos / "meta/stats.json").read_text()))
+
+
+@pytest.mark.slow
+def test_lerobot_train_trains_on_the_demos(demos, tmp_path):
+    out = tmp_path / "train"
+    p = run("lerobot-train", "--dataset.repo_id=local/mjx_pusht_demos", f"--dataset.root={demos}",
+            "--policy.type=act", "--policy.device=cpu", "--policy.push_to_hub=false",
+            "--policy.pretrained_backbone_weights=null", "--policy.dim_model=32", "--policy.n_heads=2",
+            "--policy.dim_feedforward=64", "--policy.n_encoder_layers=1", "--policy.chunk_size=8",
+            "--policy.n_action_steps=8", "--policy.use_vae=false", "--steps=4", "--batch_size=2", "--num_workers=0",
+            "--save_freq=4", "--log_freq=1", f"--output_dir={out}", "--wandb.enable=false", cwd=tmp_path)
+    losses = [float(x) for x in re.findall(r"step:\d+ .*? loss:([0-9.eE+-]+)", p.stdout + p.stderr)]
+    assert len(losses) == 4 and all(np.isfinite(losses))
+    step = json.loads((out / "checkpoints/000004/training_state/training_step.json").read_text())
+    assert step["step"] == 4
+    config = json.loads((out / "checkpoints/000004/pretrained_model/train_config.json").read_text())
+    assert config["dataset"]["root"] == str(demos)
+    assert (out / "checkpoints/000004/pretrained_model/model.safetensors").stat().st_size > 0
