@@ -407,7 +407,7 @@ def test_a_ppo_checkpoint_acts_as_braxs_own_deterministic_policy(tmp_path):
     from brax.training.acme import running_statistics, specs
     from brax.training.agents.ppo import networks as ppo_networks
 
-    from mjx_pusht.train.policy import apply_ppo
+    from mjx_pusht.train.ppo_policy import apply_ppo
     from mjx_pusht.train.ppo import to_checkpoint
 
     nets = ppo_networks.make_ppo_networks(5, 2, preprocess_observations_fn=running_statistics.normalize,

@@ -33,6 +33,7 @@ FORMAT = "mjx_pusht.policy/2"  # /1: one head, the last action as memory (NOTES,
 OBS_TYPES = ("state", "keypoints", "pixels_agent_pos")
 OBS_SIZE = {"state": 5, "keypoints": 16}  # the observations' own widths (what a PPO policy reads)
 ACTIVATIONS = ("relu", "silu")
+PPO_ACTS = ("mean", "sample")  # a PPO policy's action: its Gaussian's mean, or a draw keyed by seed and step
 # A pixel policy's image trunk: 3x3 convolutions of stride 2, no padding (96 -> 47 -> 23 -> 11 -> 5 pixels),
 # then the flattened 5 x 5 x 32 map is read into the T's pose by two Dense layers (Pose_0, Pose_1), and the policy
 # acts on that estimate as a state policy acts on the true pose (`pose_features`). Training teaches the reader the
@@ -159,13 +160,6 @@ def apply(params: dict, meta: dict, x, image=None):
 
         return _rowwise(dense, x, _trunk(params, act, image, x.dtype))
     return _rowwise(lambda v: decode(_mlp(params, meta, act, v)), x)
-
-
-def apply_ppo(params: dict, meta: dict, obs):
-    """A PPO policy (ppo.py) on raw observations (..., obs size): Brax's normalisation, its MLP (silu between
-    layers), and its deterministic action, tanh of the Gaussian's location (the first 2 outputs); in NumPy row by
-    row (`_rowwise`)."""
-    return _rowwise(lambda o: array_namespace(o).tanh(_mlp(params, meta, "silu", o)[..., :2]) * CTRL_LIMIT, obs)
 
 
 def pose_target(state):
@@ -356,7 +350,9 @@ def _check(path, params, meta) -> None:
         if not (np.isfinite(kernel).all() and np.isfinite(layer["bias"]).all()):
             raise ControllerError(f"policy checkpoint {path}: layer Dense_{i} holds non-finite weights")
         width = kernel.shape[1]
-    if ppo and len(dense) and width in (2, 4):
+    if ppo and meta.get("act", "mean") not in PPO_ACTS:
+        raise ControllerError(f"policy checkpoint {path}: unknown PPO action {meta.get('act')!r} (mean or sample)")
+    if ppo and len(dense) and (width == 4 or (width == 2 and meta.get("act", "mean") == "mean")):
         return
     if not len(dense) or width != OUTPUTS:
         raise ControllerError(f"policy checkpoint {path}: its layers end in {width} outputs, not {OUTPUTS} "
@@ -385,7 +381,9 @@ class PolicyController(Controller):
 
     def act(self, carry, obs, t, key):
         if self.meta.get("method") == "ppo":
-            return apply_ppo(self.params, self.meta, obs[self.meta["obs_type"]]), carry
+            from mjx_pusht.train.ppo_policy import apply_ppo  # it builds on this module's layers
+
+            return apply_ppo(self.params, self.meta, obs[self.meta["obs_type"]], key, t), carry
         action, memory = apply(self.params, self.meta, features(obs, self.meta["obs_type"], carry), obs.get("pixels"))
         return action, memory
 
