@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pusht.backends.base import make_backend
-from mjx_pusht.cli.banner import tier
+from mjx_pusht.backends.factory import make_backend
+from mjx_pusht.io.banner import tier
 from mjx_pusht.scenario import Scenario
 
 

@@ -23,8 +23,9 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjx_pusht.backends.base import make_backend, versions
-from mjx_pusht.cli.banner import tier as tier_name
+from mjx_pusht.backends.base import versions
+from mjx_pusht.backends.factory import make_backend
+from mjx_pusht.io.banner import tier as tier_name
 from mjx_pusht.scenario import Scenario
 
 RESULTS = Path(__file__).parent / "results"

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pusht.backends.base import versions
-from mjx_pusht.cli.banner import tier as tier_name
+from mjx_pusht.io.banner import tier as tier_name
 from mjx_pusht.task.reset import start_poses, start_state
 
 RESULTS = Path(__file__).parent / "results"

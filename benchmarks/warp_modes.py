@@ -160,7 +160,7 @@ def main(argv=None) -> int:
         return 0
 
     from mjx_pusht.backends.base import versions
-    from mjx_pusht.cli.banner import tier
+    from mjx_pusht.io.banner import tier
 
     root = a.cache_root or Path(tempfile.mkdtemp(prefix="warp-modes-"))
     out: dict = {"tier": tier(), "versions": versions(), "batch": a.batch, "variants": {}}

@@ -34,7 +34,8 @@ elif _os.environ.get("MUJOCO_GL") in ("egl", "osmesa") and _sys.platform.startsw
 # JAX then grows its pool as it needs instead; a user's own setting wins.
 _os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
 
-from mjx_pusht.backends.base import make_backend, resolve
+from mjx_pusht.backends.base import resolve
+from mjx_pusht.backends.factory import make_backend
 from mjx_pusht.backends.results import Rollouts
 from mjx_pusht.model.scene import SceneSpec, build_model, scene_xml
 from mjx_pusht.model.tree import (

@@ -337,7 +337,7 @@ def test_workers_from_a_script_without_a_main_guard_are_one_line(tmp_path):
     script = tmp_path / "unguarded.py"
     script.write_text(
         "import numpy as np\n"
-        "from mjx_pusht.backends.base import make_backend\n"
+        "from mjx_pusht.backends.factory import make_backend\n"
         "from mjx_pusht.scenario import Scenario\n"
         "from mjx_pusht.task.controllers import load\n"
         "print('BANNER')\n"

@@ -2,7 +2,8 @@
 
 Everything downstream (tables, summaries, recordings, comparison, benchmarks) holds a
 `Backend` and reads `Rollouts`; it never asks which backend made them, and never probes one
-for what it offers: every backend has every member below.
+for what it offers: every backend has every member below. The implementations (cpu.py, mjx.py) import
+this module, never the other way; `factory.make_backend` builds one by name.
 """
 
 from __future__ import annotations
@@ -100,17 +101,3 @@ def resolve(name: str) -> tuple[str, str]:
             return "mjx-warp", "auto: a GPU is present and MJX-Warp runs the scene as authored"
         return "cpu", "auto: a GPU is present but warp-lang is not; mjx-jax would change the pusher shape, so cpu"
     return "cpu", "auto: no GPU here; MuJoCo C on every core is the fastest faithful path"
-
-
-def make_backend(name: str, scenario, **kwargs) -> Backend:
-    """Build a backend by name (`auto` is resolved first); MJX keyword options pass through."""
-    name, _ = resolve(name)
-    if name == "cpu":
-        from mjx_pusht.backends.cpu import CpuBackend
-
-        return CpuBackend(scenario, nthread=kwargs.get("nthread"), workers=kwargs.get("workers", 1))
-    from mjx_pusht.backends.mjx import MjxBackend
-
-    kwargs.pop("nthread", None)
-    kwargs.pop("workers", None)  # CPU processes: the MJX backends batch on their device instead
-    return MjxBackend(scenario, IMPL[name], **kwargs)

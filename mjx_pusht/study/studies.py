@@ -15,8 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pusht.backends.base import make_backend, resolve, versions
-from mjx_pusht.cli.banner import tier
+from mjx_pusht.backends.base import resolve, versions
+from mjx_pusht.backends.factory import make_backend
+from mjx_pusht.io.banner import tier
 from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json, prepare_out_dir
 from mjx_pusht.model.scene import SceneSpec
 from mjx_pusht.scenario import Scenario

@@ -40,7 +40,7 @@ from mjx_pusht.errors import ConfigError
 from mjx_pusht.io.outputs import atomic_write_bytes
 from mjx_pusht.train.dagger import held_out_seeds
 from mjx_pusht.train.policy import OBS_SIZE, PPO_ACTS
-from mjx_pusht.train.run import TrainError, config_dict, resume_tree
+from mjx_pusht.train.resume import TrainError, config_dict, resume_tree
 
 SUCCESS_BONUS = 10.0
 SHAPING = 10.0
@@ -200,7 +200,8 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     from mjx_pusht.study.stats import wilson
     from mjx_pusht.task.episode import Episode
     from mjx_pusht.train.policy import save
-    from mjx_pusht.train.run import _kept, write_curve
+    from mjx_pusht.train.curve import kept as kept_row
+    from mjx_pusht.train.curve import write_curve
 
     ckpt = out / "checkpoints"
     restored, curve = _load_resume(ckpt / RESUME, cfg) if resume else (None, [])
@@ -280,7 +281,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     except _BudgetSpent:
         bar.write(f"stopping after judgement {len(curve) - 1}: the {minutes:g}-minute budget is spent")
     bar.close()
-    kept = _kept(curve, keep)
+    kept = kept_row(curve, keep)
     if kept is not None and kept["iteration"] != curve[-1]["iteration"]:
         shutil.copyfile(ckpt / f"policy_{kept['iteration']:03d}.msgpack", out / "policy.msgpack")
         print(f"keeping judgement {kept['iteration']}'s policy: {kept['validation_success']:.1%} on the "

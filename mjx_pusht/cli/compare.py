@@ -1,0 +1,71 @@
+"""`mjx-pusht compare`: MJX against MuJoCo C on the same seeds: open loop (the chapter's nudge), closed loop
+(a controller's episodes), or two finished evals paired (--evals)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from mjx_pusht.cli.parser import UsageError
+
+
+def cmd_compare(args) -> int:
+    from mjx_pusht.backends.base import IMPL, BackendError
+    from mjx_pusht.io.banner import Banner
+    from mjx_pusht.io.outputs import claim_out_dir
+    from mjx_pusht.study.compare import compare
+    from mjx_pusht.study.seeds import parse_seeds
+
+    if args.evals:
+        return _compare_evals(args)
+    seeds = parse_seeds(args.seeds)
+    if args.backend not in ("mjx-jax", "mjx-warp"):
+        raise BackendError(f"compare takes --backend mjx-jax or mjx-warp, not {args.backend!r}")
+    controller = None
+    if args.controller:  # a controller that cannot load is a one-line error before anything is written
+        from mjx_pusht.task.controllers import load
+
+        controller = load(args.controller)
+    out = claim_out_dir(args.out, "compare", {k: getattr(args, k) for k in (
+        "seeds", "backend", "controller", "reset", "max_steps", "root_cause", "tolerance", "iterations")},
+        replace=args.replace)
+    banner = Banner("compare")
+    if controller is not None:
+        from mjx_pusht.backends.cpu import default_threads
+        from mjx_pusht.study.closed_loop import compare_episodes
+        from mjx_pusht.task.episode import Episode
+
+        r = compare_episodes(seeds, IMPL[args.backend], out, controller=controller,
+                             reset=args.reset, episode=Episode(max_steps=args.max_steps), workers=default_threads())
+        _print_episodes(r, out)
+        banner.done()
+        return 0
+    opts = {k: v for k, v in (("tolerance", args.tolerance), ("iterations", args.iterations)) if v is not None}
+    r = compare(seeds, IMPL[args.backend], out, root_cause=args.root_cause, mjx_options=opts)
+    w = r["none"]
+    print(f"settle_max_abs_err {w['settle_max_abs_err']:.2e} (split-tee {r['split-tee']['settle_max_abs_err']:.2e}); "
+          f"verdict_agreement {w['verdict_agreement']:.3f} (split-tee {r['split-tee']['verdict_agreement']:.3f})")
+    print(f"outcome_within_cpu_baseline: {r['outcomes']['outcome_within_cpu_baseline']}")
+    print(f"report: {out / 'compare.md'}\njson: {out / 'compare.json'}\nplot: {out / 'compare.png'}")
+    banner.done()
+    return 0
+
+
+def _compare_evals(args) -> int:
+    from mjx_pusht.io.outputs import claim_out_dir
+
+    if args.controller:
+        raise UsageError("--evals pairs two finished evals; their controller is theirs, so --controller is not taken")
+    from mjx_pusht.study.closed_loop import evals_report, write_report
+
+    report = evals_report(*args.evals)  # a refused pairing leaves no --out folder behind
+    out = claim_out_dir(args.out, "compare", {"evals": [str(p.resolve()) for p in args.evals]}, replace=args.replace)
+    _print_episodes(write_report(out, report), out)
+    return 0
+
+
+def _print_episodes(r: dict, out: Path) -> None:
+    d = r["success_difference_mjx_minus_cpu"]
+    print(f"success: cpu {r['cpu']['success_rate']:.2%}, {r['impl']} {r['mjx']['success_rate']:.2%} "
+          f"(difference {d['difference']:+.2%}, 95% {d['ci95'][0]:+.2%} to {d['ci95'][1]:+.2%}); same verdict on "
+          f"{r['per_seed_success_agreement']['mjx_vs_cpu']:.2%} of seeds")
+    print(f"report: {out / 'compare_episodes.md'}\njson: {out / 'compare_episodes.json'}")

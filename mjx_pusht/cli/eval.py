@@ -1,0 +1,26 @@
+"""`mjx-pusht eval`: the command line of `study.evaluate.evaluate` (a controller's episodes on many start
+states): --param parsed, Ctrl-C an exit status of 130."""
+
+from __future__ import annotations
+
+from mjx_pusht.cli.parser import UsageError
+
+
+def cmd_eval(args) -> int:
+    from mjx_pusht.model.params import parse_param
+    from mjx_pusht.study.evaluate import evaluate
+    from mjx_pusht.study.seeds import parse_seeds
+
+    seeds = parse_seeds(args.seeds)
+    params = tuple((n, tuple(v)) for n, v in (parse_param(t) for t in args.param))
+    if len({n for n, _ in params}) != len(params):
+        raise UsageError("each --param NAME may be given once")
+    try:
+        evaluate(args.controller, seeds, args.out, backend=args.backend, action=args.action, reset=args.reset,
+                 break_it=args.break_it, max_steps=args.max_steps, frame_skip=args.frame_skip, params=params,
+                 chunk=args.chunk, resume=args.resume, replace=args.replace, progress=args.progress,
+                 record=args.record, rerun=args.rerun, video=args.video, video_episodes=args.video_episodes,
+                 video_size=args.video_size)
+    except KeyboardInterrupt:  # evaluate said where the finished chunks are
+        return 130
+    return 0

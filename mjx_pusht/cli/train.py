@@ -1,0 +1,127 @@
+"""`mjx-pusht train`: check everything, train (DAgger: train/run.py; PPO: train/ppo.py), then judge the kept
+policy with `evaluate` on the held-out seeds (out/eval) and print where everything went."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+from mjx_pusht.io.outputs import atomic_write_json
+from mjx_pusht.train.resume import TrainError
+from mjx_pusht.train.summary import write_summary
+
+
+def cmd_train(args) -> int:
+    """`mjx-pusht train`: check everything, train, then judge the policy with `eval` on the held-out seeds."""
+    from mjx_pusht.backends.base import resolve
+    from mjx_pusht.io.banner import Banner
+    from mjx_pusht.io.outputs import claim_out_dir
+    from mjx_pusht.train.dagger import DaggerConfig
+
+    name, why = resolve(args.backend)
+    if args.algo == "ppo":
+        return _cmd_ppo(args, name, why)
+    cfg = DaggerConfig(obs_type=args.obs, envs=args.envs, iterations=args.iterations, hidden=tuple(args.hidden),
+                       learning_rate=args.lr or 1e-3, batch=args.batch or 4096, fit_steps=args.fit_steps,
+                       beta_decay=args.beta_decay, max_samples=args.max_samples, eval_envs=args.eval_envs,
+                       seed=args.seed, reset=args.reset, teacher=args.teacher,
+                       image_batch=args.image_batch or min(512, args.batch or 4096), image_steps=args.image_steps)
+    out = claim_out_dir(args.out, "train", {}, replace=args.replace)  # the run's settings: checked on --resume
+    _restart(out, args)
+    _check_rerun(args)
+    banner = Banner("train")
+    print(f"backend: {name} ({why}); DAgger from {cfg.obs_type}: {cfg.envs} {cfg.reset} episodes an iteration, "
+          f"{cfg.iterations} iterations, held-out seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
+    from mjx_pusht.train.run import train_dagger
+
+    summary = train_dagger(cfg, name, out, resume=args.resume, minutes=args.minutes, progress=args.progress,
+                           rerun=args.rerun, keep=args.keep)
+    return _finish(args, name, out, summary, banner)
+
+
+def _restart(out: Path, args) -> None:
+    """A folder holding a training run is continued (--resume) or started over (--replace), never mixed."""
+    started = (out / "checkpoints" / "resume.msgpack").exists()
+    if started and args.replace and not args.resume:
+        shutil.rmtree(out / "checkpoints")
+        print(f"--replace: removed the earlier training run's checkpoints in {out}")
+    elif started and not args.resume:
+        raise TrainError(f"--out {out} holds a training run: --resume to continue it, --replace to start over, "
+                         "or give a new --out")
+
+
+def _check_rerun(args) -> None:
+    if args.rerun:  # found out now, not after the training it would otherwise end
+        try:
+            import rerun  # noqa: F401
+        except ImportError:
+            raise TrainError("train writes train.rrd and eval.rrd with rerun, which is not installed here: "
+                             "pip install rerun-sdk, or pass --no-rerun") from None
+
+
+def _cmd_ppo(args, name: str, why: str) -> int:
+    """`train --algo ppo`: Brax's PPO (train/ppo.py), then the same judgement and files as DAgger's."""
+    if args.keep != "last":
+        raise TrainError("--keep best is DAgger's (a fit judged on its next rollout's fresh seeds); PPO keeps its last")
+    from mjx_pusht.io.banner import Banner
+    from mjx_pusht.io.outputs import claim_out_dir
+
+    if name == "cpu":
+        raise TrainError("--algo ppo runs in Brax's jitted JAX: use --backend mjx-warp or mjx-jax "
+                         "(cpu is MuJoCo C on the host)")
+    try:
+        from mjx_pusht.train.ppo import PPOConfig, train_ppo
+    except ImportError as e:
+        raise TrainError(f"--algo ppo needs Brax ({e.name} is missing): pip install 'mjx-pusht[train]'") from None
+    cfg = PPOConfig(obs_type=args.obs, envs=args.envs, timesteps=args.timesteps, evals=args.iterations,
+                    hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
+                    eval_envs=args.eval_envs, seed=args.seed, reset=args.reset)
+    out = claim_out_dir(args.out, "train", {}, replace=args.replace)
+    _restart(out, args)
+    _check_rerun(args)
+    banner = Banner("train")
+    print(f"backend: {name} ({why}); Brax PPO from {cfg.obs_type}: {cfg.envs} envs, {cfg.timesteps:,} env steps, "
+          f"held-out judgement {cfg.evals} times on seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
+    curve = train_ppo(cfg, name, out, resume=args.resume, progress=args.progress, minutes=args.minutes)
+    summary = write_summary(cfg, name, out, curve, args.rerun, method="ppo")
+    return _finish(args, name, out, summary, banner)
+
+
+def _finish(args, name: str, out: Path, summary: dict, banner) -> int:
+    import gc
+
+    # Training's rollouts and renderers sit in reference cycles (jitted bound methods); collected during eval's CUDA
+    # graph capture, their programs' unloading broke the capture ("operation not permitted when stream is
+    # capturing", then Warp's render kernel failed: an H100 pixel run, NOTES change 25). Collected here, before it.
+    gc.collect()
+    summary["eval"] = _judge(args, name, out, summary)
+    atomic_write_json(out / "summary.json", summary)
+    ev = summary["eval"]
+    lo, hi = ev["success_rate_ci95"]
+    kept = summary.get("kept") or {}
+    which = f"iteration {kept['iteration']}'s policy, kept by validation; " if kept.get("rule") == "best" else ""
+    print(f"held-out success ({which}eval, {ev['n_episodes']} {summary['held_out']['reset']} seeds): "
+          f"{ev['success_rate']:.1%} "
+          f"(95% interval {lo:.1%}-{hi:.1%}); training wall-clock {summary['wall_seconds']:.0f} s "
+          f"(simulation {summary['simulation_seconds']:.0f} s, learning {summary['learning_seconds']:.0f} s)")
+    print(f"policy: {out / 'policy.msgpack'} (use it as --controller policy:{out / 'policy.msgpack'})\n"
+          f"summary: {out / 'summary.json'}\ncurve: {out / 'curve.png'}")
+    banner.done()
+    return 0
+
+
+def _judge(args, backend: str, out: Path, summary: dict) -> dict:
+    """`evaluate` of policy:out/policy.msgpack on the held-out seeds, into out/eval (what `mjx-pusht eval
+    --controller policy:out/policy.msgpack` writes)."""
+    from mjx_pusht.study.evaluate import evaluate
+
+    seeds = summary["held_out"]["seeds"]
+    # this run's own judgement of the policy it just wrote: an earlier one (before --resume) judged another policy
+    shutil.rmtree(out / "eval", ignore_errors=True)
+    evaluate(f"policy:{out / 'policy.msgpack'}", seeds, out / "eval", backend=backend, reset=summary["held_out"]["reset"],
+             max_steps=summary["held_out"]["max_steps"], record=args.record, progress=args.progress, rerun=args.rerun)
+    s = json.loads((out / "eval" / "summary.json").read_text())
+    return {k: s[k] for k in ("n_episodes", "n_success", "success_rate", "success_rate_ci95", "median_steps_to_success",
+                              "n_non_finite", "n_rigid")} | {"backend": s["backend"], "seeds": seeds,
+                                                             "table": str(out / "eval" / "per_episode.parquet")}

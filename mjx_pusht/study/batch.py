@@ -1,0 +1,82 @@
+"""What every batch command (sweep, eval) does around its rows: claim the folder and build the backend
+before the first row (`start_batch`), time its phases (`Clock`), record a few rows (`record`), warn
+about rows MuJoCo warned on (`warn_mujoco`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class Clock:
+    """Seconds per phase of a command, for summary.json's `timing` block."""
+
+    def __init__(self):
+        import time
+
+        self._now = time.perf_counter
+        self.t = self._now()
+        self.laps: dict[str, float] = {}
+
+    def lap(self, name: str) -> float:
+        t = self._now()
+        self.laps[name] = t - self.t
+        self.t = t
+        return self.laps[name]
+
+    def report(self, sweep: dict) -> dict:
+        """The command's phases, with the sweep's own (start poses, compile, rollout, writing) inside it."""
+        out = {k: round(v, 3) for k, v in self.laps.items()}
+        out.update({f"sweep.{k}": round(v, 3) for k, v in sweep.items() if k != "rollout_and_compile"})
+        return out
+
+
+def start_batch(command: str, out, seeds, name: str, why: str, config: dict, scenario, *, replace: bool = False,
+                resume: bool = False, check: bool = True):
+    """What every batch command does before its first row: the rows, a writable `out` that holds no
+    other unfinished run, the banner, and the backend (which compiles the scene and checks its tree).
+    Returns (row seeds, their parameter combinations, out, banner, clock, backend)."""
+    from mjx_pusht.backends.factory import make_backend
+    from mjx_pusht.backends.cpu import default_threads
+    from mjx_pusht.io.banner import Banner
+    from mjx_pusht.io.outputs import claim_out_dir, prepare_out_dir
+    from mjx_pusht.study.sweep import check_resumable, fingerprint, rows_for
+
+    row_seeds, combos = rows_for(seeds, len(scenario.grid()))
+    out = prepare_out_dir(out)
+    if check:  # with several processes, process 0 checks, locks (and clears) the folder for all
+        claim_out_dir(out, command, fingerprint(row_seeds, config), replace=replace)
+        check_resumable(out, row_seeds, config, resume)
+    banner = Banner(command)
+    print(f"backend: {name} ({why})")
+    clock = Clock()
+    # cpu: feedback episodes take a process per core (the sweep's open-loop rollout threads itself)
+    backend = make_backend(name, scenario, workers=default_threads() if command == "eval" else 1)
+    clock.lap("backend_setup_and_tree_check")
+    return row_seeds, combos, out, banner, clock, backend
+
+
+def record(path: Path, rows: str, backend, r, combos, pick, writer, summary: dict, clock, *, rerun: bool,
+           n: int) -> None:
+    """The recording of a batch command: the rows `pick()` chooses (when `rerun` and `n` > 0) rerun with a
+    trace and written by `writer` (or an earlier run's recording removed when this run is not recorded);
+    its time joins the summary."""
+    from mjx_pusht.io.outputs import atomic_write_json, drop_stale
+    from mjx_pusht.io.record import row_labels
+
+    if not (rerun and n > 0):
+        drop_stale(path)
+        return
+    shown = pick()
+    traced = backend.run(r.seeds[shown], trace=True, combos=combos[shown])
+    writer(path, backend.model, traced, r, row_labels(r, shown))
+    summary["timing"]["recording"] = round(clock.lap("recording"), 3)
+    atomic_write_json(path.parent / "summary.json", summary)
+    print(f"recording: {path} ({len(shown)} {rows} side by side) - open it with: rerun {path}")
+
+
+def warn_mujoco(summary: dict, rows: str) -> None:
+    """One line naming the rows on which MuJoCo raised a warning, if any did."""
+    if summary["n_mujoco_warnings"]:
+        print(f"WARNING: MuJoCo raised {', '.join(summary['mujoco_warnings'])} on {summary['n_mujoco_warnings']} {rows} "
+              f"(flagged in mujoco_warnings, never counted rigid; mjWARN_INERTIA: a singular model, e.g. a "
+              f"near-zero mass): {summary['mujoco_warning_seeds'][:10]}")

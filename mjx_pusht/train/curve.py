@@ -1,0 +1,90 @@
+"""A training run's curve: held-out success after every fit, written as curve.csv, curve.png and train.rrd
+(`write_curve`); and which fit --keep names (`kept`, by the validation rollout `validated` admits)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from mjx_pusht.io.outputs import atomic_write_bytes
+
+CURVE_COLUMNS = ("iteration", "beta", "env_steps", "samples", "loss", "success", "success_lo", "success_hi",
+                 "coverage", "sim_seconds", "learn_seconds", "wall_seconds", "pose_error_mm", "validation_success",
+                 "validation_beta")
+
+
+VALIDATION_BETA = 0.01  # --keep best: a fit's validation rollout counts once the expert acts this little in it
+
+
+def validated(row: dict) -> bool:
+    """Whether a curve row's validation rollout counts: there was one, and the expert acted in at most
+    VALIDATION_BETA of it (rows written before validation was recorded have neither key)."""
+    beta = row.get("validation_beta")
+    return row.get("validation_success") is not None and beta is not None and beta <= VALIDATION_BETA
+
+
+def kept(curve: list[dict], keep: str) -> dict | None:
+    """The curve row of the fit --keep names: the last, or the best by validation success among the fits
+    `validated` (the last when none is)."""
+    if not curve:
+        return None
+    rows = [r for r in curve if validated(r)]
+    if keep == "last" or not rows:
+        return curve[-1]
+    return max(reversed(rows), key=lambda r: r["validation_success"])  # a tie: the later fit
+
+
+def write_curve(out: Path, curve: list[dict], title: str, rerun: bool = True) -> None:
+    """curve.csv, curve.png (held-out success with its 95% band, by env steps and by wall-clock), train.rrd."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lines = [",".join(CURVE_COLUMNS)] + [",".join(f"{r[c]:.6g}" if isinstance(r.get(c), float) else
+                                                  "" if r.get(c) is None else str(r[c])
+                                                  for c in CURVE_COLUMNS) for r in curve]
+    atomic_write_bytes(out / "curve.csv", ("\n".join(lines) + "\n").encode())
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
+    for ax, key, label in ((axes[0], "env_steps", "env control steps (millions)"),
+                           (axes[1], "wall_seconds", "training wall-clock (minutes)")):
+        scale = 1e6 if key == "env_steps" else 60.0
+        xs = np.array([r[key] for r in curve]) / scale
+        ax.fill_between(xs, [100 * r["success_lo"] for r in curve], [100 * r["success_hi"] for r in curve], alpha=0.3)
+        ax.plot(xs, [100 * r["success"] for r in curve], "o-", label="held-out success")
+        val = [(x, 100 * r["validation_success"]) for x, r in zip(xs, curve) if validated(r)]
+        if val:  # what --keep best chooses by: the next rollout's fresh training seeds
+            ax.plot(*zip(*val), ".--", alpha=0.6, label="validation (training seeds, expert share <= 1%)")
+        ax.set_xlabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("success, % (coverage >= 0.95 in 300 steps)")
+    axes[0].set_ylim(0, 100)
+    axes[0].legend(loc="lower right", fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    atomic_write_bytes(out / "curve.png", buf.getvalue())
+    if rerun:
+        _record_curve(out / "train.rrd", curve)
+
+
+def _record_curve(path: Path, curve: list[dict]) -> None:
+    import rerun as rr
+
+    rec = rr.RecordingStream("mjx_pusht_train")
+    tmp = path.with_name(f".{path.name}.tmp")  # written whole, then renamed: never a half recording
+    rec.save(str(tmp))
+    for r in curve:
+        rec.set_time("env_steps", sequence=int(r["env_steps"]))
+        rec.log("curve/held_out_success", rr.Scalars(r["success"]))
+        rec.log("curve/held_out_coverage", rr.Scalars(r["coverage"]))
+        if r["loss"] is not None:  # PPO's curve has no fit loss of ours
+            rec.log("curve/loss", rr.Scalars(r["loss"]))
+    rec.flush()
+    rec.disconnect()
+    tmp.replace(path)

@@ -1,0 +1,110 @@
+"""The resume checkpoint of a training run: written whole in a thread (`checkpoint`), read back and checked
+against the run's settings (`resume_tree`), restored into DAgger's learner (`restore`); and `TrainError`,
+a run that cannot start or resume as asked."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from mjx_pusht.errors import MjxPushtError
+from mjx_pusht.io.outputs import atomic_write_bytes
+
+# The resume checkpoint holds the whole dataset (8 M samples: ~0.5 GB, ~4 s to write, measured on the H100
+# run of NOTES change 14), so it is written at most this often, and at the last iteration; a run killed
+# between two repeats at most this much work on --resume (the per-iteration policies are written every time).
+RESUME_EVERY_S = 60.0
+
+
+class TrainError(MjxPushtError, ValueError):
+    """A training run cannot start or resume as asked; the message says why."""
+
+
+def config_dict(cfg) -> dict:
+    """A method's config (DaggerConfig, PPOConfig) as JSON-ready values: what checkpoints and --resume compare."""
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(cfg).items()}
+
+
+def checkpoint(path, cfg, learner, iteration, env_steps, curve, writer=None):
+    """Everything --resume needs (optimiser, dataset ring, normalisation, curve), written whole. The arrays are
+    copied to the host here; encoding and writing (~4 s for 8 M samples on the H100 run of NOTES change 14) go
+    on in a thread while training continues. Returns that thread: join it before the next one, and at the end."""
+    from flax import serialization
+
+    from mjx_pusht.train.policy import to_numpy
+
+    if writer is not None:
+        writer.join()  # one file, written in order
+    tree = {"config": json.dumps(config_dict(cfg), sort_keys=True), "iteration": iteration, "env_steps": env_steps,
+            "curve": json.dumps(curve), "params": to_numpy(learner.params),
+            "opt_state": serialization.to_state_dict(to_numpy(learner.opt_state)),
+            "x": np.asarray(learner.x[:learner.filled]), "y": np.asarray(learner.y[:learner.filled]),
+            "head": learner.head, "floor": learner.floor, "norm_mean": learner.norm[0], "norm_std": learner.norm[1]}
+    writer = _Writer(lambda: atomic_write_bytes(path, serialization.msgpack_serialize(tree)))
+    writer.start()
+    return writer
+
+
+class _Writer(threading.Thread):
+    """A thread whose failure (a full disk) is raised in the training loop when joined, not only printed."""
+
+    def __init__(self, write):
+        super().__init__(name="resume-checkpoint")
+        self.write, self.error = write, None
+
+    def run(self) -> None:
+        try:
+            self.write()
+        except BaseException as e:  # noqa: BLE001 - handed to the joining thread as it is
+            self.error = e
+
+    def join(self, timeout=None) -> None:
+        super().join(timeout)
+        if self.error is not None:
+            raise self.error
+
+
+def resume_tree(path: Path, cfg, may_change: tuple[str, ...]) -> dict:
+    """The resume checkpoint at `path` (either method's), refused in one line if it is missing, unreadable,
+    or from a run with other settings than `cfg` (those in `may_change`, how far to go, excepted)."""
+    from flax import serialization
+
+    if not path.is_file():
+        raise TrainError(f"--resume: {path} does not exist; nothing to resume (run without --resume to start)")
+    try:
+        tree = serialization.msgpack_restore(path.read_bytes())
+        saved = json.loads(tree["config"])
+    except Exception as e:  # noqa: BLE001 - any decoding failure means the same thing to the user
+        raise TrainError(f"--resume: {path} is unreadable ({type(e).__name__}); start again without --resume") from None
+    now = config_dict(cfg)
+    # both keys' sides: another method's run differs in the names of its settings too
+    diff = sorted(k for k in set(saved) | set(now) if saved.get(k) != now.get(k) and k not in may_change)
+    if diff:
+        raise TrainError(f"--resume: the run in {path.parent.parent} was started with other settings "
+                         f"({', '.join(diff[:6])}); give the same ones, or a new --out")
+    return tree
+
+
+def restore(path, cfg, learner):
+    import jax
+    import jax.numpy as jnp
+    from flax import serialization
+
+    tree = resume_tree(path, cfg, ("iterations",))
+    try:  # the optimiser's layout is this version's: one Adam a part of the network (dagger._parts)
+        learner.opt_state = serialization.from_state_dict(learner.opt_state, tree["opt_state"])
+    except (KeyError, ValueError, TypeError) as e:
+        raise TrainError(f"--resume: {path} holds an optimiser state this version does not use ({type(e).__name__}; "
+                         "written before the fit's parts had an Adam each?); start again without --resume") from None
+    learner.params = jax.tree.map(jnp.asarray, tree["params"])
+    n = len(tree["x"])
+    learner.x = learner.x.at[:n].set(jnp.asarray(tree["x"]))
+    learner.y = learner.y.at[:n].set(jnp.asarray(tree["y"]))
+    learner.filled, learner.head, learner.floor = n, int(tree["head"]), int(tree["floor"])
+    learner.norm = (np.asarray(tree["norm_mean"]), np.asarray(tree["norm_std"]))
+    curve = json.loads(tree["curve"])
+    return int(tree["iteration"]) + 1, int(tree["env_steps"]), curve, curve[-1]["wall_seconds"] if curve else 0.0
