@@ -22,8 +22,12 @@ the two things a random policy almost never does on its own.
 
 The policy Brax learns (an MLP on Brax's running observation normalisation, tanh-squashed
 Gaussian) is saved as a `policy:PATH` checkpoint (policy.py): the normaliser's mean and std, the
-layers, and its deterministic action tanh(loc), which is Brax's own `make_policy(...,
-deterministic=True)`; a test checks the two agree.
+layers, and which action it acts with (ppo_policy.py): by default a draw from the Gaussian keyed
+by seed and step, the policy PPO trains; or its mean, tanh(loc), Brax's own `make_policy(...,
+deterministic=True)` (tests check both against Brax). The mean action is not what PPO optimises:
+it stalls where the trained policy's noise carries it on, and its held-out rate swung 5-93%
+between judgements while PPO learned (docs/notebook/training.md), so every judgement measures
+both, and `--keep best` chooses by validation seeds, never the held-out ones.
 """
 
 from __future__ import annotations
