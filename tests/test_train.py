@@ -540,3 +540,15 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp
     args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "20480", "2"
     r = cli(*args, "--resume")  # nothing left to do is one line, not a crash inside Brax
     assert r.returncode == 1 and "already reached 20,480 env steps" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_a_fit_that_goes_non_finite_ends_the_run_in_one_line_naming_the_iteration(tmp_path):
+    """A learning rate of 1e30 turns the first fit's loss to NaN: the run stops there, one line names the
+    iteration and says what stays, instead of rolling a NaN student out and judging it at 0%."""
+    r = cli("train", "--backend", "cpu", "--reset", "chapter", "--envs", "16", "--iterations", "3", "--fit-steps", "50",
+            "--batch", "128", "--hidden", "32,32", "--eval-envs", "8", "--lr", "1e30", "--no-rerun", "--no-progress",
+            "--record", "0", "--out", str(tmp_path / "nan"))
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "iteration 0's fit, the loss is nan; no policy was saved" in r.stderr
+    assert not (tmp_path / "nan" / "policy.msgpack").exists()
