@@ -102,7 +102,8 @@ def main(argv=None) -> int:
         except (OSError, KeyError, ValueError) as e:  # unreadable, cut or unfinished: listed, not dropped
             failed.append(f"{run} ({e})")
     if not rows:
-        print("no finished run to aggregate", file=sys.stderr)
+        atomic_write_json(args.out / "seeds.json", {"runs": [], "aggregate": None, "failed": failed})
+        print("no finished run to aggregate:\n" + "\n".join(failed), file=sys.stderr)
         return 1
     agg = aggregate(rows, args.goal)
     atomic_write_json(args.out / "seeds.json", {"runs": rows, "aggregate": agg, "failed": failed})
