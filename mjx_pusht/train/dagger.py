@@ -261,19 +261,6 @@ def _outcomes(s) -> dict:
             "finite": np.asarray(m["finite"], bool)}
 
 
-def non_finite(outcome: dict, seeds: np.ndarray, *arrays) -> str | None:
-    """What went non-finite in a rollout (its episodes' states, by the env's own invariant, or its samples and
-    labels), naming the first such seed; None when all is finite."""
-    import jax.numpy as jnp
-
-    bad = np.flatnonzero(~np.asarray(outcome["finite"], bool))
-    if bad.size:
-        return f"{bad.size} episodes' states went non-finite (first seed {int(seeds[bad[0]])})"
-    if not all(bool(jnp.isfinite(a).all()) for a in arrays if a is not None and a.size):
-        return "a sample or label went non-finite"
-    return None
-
-
 # -- the fit: minibatch regression onto the expert's labels ------------------------------------------
 class Learner:
     """The student network, its optimisers (one a part of the network, `_parts`) and the dataset ring, on the

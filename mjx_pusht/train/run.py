@@ -45,7 +45,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     from mjx_pusht.backends.cpu import default_threads
     from mjx_pusht.envs.functional import PushTEnv
     from mjx_pusht.task.episode import Episode
-    from mjx_pusht.train.dagger import Learner, Rollouts, non_finite
+    from mjx_pusht.train.dagger import Learner, Rollouts
     from mjx_pusht.train.policy import save
 
     out = Path(out)
@@ -145,6 +145,19 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         bar.write(f"keeping iteration {kept['iteration']}'s policy: {kept['validation_success']:.1%} on its "
                   f"validation rollout (held-out {kept['success']:.1%})")
     return write_summary(cfg, backend, out, curve, rerun, kept=kept, keep=keep)
+
+
+def non_finite(outcome: dict, seeds: np.ndarray, *arrays) -> str | None:
+    """What went non-finite in a rollout (its episodes' states, by the env's own invariant, or its samples and
+    labels), naming the first such seed; None when all is finite."""
+    import jax.numpy as jnp
+
+    bad = np.flatnonzero(~np.asarray(outcome["finite"], bool))
+    if bad.size:
+        return f"{bad.size} episodes' states went non-finite (first seed {int(seeds[bad[0]])})"
+    if not all(bool(jnp.isfinite(a).all()) for a in arrays if a is not None and a.size):
+        return "a sample or label went non-finite"
+    return None
 
 
 def _stop_if_non_finite(what: str | None, where: str, curve: list[dict], out: Path) -> None:
