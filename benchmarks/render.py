@@ -97,7 +97,7 @@ def measure_cpu() -> dict:
     import gymnasium as gym
 
     import mjx_pusht  # noqa: F401
-    from mjx_pusht.envs.pixels import CpuRenderer
+    from mjx_pusht.render.pixels import CpuRenderer
     from mjx_pusht.model.layout import QposLayout
     from mjx_pusht.model.scene import SceneSpec, build_model
     from mjx_pusht.task.reset import start_poses
@@ -128,7 +128,7 @@ def measure_cpu() -> dict:
 
 def compare(npz: Path) -> dict:
     """The CPU renderer's images of the states the GPU rendered: how many pixels differ, and by how much."""
-    from mjx_pusht.envs.pixels import CpuRenderer
+    from mjx_pusht.render.pixels import CpuRenderer
     from mjx_pusht.model.scene import SceneSpec, build_model
 
     data = np.load(npz)

@@ -22,7 +22,7 @@ if _sys.platform.startswith("linux") and not _os.environ.get("DISPLAY") and "MUJ
             break
 # A MUJOCO_GL whose library is missing breaks `import mujoco` itself, so every command would die at
 # import, `tree` and `sweep` included, that never draw. Only pixels need GL: the setting is set aside
-# here and the renderer (envs/pixels.py) refuses in one line, naming it, when pixels are asked for.
+# here and the renderer (render/pixels.py) refuses in one line, naming it, when pixels are asked for.
 elif _os.environ.get("MUJOCO_GL") in ("egl", "osmesa") and _sys.platform.startswith("linux"):
     import ctypes.util as _cu
 
@@ -49,6 +49,11 @@ from mjx_pusht.scenario import Scenario
 from mjx_pusht.task.invariants import gap_deviation, stayed_rigid, weld_gap
 from mjx_pusht.task.reset import start_pose, start_poses
 from mjx_pusht.task.schedule import Schedule
+from mjx_pusht.train.controller import register_policy as _register_policy
+
+# `--controller policy:PATH` (and `task.controllers.load("policy:PATH")`) without importing the training layer:
+# the task layer keeps a registry of controller prefixes, and training's is registered here, at the top
+_register_policy()
 
 __all__ = [
     "EXPECTED_TREES", "Rollouts", "Scenario", "SceneSpec", "Schedule", "Tree", "TreeMismatch",

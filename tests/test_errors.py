@@ -44,7 +44,7 @@ def test_each_user_facing_error_is_one_line_and_a_non_zero_exit(tmp_path, argv):
 def test_every_error_the_library_raises_for_bad_input_shares_one_base():
     from mjx_pusht.backends.base import BackendError
     from mjx_pusht.backends.warp import BufferOverflow
-    from mjx_pusht.envs.pixels import PixelsError
+    from mjx_pusht.render.pixels import PixelsError
     from mjx_pusht.io.outputs import OutputError
     from mjx_pusht.io.video import VideoError
     from mjx_pusht.model.params import ParamError

@@ -138,7 +138,7 @@ def test_bad_arguments_are_one_line_errors():
         gym.make(ENV, obs_type="rgb")
     with pytest.raises(ValueError, match="num_envs"):
         gym.make_vec(ENV, num_envs=0, backend="cpu")
-    from mjx_pusht.envs.pixels import PixelsError
+    from mjx_pusht.render.pixels import PixelsError
 
     with pytest.raises(PixelsError, match="mjx-warp"):
         gym.make_vec(ENV, num_envs=2, backend="mjx-jax", obs_type="pixels")

@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from mjx_pusht.envs.pixels import CAMERA, CpuRenderer, PixelsError, view_model
+from mjx_pusht.render.pixels import CAMERA, CpuRenderer, PixelsError, view_model
 from mjx_pusht.model.layout import QposLayout
 from mjx_pusht.model.scene import SceneSpec, build_model
 from mjx_pusht.task.rules import T_RECTS, to_pixels

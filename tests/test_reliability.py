@@ -83,7 +83,7 @@ def test_a_mujoco_gl_whose_library_is_missing_breaks_only_pixels(tmp_path):
     r = cli("tree", env=env)
     assert r.returncode == 0 and "kinematic tree" in r.stdout, r.stderr[-500:]
     code = ("import gymnasium as gym, mjx_pusht\n"
-            "from mjx_pusht.envs.pixels import PixelsError\n"
+            "from mjx_pusht.render.pixels import PixelsError\n"
             "try:\n    gym.make('mjx_pusht/PushT-v0', obs_type='pixels')\n"
             "except PixelsError as e:\n    print('REFUSED', e)\n")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=os.getcwd())

@@ -284,7 +284,7 @@ def run_cpu(
     datas = [mujoco.MjData(model) for _ in range(nthread)]
     renderer = None
     if controller.pixels:  # a controller that looks: the top camera's image of every control step's pose
-        from mjx_pusht.envs.pixels import CpuRenderer
+        from mjx_pusht.render.pixels import CpuRenderer
 
         renderer = CpuRenderer(model, controller.pixels)
     with mj_rollout.Rollout(nthread=nthread) as pool:

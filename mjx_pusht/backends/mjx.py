@@ -223,7 +223,7 @@ class MjxRunner:
             # A controller that looks: MJX-Warp's ray tracer renders the batch each control step. Its call is one
             # for the whole batch (custom_vmap): traced inside a vmapped scan's body it would be traced unbatched
             # first and return every world's image to each, so this rollout scans the vmapped step instead.
-            from mjx_pusht.envs.pixels import PixelsError, WarpRenderer
+            from mjx_pusht.render.pixels import PixelsError, WarpRenderer
 
             if not warp or n_dev > 1:
                 raise PixelsError(f"{controller.name} looks at pixels, which MJX renders with MJX-Warp on one GPU: "
@@ -320,13 +320,6 @@ class Pending:
     batch: int
     trace: bool
     future: object
-
-
-@functools.lru_cache(maxsize=1)
-def _device_thread():
-    """One thread launches rollouts, in order: MJX-Warp's program reads its loop predicate on the host, so a
-    launch blocks until the device is done; from this thread it blocks nobody else."""
-    return ThreadPoolExecutor(max_workers=1, thread_name_prefix="mjx-launch")
 
 
 @functools.lru_cache(maxsize=1)

@@ -124,7 +124,7 @@ class PushTEnv:
             self.model = cpu_model(self.scenario)
             self._xp = np
             if self.pixels:
-                from mjx_pusht.envs.pixels import CpuRenderer
+                from mjx_pusht.render.pixels import CpuRenderer
 
                 self.renderer = CpuRenderer(self.model, self.pixels)
         else:
@@ -164,7 +164,7 @@ class PushTEnv:
             self._xp = jnp
             self._mx = self.runner.models.first()
             if self.pixels and impl != "warp":
-                from mjx_pusht.envs.pixels import PixelsError
+                from mjx_pusht.render.pixels import PixelsError
 
                 raise PixelsError("pixel observations on MJX need MJX-Warp's renderer: use backend mjx-warp (or cpu)")
             self._renderers, self._jitted, self._templates = {}, {}, {}
@@ -255,7 +255,7 @@ class PushTEnv:
         if self.backend == "cpu":  # MuJoCo C's OpenGL renderer, on the host
             from concurrent.futures import ThreadPoolExecutor
 
-            from mjx_pusht.envs.pixels import CpuRenderer
+            from mjx_pusht.render.pixels import CpuRenderer
 
             # JAX calls back on threads of its own, where a GL context cannot be made current (EGL_BAD_ACCESS, or a
             # crash): the images are rendered on one thread of ours, with a renderer of its own
@@ -266,7 +266,7 @@ class PushTEnv:
                 return pool.submit(renderer, self.layout.qpos_of_state(q0, np.asarray(st, np.float64))).result()
 
             return lambda states: jax.pure_callback(render, shape, states)
-        from mjx_pusht.envs.pixels import WarpRenderer
+        from mjx_pusht.render.pixels import WarpRenderer
 
         renderer, d0 = WarpRenderer(self.model, n, self.pixels), self.template(n)
         return lambda states: jax.vmap(lambda q: renderer(d0.replace(qpos=q)))(
@@ -332,7 +332,7 @@ class PushTEnv:
 
         if n not in self._jitted:
             if self.pixels:
-                from mjx_pusht.envs.pixels import WarpRenderer
+                from mjx_pusht.render.pixels import WarpRenderer
 
                 self._renderers[n] = WarpRenderer(self.model, n, self.pixels)
             self._jitted[n] = (jax.jit(jax.vmap(self.step_one)), jax.jit(self._reset_batch))

@@ -39,7 +39,7 @@ except ImportError as e:  # the extra is optional: say what to install, in one l
 
 from mjx_pusht.envs.functional import PushTEnv
 from mjx_pusht.envs.handoff import check_array_type, from_user, hand_off
-from mjx_pusht.envs.pixels import IMAGE_SIZE
+from mjx_pusht.render.pixels import IMAGE_SIZE
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.episode import Episode
 from mjx_pusht.task.reset import SEED_MAX
@@ -52,7 +52,7 @@ ENV_ID = "mjx_pusht/PushT-v0"
 
 def _check(obs_type: str, action_type: str, observation_size: int = IMAGE_SIZE) -> None:
     if obs_type.startswith("pixels"):
-        from mjx_pusht.envs.pixels import _check_size
+        from mjx_pusht.render.pixels import _check_size
 
         _check_size(observation_size)
     if obs_type not in OBS_TYPES:
@@ -184,7 +184,7 @@ class _Pictures:
 
     def _draw(self, qpos) -> np.ndarray:
         if self._viewer is None:
-            from mjx_pusht.envs.pixels import CpuRenderer
+            from mjx_pusht.render.pixels import CpuRenderer
 
             self._viewer = CpuRenderer(self._env.model, self.render_size)
         return self._viewer(np.asarray(qpos, np.float64))

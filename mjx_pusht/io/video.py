@@ -69,7 +69,7 @@ def episode_grid(model, qpos: np.ndarray, layout, seeds, frame_skip: int, succes
                  size: int = 128) -> np.ndarray:
     """(frames, H, W, 3) uint8: episode i of the traced qpos (K, 1 + steps, nq) in tile i of a near-square grid,
     one frame per control step, each tile labelled with its seed and coverage."""
-    from mjx_pusht.envs.pixels import CpuRenderer
+    from mjx_pusht.render.pixels import CpuRenderer
 
     k, t = qpos.shape[0], qpos.shape[1]
     idx = np.arange(0, t, frame_skip)

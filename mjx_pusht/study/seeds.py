@@ -9,12 +9,12 @@ from mjx_pusht.task.reset import SEED_MAX as MAX_SEED
 
 
 class SeedSpecError(MjxPushtError, ValueError):
-    pass
+    """A --seeds spec that names no seeds, malformed ones, or too many; the message says which."""
 
 
 # One run's rows fit in memory: 2**30 seeds is 8.6 GB of seeds alone. NumPy's arange of a count near
-# 2**63 silently comes back empty (an empty table written with exit 0 was issue 23's finding 2), and
-# 10**10 dies allocating: both are refused here, before any work. Larger studies: A:B ranges per run.
+# 2**63 silently comes back empty (a sweep then wrote an empty table and exited 0), and 10**10 dies
+# allocating: both are refused here, before any work. Larger studies: A:B ranges per run.
 MAX_SEEDS = 1 << 30
 
 

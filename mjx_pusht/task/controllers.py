@@ -72,7 +72,7 @@ class Controller:
     name: str = "zero"
     action_type: str = "velocity"
     # The side of the top-camera image the controller looks at, in obs["pixels"] (each backend renders it for
-    # every control step; envs/pixels.py); 0: it reads the state alone, and nothing is rendered.
+    # every control step; render/pixels.py); 0: it reads the state alone, and nothing is rendered.
     pixels: ClassVar[int] = 0
 
     def __post_init__(self) -> None:
@@ -308,24 +308,30 @@ class FromFunction(Controller):
         return action, carry
 
 
+# Controllers of the form PREFIX:ARGUMENT that a layer above the task provides, by prefix (`register`): the
+# training layer registers `policy` (train/controller.py, when mjx_pusht is imported), so the task knows no
+# network and a trained policy is still one --controller spec among the others.
+_LOADERS: dict[str, Callable[..., Controller]] = {}
+
+
+def register(prefix: str, loader: Callable[..., Controller]) -> None:
+    """Make `load("PREFIX:...")` return `loader(spec, action_type=...)`; a prefix registered before is replaced.
+    A registered prefix is matched before a user's `package.module:function`."""
+    _LOADERS[prefix] = loader
+
+
 def load(spec: str, *, action_type: str | None = None, schedule: Schedule = Schedule(), frame_skip: int = 10) -> Controller:
-    """A built-in controller by name, a trained policy as `policy:PATH`, or a user's function as
-    `package.module:function`."""
+    """A built-in controller by name, a registered `PREFIX:ARGUMENT` (a trained policy as `policy:PATH`), or a
+    user's function as `package.module:function`."""
     if spec in BUILTIN:
         if action_type not in (None, "velocity"):
             raise ControllerError(f"the built-in controller {spec!r} commands velocities; --action position is for "
                                   "your own controllers")
         return {"zero": lambda: Zero(), "nudge": lambda: Nudge(schedule=schedule, frame_skip=frame_skip),
                 "random": lambda: Random(), "expert": lambda: Expert()}[spec]()
-    if spec.startswith("policy:"):  # a checkpoint written by `mjx-pusht train`
-        if action_type not in (None, "velocity"):
-            raise ControllerError("a trained policy commands velocities; --action position is for your own controllers")
-        try:
-            from mjx_pusht.train.policy import load_policy
-        except ImportError as e:
-            raise ControllerError(f"policy:PATH needs the training extra ({e.name} is missing): "
-                                  "pip install 'mjx-pusht[train]'") from None
-        return load_policy(spec)
+    prefix = spec.partition(":")[0]
+    if ":" in spec and prefix in _LOADERS:  # e.g. policy:PATH, a checkpoint written by `mjx-pusht train`
+        return _LOADERS[prefix](spec, action_type=action_type)
     if ":" not in spec:
         raise ControllerError(f"unknown controller {spec!r}: choose from {', '.join(BUILTIN)}, or give your own as "
                               "package.module:function")

@@ -13,7 +13,7 @@ the expert is the same `Expert.act` in both, in the env's array namespace.
 
 From pixels (`pixels_agent_pos`: the top camera's 96 x 96 image and the pusher's position) the student
 sees the image the env renders in its step (MJX-Warp's ray tracer on the device, MuJoCo C's OpenGL on
-the CPU: the same bytes, envs/pixels.py), reads the T's pose from it and acts on that reading (policy.py); the
+the CPU: the same bytes, render/pixels.py), reads the T's pose from it and acts on that reading (policy.py); the
 expert still labels from the state, and the fit teaches the reader the pose each image shows. The dataset keeps
 no images: a sample holds the 5 numbers of the state that the image is a function of (`RENDER_KEY`
 columns, ahead of the features), and each minibatch is rendered again from them inside the fit (on one
@@ -119,7 +119,7 @@ class DaggerConfig:
     @property
     def image(self) -> int:
         """The side of the image the student sees (0: none)."""
-        from mjx_pusht.envs.pixels import IMAGE_SIZE
+        from mjx_pusht.render.pixels import IMAGE_SIZE
 
         return IMAGE_SIZE if self.obs_type.startswith("pixels") else 0
 
