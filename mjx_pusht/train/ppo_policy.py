@@ -15,14 +15,14 @@ import numpy as np
 
 from mjx_pusht.task.controllers import ControllerError, uniform_hash
 from mjx_pusht.task.rules import CTRL_LIMIT, array_namespace
-from mjx_pusht.train.policy import _mlp, _rowwise
+from mjx_pusht.train.layers import mlp, rowwise
 
 
 def apply_ppo(params: dict, meta: dict, obs, key=None, t=None):
     """A PPO policy (ppo.py) on raw observations (..., obs size): Brax's normalisation, its MLP (silu between
     layers), then its action (`ppo_action`): with meta["act"] "mean" (or absent), tanh of the Gaussian's location,
     Brax's deterministic action; with "sample", the action PPO trained, a draw from the Gaussian keyed by the
-    episode's seed `key` and the control step `t`. In NumPy row by row (`_rowwise`)."""
+    episode's seed `key` and the control step `t`. In NumPy row by row (`layers.rowwise`)."""
     return ppo_action(params, meta, obs, key, t, meta.get("act", "mean") == "sample")
 
 
@@ -32,7 +32,7 @@ def ppo_action(params: dict, meta: dict, obs, key, t, sample):
     counter-based, so NumPy and JAX draw the same z for the same episode and step. `sample`: a Python bool, or a
     per-row 0/1 array (a judge that runs both actions in one batch)."""
     xp = array_namespace(obs)
-    out = _rowwise(lambda o: _mlp(params, meta, "silu", o), obs)
+    out = rowwise(lambda o: mlp(params, meta, "silu", o), obs)
     loc = out[..., :2]
     if sample is not False:
         if out.shape[-1] < 4:
