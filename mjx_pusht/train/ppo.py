@@ -162,7 +162,8 @@ def _judge(env, cfg: PPOConfig):
                                                              jnp.asarray(meta["in_std"], jnp.float32), s0, sample))
         n, out = len(held) + len(val), {"non_finite": int((~finite).sum())}
         for i, act in enumerate(PPO_ACTS):
-            for name, part in (("held_out", slice(i * n, i * n + len(held))), ("validation", slice(i * n + len(held), (i + 1) * n))):
+            parts = {"held_out": slice(i * n, i * n + len(held)), "validation": slice(i * n + len(held), (i + 1) * n)}
+            for name, part in parts.items():
                 out[act, name] = (success[part].astype(bool), cov[part].astype(float))
         return out
 
@@ -176,8 +177,8 @@ def _finite(tree) -> bool:
 
 
 class _BudgetSpent(Exception):
-    """Raised from Brax's `policy_params_fn` once --minutes is spent: Brax's trainer has no stop of its own, and
-    that callback runs on the host between training epochs, after the judged policy is saved."""
+    """Raised from Brax's `progress_fn` once --minutes is spent: Brax's trainer has no stop of its own, and that
+    callback runs on the host between training epochs, after `policy_params_fn` judged and saved the policy."""
 
 
 def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, progress: bool = True,
