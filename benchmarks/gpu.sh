@@ -102,7 +102,45 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           run=$HOME/runs/${RUN:-px}; t=0
           while kill -0 "$(cat "$run.pid")" 2>/dev/null && [ "$t" -lt "${WAIT:-570}" ]; do sleep 5; t=$((t + 5)); done
           cp "$run.log" "$OUT/"; for f in curve.csv curve.png summary.json policy.msgpack; do
-            [ -f "$run/$f" ] && cp "$run/$f" "$OUT/"; done; true ;;
+            [ -f "$run/$f" ] && cp "$run/$f" "$OUT/"; done
+          [ -f "$run/eval/summary.json" ] && mkdir -p "$OUT/eval" && cp "$run/eval/summary.json" "$OUT/eval/"; true ;;
+  train-ppo) # Brax PPO from state at change 18's settings (issue 40's) for MINUTES (default 10) of training, with
+          # --keep best (validation seeds) and the sampled action (ACT=mean for Brax's deterministic one), started
+          # in its own session like train-pixels (about 11.5 minutes with compiling and eval); then
+          # `watch` with the same RUN (default ppo-SEED) copies it back. The curve has both actions' held-out
+          # success and Brax's losses per judgement (success_mean, success_sample, brax_*).
+          run=$HOME/runs/${RUN:-ppo-${SEED:-0}}; mkdir -p "$HOME/runs"
+          setsid nohup python3 -m mjx_pusht train --algo ppo --backend mjx-warp --reset task --envs 8192 --batch 512 \
+            --timesteps 400000000 --iterations 80 --minutes "${MINUTES:-10}" --seed "${SEED:-0}" --keep "${KEEP:-best}" \
+            --ppo-act "${ACT:-sample}" --no-progress --no-rerun --record 0 --out "$run" > "$run.log" 2>&1 < /dev/null &
+          echo $! > "$run.pid"; sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
+  train-seeds) # RECIPE (ppo, dagger-state or dagger-pixels) on SEEDS (comma-separated) one after another, as one
+          # result (benchmarks/train_seeds.py: each run, then seeds.json/.md with mean, sd, min); started in its own
+          # session like train-pixels, then `watch-seeds`. A machine is held at most 30 minutes, so give each hold
+          # what fits: ppo 2 seeds (~11.5 min each), dagger-state 3 (~6.5), dagger-pixels 1 (~22); aggregate the
+          # holds' copied-back runs here with `python -m benchmarks.train_seeds --collect DIR... --out DIR`.
+          run=$HOME/runs/seeds-${RECIPE:?RECIPE=ppo, dagger-state or dagger-pixels}; mkdir -p "$run"
+          case "$RECIPE" in
+            ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes 10" ;;
+            dagger-state) args="--envs 4096 --iterations 60 --minutes 5 --hidden 1024,1024,1024 --fit-steps 10000 \
+              --batch 4096 --max-samples 8000000 --beta-decay 0.7" ;;
+            dagger-pixels) args="--obs pixels_agent_pos --envs 4096 --iterations 300 --minutes 19.5 \
+              --hidden 1024,1024,1024 --fit-steps 10000 --image-steps 4000 --batch 4096 --image-batch 512 \
+              --max-samples 8000000 --beta-decay 0.7" ;;
+            *) echo "unknown RECIPE $RECIPE" >&2; exit 2 ;;
+          esac
+          # shellcheck disable=SC2086  # $args is a list of flags
+          setsid nohup python3 -m benchmarks.train_seeds --seeds "${SEEDS:?SEEDS=0,1,...}" --out "$run" --goal "${GOAL:-0.9}" \
+            -- --backend mjx-warp --reset task $args --keep best --no-progress --no-rerun --record 0 \
+            > "$run.log" 2>&1 < /dev/null &
+          echo $! > "$run.pid"; sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
+  watch-seeds) # wait up to WAIT seconds (default 570) for train-seeds' RECIPE, then copy back every seed's results
+          run=$HOME/runs/seeds-${RECIPE:?RECIPE as given to train-seeds}; t=0
+          while kill -0 "$(cat "$run.pid")" 2>/dev/null && [ "$t" -lt "${WAIT:-570}" ]; do sleep 5; t=$((t + 5)); done
+          cp "$run.log" "$OUT/"; cp "$run"/seeds.* "$OUT/" 2>/dev/null
+          for d in "$run"/seed-*; do [ -d "$d" ] || continue; mkdir -p "$OUT/$(basename "$d")/eval"
+            for f in curve.csv curve.png summary.json policy.msgpack log.txt; do [ -f "$d/$f" ] && cp "$d/$f" "$OUT/$(basename "$d")/"; done
+            [ -f "$d/eval/summary.json" ] && cp "$d/eval/summary.json" "$OUT/$(basename "$d")/eval/"; done; true ;;
   train-state) # DAgger from state for MINUTES (default 5) of training, inside one call (about 6.5 minutes with
           # compiling and the held-out eval); results and the held-out eval's table are copied back
           run=$HOME/runs/state-${SEED:-0}; mkdir -p "$HOME/runs"

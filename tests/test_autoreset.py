@@ -141,3 +141,50 @@ def test_brax_ppo_trains_on_the_adapter_unchanged():
     for _, m in evals:  # the task's own metrics came back through Brax's evaluator, and nothing was dropped
         assert np.isfinite(float(m["eval/episode_coverage"])) and float(m["eval/episode_dropped"]) == 0
     assert params is not None
+
+
+@pytest.mark.slow
+def test_brax_sees_a_time_out_as_truncation_and_a_success_as_termination():
+    """Brax's GAE bootstraps through a truncation and not through a termination, so the adapter's episode ends must
+    say which is which. Half the starts have the T on its target (the task's success, a termination), half never
+    reach it in 5 control steps of standing still (a time-out). Each env's ends, read from Brax's `done` and
+    `info["truncation"]` across autoresets, are compared with the functional env's own `terminated` / `truncated`
+    for the same start on MuJoCo C. Before the fix every time-out read as a termination (truncation 0)."""
+    pytest.importorskip("brax")
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_pusht.envs.brax import BraxPushT, wrap_for_training
+    from mjx_pusht.task.reset import start_poses
+
+    steps, n = 5, 8
+    starts = start_poses(np.arange(n), reset="task")
+    starts[: n // 2, :3] = 0.0  # the T on its target pose: covered, so the episode ends in success
+    cpu = PushTEnv(backend="cpu", reset_kind="task", episode=Episode(max_steps=steps))
+    ref = cpu.reset_to(starts)
+    end = {}  # start row -> (control steps to its end, terminated?) by the functional env itself
+    for t in range(1, steps + 1):
+        ref = cpu.step(ref, np.zeros((n, 2)))
+        for i in np.flatnonzero((ref.terminated | ref.truncated)):
+            end.setdefault(int(i), (t, bool(ref.terminated[i])))
+    assert sorted(end) == list(range(n)) and {e[1] for e in end.values()} == {True, False}
+
+    env = wrap_for_training(BraxPushT(backend="mjx-jax", max_worlds=n, table=n, starts=starts,
+                                      episode=Episode(max_steps=steps)), episode_length=steps)
+    state = jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(0), n))
+    step = jax.jit(env.step)
+    age, ends = np.zeros(n, int), 0
+    for _ in range(3 * steps):
+        row = np.asarray(state.info["seed"]).copy()
+        state = step(state, jnp.zeros((n, 2)))
+        age += 1
+        done, trunc = np.asarray(state.done) > 0, np.asarray(state.info["truncation"])
+        for e in range(n):
+            if done[e]:
+                t, terminated = end[int(row[e])]
+                assert (age[e], trunc[e]) == (t, 0.0 if terminated else 1.0), (e, row[e])
+                ends += 1
+            else:
+                assert trunc[e] == 0.0
+        age[done] = 0
+    assert ends >= n  # every env ended at least once, of both kinds

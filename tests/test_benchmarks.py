@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -80,3 +81,33 @@ def test_the_hostile_pass_over_the_cli_finds_every_bad_input_refused_in_one_line
     assert len(rows) >= 150
     bad = [r for r in rows if not r.rstrip().endswith("| ok |")]
     assert not bad, "\n".join(bad)
+
+
+def test_train_seeds_reports_every_committed_seed_run_and_their_spread(tmp_path):
+    """The committed DAgger-from-state runs (seed 0; seed 1, last and best) aggregated as one result: each row is
+    eval's held-out count over its episodes, the mean / sd / min are those of the three rates, and a run folder
+    without a finished eval is listed as failed (exit 1), not dropped or averaged in."""
+    import numpy as np
+
+    from benchmarks import train_seeds
+
+    root = Path(__file__).resolve().parents[1] / "outputs" / "reports" / "train"
+    runs = [root / "dagger-state", root / "history" / "dagger-state-change24-seed1",
+            root / "history" / "dagger-state-change28-seed1-keep-best"]
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    s = json.loads((runs[0] / "summary.json").read_text())
+    del s["eval"]
+    (cut / "summary.json").write_text(json.dumps(s))
+    rc = train_seeds.main(["--collect", *map(str, runs), str(cut), "--out", str(tmp_path / "agg"), "--goal", "0.95"])
+    assert rc == 1
+    out = json.loads((tmp_path / "agg" / "seeds.json").read_text())
+    evals = [json.loads((r / "summary.json").read_text())["eval"] for r in runs]
+    rates = np.array([e["n_success"] / e["n_episodes"] for e in evals])
+    assert [r["held_out_success"] for r in out["runs"]] == list(rates)
+    agg = out["aggregate"]
+    assert agg["n_seeds"] == 3 and agg["mean"] == pytest.approx(rates.mean()) and agg["min"] == rates.min()
+    assert agg["sd"] == pytest.approx(rates.std(ddof=1)) and agg["seeds_at_goal"] == int((rates >= 0.95).sum())
+    assert len(out["failed"]) == 1 and "cut" in out["failed"][0]
+    table_rows = [line for line in (tmp_path / "agg" / "seeds.md").read_text().splitlines() if line[:3] in ("| 0", "| 1")]
+    assert len(table_rows) == 3  # every run, the two of seed 1 included

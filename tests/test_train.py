@@ -109,7 +109,7 @@ def test_keep_best_keeps_the_fit_whose_next_rollout_on_fresh_training_seeds_succ
                                "validation_success": best["validation_success"], "validation_beta": 0.0}
     kept = run / "checkpoints" / f"policy_{best['iteration']:03d}.msgpack"
     assert (run / "policy.msgpack").read_bytes() == kept.read_bytes()
-    assert summary["final_success"] == best["success"] == summary["eval"]["success_rate"]
+    assert summary["trainer_success"] == best["success"] == summary["eval"]["success_rate"] == summary["held_out_success"]
     assert "validation_success" in (run / "curve.csv").read_text().splitlines()[0]
 
 
@@ -297,7 +297,8 @@ def test_dagger_learns_to_finish_episodes_on_cpu_in_about_a_minute():
 
     from mjx_pusht.envs.functional import PushTEnv
     from mjx_pusht.task.controllers import Random
-    from mjx_pusht.train.dagger import DaggerConfig, Learner, Rollouts
+    from mjx_pusht.train.dagger import DaggerConfig, Rollouts
+    from mjx_pusht.train.learner import Learner
 
     # the expert as teacher, as measured (the paced teacher, the same way: 18 of 64, notebook change 24)
     cfg = DaggerConfig(reset="chapter", envs=256, iterations=4, eval_envs=64, fit_steps=1500, batch=1024,
@@ -410,7 +411,7 @@ def test_a_ppo_checkpoint_acts_as_braxs_own_deterministic_policy(tmp_path):
     from brax.training.acme import running_statistics, specs
     from brax.training.agents.ppo import networks as ppo_networks
 
-    from mjx_pusht.train.policy import apply_ppo
+    from mjx_pusht.train.ppo_policy import apply_ppo
     from mjx_pusht.train.ppo import to_checkpoint
 
     nets = ppo_networks.make_ppo_networks(5, 2, preprocess_observations_fn=running_statistics.normalize,
@@ -429,6 +430,45 @@ def test_a_ppo_checkpoint_acts_as_braxs_own_deterministic_policy(tmp_path):
     key = np.zeros((32, 2), np.uint32)
     action, carry = ctrl.act(ctrl.init(key), {"state": obs.astype(np.float64)}, 0, key)
     assert np.abs(action - np.asarray(brax_action)).max() < 1e-5 and not carry.any()
+
+
+def test_a_sampled_ppo_action_is_a_draw_from_braxs_own_distribution_keyed_by_seed_and_step():
+    """act "sample": tanh(loc + scale * z) with Brax's own NormalTanhDistribution loc and scale, z standard normal
+    (over 4,096 seeds: mean 0, sd 1, its tails), the same draw in NumPy and in JAX for the same seed and step, a
+    fresh one at the next step, and a row's action does not depend on the rows beside it."""
+    pytest.importorskip("brax")
+    import jax
+    import jax.numpy as jnp
+    from brax.training.acme import running_statistics, specs
+    from brax.training.agents.ppo import networks as ppo_networks
+
+    from mjx_pusht.task.controllers import seed_key
+    from mjx_pusht.task.rules import CTRL_LIMIT
+    from mjx_pusht.train.ppo import to_checkpoint
+    from mjx_pusht.train.ppo_policy import apply_ppo
+
+    nets = ppo_networks.make_ppo_networks(5, 2, preprocess_observations_fn=running_statistics.normalize,
+                                          policy_hidden_layer_sizes=(16, 16))
+    rng = np.random.default_rng(0)
+    normalizer = running_statistics.init_state(specs.Array((5,), jnp.float32))
+    params = (normalizer, nets.policy_network.init(jax.random.key(1)), nets.value_network.init(jax.random.key(2)))
+    dense, meta = to_checkpoint(params, "state", act="sample")
+    n = 4096
+    obs = np.repeat(rng.normal(0, 0.3, size=(1, 5)), n, axis=0)  # one observation, 4,096 episodes
+    key, t = seed_key(np.arange(n)), np.full(n, 7)
+    dist = nets.parametric_action_distribution.create_dist(
+        nets.policy_network.apply(normalizer, params[1], jnp.asarray(obs[:1], jnp.float32)))
+    loc, scale = np.asarray(dist.loc)[0], np.asarray(dist.scale)[0]
+    action = apply_ppo(dense, meta, obs, key, t)
+    z = (np.arctanh(action / CTRL_LIMIT) - loc) / scale
+    assert abs(z.mean()) < 0.05 and abs(z.std() - 1) < 0.05 and 0.02 < (np.abs(z) > 2).mean() < 0.07
+    assert np.abs(np.corrcoef(z.T)[0, 1]) < 0.05  # the two actions draw apart
+    in_jax = np.asarray(jax.jit(lambda o, k, s: apply_ppo(dense, meta, o, k, s))(jnp.asarray(obs, jnp.float32),
+                                                                                  jnp.asarray(key), jnp.asarray(t)))
+    assert np.abs(in_jax - action).max() < 1e-4
+    assert np.abs(apply_ppo(dense, meta, obs, key, t + 1) - action).max() > 0.1  # the next step draws anew
+    assert np.array_equal(apply_ppo(dense, meta, obs[5:6], key[5:6], t[5:6]), action[5:6])
+    assert np.abs(apply_ppo(dense, {**meta, "act": "mean"}, obs[:1]) - np.tanh(loc) * CTRL_LIMIT).max() < 1e-6
 
 
 def test_ppos_training_reward_makes_succeeding_the_best_outcome():
@@ -458,8 +498,7 @@ def test_ppos_training_reward_makes_succeeding_the_best_outcome():
 
 
 def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
-    for extra, why in ((("--backend", "cpu"), "Brax's jitted JAX"), (("--backend", "mjx-jax", "--resume"), "nothing to resume"),
-                       (("--backend", "mjx-jax", "--keep", "best"), "PPO keeps its last")):
+    for extra, why in ((("--backend", "cpu"), "Brax's jitted JAX"), (("--backend", "mjx-jax", "--resume"), "nothing to resume")):
         r = cli("train", "--algo", "ppo", *extra, "--out", str(tmp_path / "p"), "--no-rerun")
         assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and why in r.stderr, r.stderr
         assert not (tmp_path / "p" / "checkpoints").exists()
@@ -471,18 +510,28 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp
     out = tmp_path / "ppo"
     args = ["train", "--algo", "ppo", "--backend", "mjx-jax", "--envs", "8", "--batch", "8", "--timesteps", "10240",
             "--iterations", "1", "--eval-envs", "4", "--hidden", "32,32", "--no-rerun", "--record", "0",
-            "--no-progress", "--out", str(out)]
+            "--no-progress", "--out", str(out), "--keep", "best"]
     r = cli(*args)
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["method"] == "ppo" and [c["env_steps"] for c in summary["curve"]] == [0, 10240]
+    # every judgement: both actions on the held-out seeds, the saved one's on the validation seeds, and after
+    # training, Brax's own loss metrics of the epoch that made it
+    for row in summary["curve"]:
+        assert row["success"] == row["success_sample"] and 0 <= row["success_mean"] <= 1
+        assert 0 <= row["validation_success"] <= 1 and row["validation_beta"] == 0.0
+    assert all(np.isfinite(summary["curve"][1][f"brax_{k}"]) for k in ("v_loss", "policy_loss", "entropy_loss", "sigma"))
+    best = max(reversed(summary["curve"]), key=lambda r: r["validation_success"])
+    assert summary["kept"]["rule"] == "best" and summary["kept"]["iteration"] == best["iteration"]
+    kept = out / "checkpoints" / f"policy_{best['iteration']:03d}.msgpack"
+    assert (out / "policy.msgpack").read_bytes() == kept.read_bytes()
     for name in ("policy.msgpack", "checkpoints/policy_000.msgpack", "checkpoints/policy_001.msgpack", "curve.png"):
         assert (out / name).is_file(), name
     # the trainer's judge (its own jitted scan) and `eval --controller policy:...` (the backend's episode
     # machinery) on the same held-out seeds: MJX-JAX on the CPU is deterministic, so they agree
     rows = pq.read_table(out / "eval" / "per_episode.parquet").to_pydict()
-    assert summary["eval"]["success_rate"] == summary["curve"][-1]["success"]
-    assert summary["curve"][-1]["coverage"] == pytest.approx(np.mean(rows["final_coverage"]), abs=1e-5)
+    assert summary["eval"]["success_rate"] == best["success"] == summary["held_out_success"]
+    assert best["coverage"] == pytest.approx(np.mean(rows["final_coverage"]), abs=1e-5)
     # --resume goes on from the last judged policy: the finished judgements stay, more are added; --minutes
     # (spent at once here) stops it at the first judgement past the budget, 20,480 of the 30,720 steps asked
     args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "30720", "3"
@@ -495,3 +544,15 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp
     args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "20480", "2"
     r = cli(*args, "--resume")  # nothing left to do is one line, not a crash inside Brax
     assert r.returncode == 1 and "already reached 20,480 env steps" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_a_fit_that_goes_non_finite_ends_the_run_in_one_line_naming_the_iteration(tmp_path):
+    """A learning rate of 1e30 turns the first fit's loss to NaN: the run stops there, one line names the
+    iteration and says what stays, instead of rolling a NaN student out and judging it at 0%."""
+    r = cli("train", "--backend", "cpu", "--reset", "chapter", "--envs", "16", "--iterations", "3", "--fit-steps", "50",
+            "--batch", "128", "--hidden", "32,32", "--eval-envs", "8", "--lr", "1e30", "--no-rerun", "--no-progress",
+            "--record", "0", "--out", str(tmp_path / "nan"))
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "iteration 0's fit, the loss is nan; no policy was saved" in r.stderr
+    assert not (tmp_path / "nan" / "policy.msgpack").exists()

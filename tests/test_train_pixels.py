@@ -159,7 +159,8 @@ def test_the_fit_teaches_the_pose_reader_the_pose_each_image_shows(env):
     ignores the image can do (the training poses' mean), and the fit's own figure (`pose_error_mm`) agrees."""
     import jax
 
-    from mjx_pusht.train.dagger import DaggerConfig, Learner
+    from mjx_pusht.train.dagger import DaggerConfig
+    from mjx_pusht.train.learner import Learner
     from mjx_pusht.train.policy import POSE_SCALE, pose_target, read_pose
 
     def states(n, seed):  # pusher and T anywhere a task episode puts them
@@ -189,7 +190,8 @@ def test_the_fit_teaches_the_pose_reader_the_pose_each_image_shows(env):
 
 def _pixel_learner(env, render=None, rows=256, **kw):
     """A small pixel Learner with `rows` ring samples of states anywhere a task episode puts pusher and T."""
-    from mjx_pusht.train.dagger import DaggerConfig, Learner
+    from mjx_pusht.train.dagger import DaggerConfig
+    from mjx_pusht.train.learner import Learner
 
     r = np.random.default_rng(0)
     states = np.column_stack([r.uniform(-0.3, 0.3, (rows, 4)), r.uniform(-np.pi, np.pi, rows)])

@@ -193,8 +193,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "apart from the --fit-steps that teach the actions (default: as many as --fit-steps)")
     t.add_argument("--keep", choices=("last", "best"), default="last",
                    help="DAgger: the run's policy is the last fit (default), or the fit whose next rollout succeeded "
-                        "most on that iteration's fresh training seeds once the expert's share there is at most 1%% "
-                        "(chosen without the held-out seeds)")
+                        "most on that iteration's fresh training seeds once the expert's share there is at most 1%%; "
+                        "PPO: the judged policy that succeeded most on validation seeds past its training starts "
+                        "(both chosen without the held-out seeds)")
+    t.add_argument("--ppo-act", choices=("sample", "mean"), default="sample",
+                   help="PPO: the saved policy acts with a draw from its Gaussian keyed by seed and step, what PPO "
+                        "trains (default), or with the Gaussian's mean, Brax's deterministic action")
     t.add_argument("--hidden", type=_widths, default=(256, 256, 256), help="hidden widths (default 256,256,256)")
     t.add_argument("--lr", type=_positive_float, default=None, help="Adam's learning rate (default 1e-3; PPO 3e-4)")
     t.add_argument("--beta-decay", type=_fraction, default=0.7,

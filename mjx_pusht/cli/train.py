@@ -8,6 +8,7 @@ import shutil
 from pathlib import Path
 
 from mjx_pusht.io.outputs import atomic_write_json
+from mjx_pusht.train.curve import kept as kept_row
 from mjx_pusht.train.resume import TrainError
 from mjx_pusht.train.summary import write_summary
 
@@ -62,8 +63,6 @@ def _check_rerun(args) -> None:
 
 def _cmd_ppo(args, name: str, why: str) -> int:
     """`train --algo ppo`: Brax's PPO (train/ppo.py), then the same judgement and files as DAgger's."""
-    if args.keep != "last":
-        raise TrainError("--keep best is DAgger's (a fit judged on its next rollout's fresh seeds); PPO keeps its last")
     from mjx_pusht.io.banner import Banner
     from mjx_pusht.io.outputs import claim_out_dir
 
@@ -76,15 +75,16 @@ def _cmd_ppo(args, name: str, why: str) -> int:
         raise TrainError(f"--algo ppo needs Brax ({e.name} is missing): pip install 'mjx-pusht[train]'") from None
     cfg = PPOConfig(obs_type=args.obs, envs=args.envs, timesteps=args.timesteps, evals=args.iterations,
                     hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
-                    eval_envs=args.eval_envs, seed=args.seed, reset=args.reset)
+                    eval_envs=args.eval_envs, seed=args.seed, reset=args.reset, act=args.ppo_act)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)
     _restart(out, args)
     _check_rerun(args)
     banner = Banner("train")
     print(f"backend: {name} ({why}); Brax PPO from {cfg.obs_type}: {cfg.envs} envs, {cfg.timesteps:,} env steps, "
           f"held-out judgement {cfg.evals} times on seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
-    curve = train_ppo(cfg, name, out, resume=args.resume, progress=args.progress, minutes=args.minutes)
-    summary = write_summary(cfg, name, out, curve, args.rerun, method="ppo")
+    curve = train_ppo(cfg, name, out, resume=args.resume, progress=args.progress, minutes=args.minutes, keep=args.keep)
+    summary = write_summary(cfg, name, out, curve, args.rerun, method="ppo", kept=kept_row(curve, args.keep),
+                            keep=args.keep)
     return _finish(args, name, out, summary, banner)
 
 
@@ -96,9 +96,10 @@ def _finish(args, name: str, out: Path, summary: dict, banner) -> int:
     # capturing", then Warp's render kernel failed: an H100 pixel run, notebook change 25). Collected here, before it.
     gc.collect()
     summary["eval"] = _judge(args, name, out, summary)
-    atomic_write_json(out / "summary.json", summary)
     ev = summary["eval"]
     lo, hi = ev["success_rate_ci95"]
+    summary["held_out_success"], summary["held_out_success_ci95"] = ev["success_rate"], [lo, hi]
+    atomic_write_json(out / "summary.json", summary)
     kept = summary.get("kept") or {}
     which = f"iteration {kept['iteration']}'s policy, kept by validation; " if kept.get("rule") == "best" else ""
     print(f"held-out success ({which}eval, {ev['n_episodes']} {summary['held_out']['reset']} seeds): "

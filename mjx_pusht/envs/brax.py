@@ -15,6 +15,13 @@ Start poses come from a table drawn ahead on the host (task seeds `first_seed` .
 episode of an env then starts the same); `wrap_for_training` is the same wrapper stack with a
 fresh start from the table on every reset instead: pass it as `ppo.train(..., wrap_env_fn=...)`.
 
+Episode ends reach Brax's trainer as the task defines them: success is a termination (no value
+after it) and running out of control steps a truncation (`info["truncation"]`, which Brax's GAE
+masks rather than bootstrapping a value of 0). Brax's EpisodeWrapper marks a truncation only where
+the inner env is not already done, and this env's own step limit ends the episode on the same step,
+so without `FreshStartAutoReset` setting it from the env's own `terminated` every time-out would
+reach PPO as a termination: a free end to the per-step cost of failing.
+
 On MJX-Warp the contact buffers are sized for `max_worlds` (the largest batch you will vmap,
 training and evaluation envs alike) and every world's overflow bits are in
 `metrics["dropped"]`: nonzero means a contact was dropped, and the numbers are not physics.
@@ -61,7 +68,9 @@ class BraxPushT(Env):
 
     def __init__(self, backend: str = "mjx-warp", obs_type: str = "state", reset_kind: str = "task",
                  episode: Episode = Episode(), max_worlds: int = 4096, table: int = 65536, first_seed: int = 0,
-                 reward_fn=None):
+                 reward_fn=None, starts: np.ndarray | None = None):
+        """`starts`: a (table, 5) array of starts (tee x, y, yaw, pusher x, y) to draw from instead of the task
+        seeds' own (row i is still keyed and reported as seed `first_seed + i`)."""
         if obs_type not in OBS_TYPES:
             raise ConfigError(f"the Brax adapter observes {' or '.join(OBS_TYPES)}, not {obs_type!r}")
         if backend == "cpu":
@@ -70,7 +79,11 @@ class BraxPushT(Env):
         self.obs_type, self.reward_fn = obs_type, reward_fn
         self.first_seed, self.table = int(first_seed), int(table)
         seeds = np.arange(self.first_seed, self.first_seed + self.table, dtype=np.int64)
-        qpos = self.env.layout.initial_qpos(self.env.model, start_poses(seeds, reset=reset_kind))
+        if starts is None:
+            starts = start_poses(seeds, reset=reset_kind)
+        elif np.shape(starts) != (self.table, 5):
+            raise ConfigError(f"starts must be ({self.table}, 5) (one row per table entry), got {np.shape(starts)}")
+        qpos = self.env.layout.initial_qpos(self.env.model, np.asarray(starts, np.float64))
         self._qpos = jnp.asarray(qpos, self.env.runner.dtype)
         self._keys = jnp.asarray(seed_key(seeds))
         self._d0 = self.env.template(int(max_worlds))
@@ -109,7 +122,8 @@ class BraxPushT(Env):
 
 
 class FreshStartAutoReset(brax_training.Wrapper):
-    """Brax's AutoResetWrapper, but a done env restarts from a new start drawn from the table (a key per env)."""
+    """Brax's AutoResetWrapper, but a done env restarts from a new start drawn from the table (a key per env), and
+    `info["truncation"]` says which ends were time-outs: done and not terminated by the task (module docstring)."""
 
     def reset(self, rng: jax.Array) -> State:
         state = self.env.reset(rng)
@@ -131,10 +145,11 @@ class FreshStartAutoReset(brax_training.Wrapper):
             return jnp.where(done.reshape((-1,) + (1,) * (new.ndim - 1)) > 0, new, old)
 
         pipeline = state.pipeline_state
+        truncation = jnp.where(done > 0, 1.0 - pipeline.terminated.astype(done.dtype), jnp.zeros_like(done))
         merged = jax.tree.map(where_done, fresh.pipeline_state._replace(data=None),
                               pipeline._replace(data=None))
         data = jax.vmap(lambda d, f, x: x.where(d > 0, f))(done, fresh.pipeline_state.data, pipeline.data)
-        info = {**state.info, "reset_key": keys[:, 1],
+        info = {**state.info, "reset_key": keys[:, 1], "truncation": truncation,
                 "seed": jnp.where(done > 0, fresh.info["seed"], state.info["seed"])}
         return state.replace(pipeline_state=merged._replace(data=data), obs=where_done(fresh.obs, state.obs),
                              info=info)

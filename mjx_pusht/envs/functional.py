@@ -80,7 +80,7 @@ def _check_actions(action, n: int):
 
 
 # The env steps one control step per call, from buffers XLA hands it anew each call: staged, Warp replays
-# one graph whatever the addresses. Measured on an H100 (NOTES change 13): the gymnasium vector env,
+# one graph whatever the addresses. Measured on an H100 (notebook change 13): the gymnasium vector env,
 # torch output, 237k / 650k / 1.17 M control steps/s at 4,096 / 16,384 / 65,536 envs, against 114k /
 # 431k / out of memory with "WARP".
 ENV_GRAPH_MODE = "WARP_STAGED"
@@ -109,7 +109,7 @@ class PushTEnv:
     rows_per_world: int | None = None
     # MJX-Warp's CUDA-graph mode, a name of warp.JaxCallableGraphMode. None: "WARP_STAGED" (Warp copies the
     # step's inputs into buffers of its own and replays one captured graph), the env's measured best
-    # (NOTES change 13); "WARP" is MJX's default, which the sweep keeps
+    # (notebook change 13); "WARP" is MJX's default, which the sweep keeps
     graph_mode: str | None = None
 
     def __post_init__(self) -> None:

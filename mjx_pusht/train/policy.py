@@ -28,11 +28,16 @@ import numpy as np
 
 from mjx_pusht.task.controllers import NEAR, REVERSE, Controller, ControllerError
 from mjx_pusht.task.rules import CTRL_LIMIT, array_namespace
+from mjx_pusht.train.layers import activation as _activation
+from mjx_pusht.train.layers import mlp as _mlp
+from mjx_pusht.train.layers import rowwise as _rowwise
+from mjx_pusht.train.ppo_policy import apply_ppo
 
 FORMAT = "mjx_pusht.policy/2"  # /1: one head, the last action as memory (notebook, change 12)
 OBS_TYPES = ("state", "keypoints", "pixels_agent_pos")
 OBS_SIZE = {"state": 5, "keypoints": 16}  # the observations' own widths (what a PPO policy reads)
 ACTIVATIONS = ("relu", "silu")
+PPO_ACTS = ("mean", "sample")  # a PPO policy's action: its Gaussian's mean, or a draw keyed by seed and step
 # A pixel policy's image trunk: 3x3 convolutions of stride 2, no padding (96 -> 47 -> 23 -> 11 -> 5 pixels),
 # then the flattened 5 x 5 x 32 map is read into the T's pose by two Dense layers (Pose_0, Pose_1), and the policy
 # acts on that estimate as a state policy acts on the true pose (`pose_features`). Training teaches the reader the
@@ -105,49 +110,6 @@ def decode(head):
     return action, xp.astype(move, xp.int32)
 
 
-def _activation(name: str, x, xp):
-    if name == "relu":
-        return xp.maximum(x, 0.0)
-    return x / (1.0 + xp.exp(-x))  # silu
-
-
-# NumPy's matmul (BLAS) chooses its kernels, and so its order of summation, by the matrices' shapes, so a row's
-# product moved in its last bits with the number of rows it came with; the contacts then amplify it, and a seed's
-# MuJoCo C episode depended on which seeds shared its eval (the pixel policy of notebook change 28 ended seed
-# 1000000002 at coverage 0.956 in a 9-seed eval and at 0.970 among 4,096). The Dense layers are evaluated in
-# blocks of a fixed CPU_BLOCK rows, so a row's action is a function of its own observation alone. Measured on this
-# repo's 2-core machine: 32-row blocks take a 1024 x 3 state network on 4,096 rows in the time of one product (0.24 s
-# against 0.22). The image trunk is not blocked: its products are tall for one image already (47 x 47 rows), BLAS
-# sums them alike whatever the batch (an image's map alone equals its map among 64, float32 and float64), and
-# padding one image to 32 cost 45 times the work. JAX is left as it is: MJX-Warp's physics is not repeatable to
-# the bit anyway, and the compiled scan wants one product.
-CPU_BLOCK = 32
-
-
-def _rowwise(fn, *arrays):
-    """fn on (batch, ...) NumPy arrays (None passes through), CPU_BLOCK rows at a time, padded with zeros to whole
-    blocks; fn's outputs (an array or a tuple of arrays) are cut back to the batch. JAX arrays go to fn whole."""
-    first = arrays[0]
-    if not isinstance(first, np.ndarray) or first.size == 0:  # JAX, or no rows to block
-        return fn(*arrays)
-    single = first.ndim == 1  # one env's observation (the CPU gym env): a batch of one
-    if single:
-        arrays = tuple(None if a is None else a[None] for a in arrays)
-    n = arrays[0].shape[0]
-    pad = -n % CPU_BLOCK
-    arrays = tuple(None if a is None else np.concatenate([a, np.zeros((pad,) + a.shape[1:], a.dtype)])
-                   for a in arrays)
-    blocks = [fn(*(None if a is None else a[i:i + CPU_BLOCK] for a in arrays)) for i in range(0, n + pad, CPU_BLOCK)]
-
-    def joined(parts):
-        out = np.concatenate(parts)[:n]
-        return out[0] if single else out
-
-    if isinstance(blocks[0], tuple):
-        return tuple(joined([b[k] for b in blocks]) for k in range(len(blocks[0])))
-    return joined(blocks)
-
-
 def apply(params: dict, meta: dict, x, image=None):
     """The network on (..., feature_size) features (and, for a pixel policy, the (..., H, W, 3) uint8 image), in
     x's array namespace: (action (..., 2), memory (...,)). In NumPy a row's result does not depend on the rows
@@ -159,13 +121,6 @@ def apply(params: dict, meta: dict, x, image=None):
 
         return _rowwise(dense, x, _trunk(params, act, image, x.dtype))
     return _rowwise(lambda v: decode(_mlp(params, meta, act, v)), x)
-
-
-def apply_ppo(params: dict, meta: dict, obs):
-    """A PPO policy (ppo.py) on raw observations (..., obs size): Brax's normalisation, its MLP (silu between
-    layers), and its deterministic action, tanh of the Gaussian's location (the first 2 outputs); in NumPy row by
-    row (`_rowwise`)."""
-    return _rowwise(lambda o: array_namespace(o).tanh(_mlp(params, meta, "silu", o)[..., :2]) * CTRL_LIMIT, obs)
 
 
 def pose_target(state):
@@ -237,22 +192,6 @@ def _conv_xla(h, kernel):
     out = lax.conv_general_dilated(h.reshape((-1,) + h.shape[-3:]), kernel, (CONV_STRIDE, CONV_STRIDE), "VALID",
                                    dimension_numbers=("NHWC", "HWIO", "NHWC"))
     return out.reshape(lead + out.shape[1:])
-
-
-def _mlp(params: dict, meta: dict, activation: str, x, pose=None):
-    """Normalise by the checkpoint's mean and std, then the Dense layers, in x's array namespace and dtype
-    (a pixel policy's first Dense layer reads its pose estimate's `pose_features`, then the normalised features)."""
-    xp = array_namespace(x)
-    h = (x - xp.asarray(meta["in_mean"], dtype=x.dtype)) / xp.asarray(meta["in_std"], dtype=x.dtype)
-    if pose is not None:
-        h = xp.concat([pose, h], axis=-1)
-    params = {k: v for k, v in params.items() if k.startswith("Dense_")}
-    for i in range(len(params)):
-        layer = params[f"Dense_{i}"]
-        h = h @ xp.asarray(layer["kernel"], dtype=x.dtype) + xp.asarray(layer["bias"], dtype=x.dtype)
-        if i < len(params) - 1:
-            h = _activation(activation, h, xp)
-    return h
 
 
 def network(hidden: tuple[int, ...], activation: str = "relu", image: int = 0):
@@ -356,7 +295,9 @@ def _check(path, params, meta) -> None:
         if not (np.isfinite(kernel).all() and np.isfinite(layer["bias"]).all()):
             raise ControllerError(f"policy checkpoint {path}: layer Dense_{i} holds non-finite weights")
         width = kernel.shape[1]
-    if ppo and len(dense) and width in (2, 4):
+    if ppo and meta.get("act", "mean") not in PPO_ACTS:
+        raise ControllerError(f"policy checkpoint {path}: unknown PPO action {meta.get('act')!r} (mean or sample)")
+    if ppo and len(dense) and (width == 4 or (width == 2 and meta.get("act", "mean") == "mean")):
         return
     if not len(dense) or width != OUTPUTS:
         raise ControllerError(f"policy checkpoint {path}: its layers end in {width} outputs, not {OUTPUTS} "
@@ -385,7 +326,7 @@ class PolicyController(Controller):
 
     def act(self, carry, obs, t, key):
         if self.meta.get("method") == "ppo":
-            return apply_ppo(self.params, self.meta, obs[self.meta["obs_type"]]), carry
+            return apply_ppo(self.params, self.meta, obs[self.meta["obs_type"]], key, t), carry
         action, memory = apply(self.params, self.meta, features(obs, self.meta["obs_type"], carry), obs.get("pixels"))
         return action, memory
 

@@ -22,14 +22,19 @@ the two things a random policy almost never does on its own.
 
 The policy Brax learns (an MLP on Brax's running observation normalisation, tanh-squashed
 Gaussian) is saved as a `policy:PATH` checkpoint (policy.py): the normaliser's mean and std, the
-layers, and its deterministic action tanh(loc), which is Brax's own `make_policy(...,
-deterministic=True)`; a test checks the two agree.
+layers, and which action it acts with (ppo_policy.py): by default a draw from the Gaussian keyed
+by seed and step, the policy PPO trains; or its mean, tanh(loc), Brax's own `make_policy(...,
+deterministic=True)` (tests check both against Brax). The mean action is not what PPO optimises:
+it stalls where the trained policy's noise carries it on, and its held-out rate swung 5-93%
+between judgements while PPO learned (docs/notebook/training.md), so every judgement measures
+both, and `--keep best` chooses by validation seeds, never the held-out ones.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 import time
 from pathlib import Path
 
@@ -38,11 +43,12 @@ import numpy as np
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.io.outputs import atomic_write_bytes
 from mjx_pusht.train.dagger import held_out_seeds
-from mjx_pusht.train.policy import OBS_SIZE
+from mjx_pusht.train.policy import OBS_SIZE, PPO_ACTS
 from mjx_pusht.train.resume import TrainError, config_dict, resume_tree
 
 SUCCESS_BONUS = 10.0
 SHAPING = 10.0
+TABLE = 65536  # the training starts: task seeds 0 .. TABLE - 1 (BraxPushT's table)
 RESUME = "resume.msgpack"  # in checkpoints/: Brax's params and the curve after the last judgement
 
 
@@ -65,10 +71,16 @@ class PPOConfig:
     eval_envs: int = 4096
     max_steps: int = 300
     seed: int = 0
+    act: str = "sample"  # the saved policy's action (ppo_policy.py): "sample", what PPO trains, or "mean"
+    validation_envs: int = 0  # --keep best judges on this many seeds, neither trained on nor held out (0: eval_envs / 4)
 
     def __post_init__(self) -> None:
+        if self.act not in PPO_ACTS:
+            raise ConfigError(f"PPO acts with its Gaussian's {' or '.join(PPO_ACTS)}, not {self.act!r}")
         if self.obs_type not in ("state", "keypoints"):
             raise ConfigError(f"PPO trains from state or keypoints observations, not {self.obs_type!r}")
+        if self.validation_envs < 0:
+            raise ConfigError(f"PPO: validation_envs must be at least 0, got {self.validation_envs}")
         for name in ("envs", "timesteps", "evals", "eval_envs", "max_steps", "unroll_length", "batch_size"):
             if int(getattr(self, name)) < 1:
                 raise ConfigError(f"--{name.replace('_', '-')} must be at least 1, got {getattr(self, name)}")
@@ -83,6 +95,10 @@ class PPOConfig:
 
     def held_out_seeds(self) -> np.ndarray:
         return held_out_seeds(self.eval_envs)  # the same held-out task seeds as DAgger's
+
+    def validation_seeds(self) -> np.ndarray:
+        """Task seeds past the training table (BraxPushT draws its starts from seeds 0 .. TABLE - 1)."""
+        return TABLE + np.arange(self.validation_envs or max(8, self.eval_envs // 4), dtype=np.int64)
 
 
 def training_reward(prev, s):
@@ -102,58 +118,82 @@ def training_reward(prev, s):
     return (m["coverage"] - 1.0) + SUCCESS_BONUS * m["success"].astype(m["coverage"].dtype) + SHAPING * (phi(s) - phi(prev))
 
 
-def to_checkpoint(params, obs_type: str) -> tuple[dict, dict]:
+def to_checkpoint(params, obs_type: str, act: str = "mean") -> tuple[dict, dict]:
     """Brax's (normaliser, policy, value) params -> (layers, meta) of a policy.py checkpoint."""
     normalizer, policy = params[0], params[1]
     layers = policy["params"]
     names = sorted((k for k in layers if k.startswith("hidden_")), key=lambda k: int(k.split("_")[1]))
     dense = {f"Dense_{i}": {"kernel": np.asarray(layers[k]["kernel"]), "bias": np.asarray(layers[k]["bias"])}
              for i, k in enumerate(names)}
-    meta = {"method": "ppo", "obs_type": obs_type, "activation": "silu",
+    meta = {"method": "ppo", "obs_type": obs_type, "activation": "silu", "act": act,
             "in_mean": [float(v) for v in np.asarray(normalizer.mean)],
             "in_std": [float(v) for v in np.asarray(normalizer.std)]}
     return dense, meta
 
 
-def _held_out(env, cfg: PPOConfig):
-    """A jitted judge: checkpoint layers and meta -> per-episode success and final coverage on the held-out seeds."""
+def _judge(env, cfg: PPOConfig):
+    """A jitted judge: checkpoint layers and meta -> {"mean", "sample"} x {"held_out", "validation"} per-episode
+    success and final coverage, and the count of episodes whose observation went non-finite. Both actions run in one
+    batch (held-out and validation seeds, each twice), so judging the action not saved costs little on a GPU."""
     import jax
     import jax.numpy as jnp
 
-    from mjx_pusht.train.policy import apply_ppo
+    from mjx_pusht.train.ppo_policy import ppo_action
 
-    s0 = env.reset(cfg.held_out_seeds())
+    held, val = cfg.held_out_seeds(), cfg.validation_seeds()
+    seeds = np.concatenate([held, val, held, val])
+    sample = jnp.asarray(np.repeat([0.0, 1.0], len(held) + len(val)), jnp.float32)
+    s0 = env.reset(seeds)
 
-    def episode(dense, mean, std, s):
+    def episode(dense, mean, std, s, noise):
         meta = {"in_mean": mean, "in_std": std, "activation": "silu"}
 
         def body(s, _):
-            return env.advance_one(s, apply_ppo(dense, meta, s.obs[cfg.obs_type])), None
+            obs = s.obs[cfg.obs_type]
+            return env.advance_one(s, ppo_action(dense, meta, obs, s.key, s.step, noise)), None
 
         s, _ = jax.lax.scan(body, s, None, cfg.max_steps)
-        return s.metrics["success"], s.metrics["coverage"]
+        return s.metrics["success"], s.metrics["coverage"], jnp.isfinite(s.obs[cfg.obs_type]).all()
 
-    run = jax.jit(jax.vmap(episode, in_axes=(None, None, None, 0)))
+    run = jax.jit(jax.vmap(episode, in_axes=(None, None, None, 0, 0)))
 
     def judge(dense, meta):
-        success, cov = run(dense, jnp.asarray(meta["in_mean"], jnp.float32), jnp.asarray(meta["in_std"], jnp.float32), s0)
-        return np.asarray(success, bool), np.asarray(cov, float)
+        success, cov, finite = (np.asarray(v) for v in run(dense, jnp.asarray(meta["in_mean"], jnp.float32),
+                                                             jnp.asarray(meta["in_std"], jnp.float32), s0, sample))
+        n, out = len(held) + len(val), {"non_finite": int((~finite).sum())}
+        for i, act in enumerate(PPO_ACTS):
+            parts = {"held_out": slice(i * n, i * n + len(held)), "validation": slice(i * n + len(held), (i + 1) * n)}
+            for name, part in parts.items():
+                out[act, name] = (success[part].astype(bool), cov[part].astype(float))
+        return out
 
     return judge
 
 
+def _finite(tree) -> bool:
+    import jax
+
+    return all(bool(np.isfinite(np.asarray(x)).all()) for x in jax.tree.leaves(tree))
+
+
 class _BudgetSpent(Exception):
-    """Raised from Brax's `policy_params_fn` once --minutes is spent: Brax's trainer has no stop of its own, and
-    that callback runs on the host between training epochs, after the judged policy is saved."""
+    """Raised from Brax's `progress_fn` once --minutes is spent: Brax's trainer has no stop of its own, and that
+    callback runs on the host between training epochs, after `policy_params_fn` judged and saved the policy."""
 
 
 def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, progress: bool = True,
-              minutes: float | None = None) -> list[dict]:
+              minutes: float | None = None, keep: str = "last") -> list[dict]:
     """Brax PPO on the adapter, judged on the held-out seeds at every evaluation; returns the curve.
 
+    Each curve row has the held-out success of the action the policy is saved with (`cfg.act`) and of both
+    actions (success_mean, success_sample), the saved action's success on the validation seeds, and Brax's own
+    loss metrics of the epoch before it (brax_*: policy, value and entropy losses, KL, the Gaussian's mean sigma).
     `resume`: go on from the last judged policy in `out` (Brax's `restore_params`: the normaliser, policy and
     value networks; Brax restores no optimiser state, so Adam starts afresh) up to `cfg.timesteps`.
-    `minutes`: stop at the first judgement past this much training wall-clock (resumable from there)."""
+    `minutes`: stop at the first judgement past this much training wall-clock (resumable from there).
+    `keep`: "best": policy.msgpack is the judged policy with the highest validation success (never chosen by
+    the held-out seeds); "last": the last judged. A non-finite network, observation statistic or judged episode
+    stops the run with a TrainError naming the judgement; the files of the last good one stay."""
     import functools
 
     from brax.training.agents.ppo import networks as ppo_networks
@@ -165,6 +205,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     from mjx_pusht.study.stats import wilson
     from mjx_pusht.task.episode import Episode
     from mjx_pusht.train.policy import save
+    from mjx_pusht.train.curve import kept as kept_row
     from mjx_pusht.train.curve import write_curve
 
     ckpt = out / "checkpoints"
@@ -176,39 +217,60 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
                          "judgements; raise --timesteps and --iterations to go on")
     episode = Episode(max_steps=cfg.max_steps)
     env = BraxPushT(backend=backend, obs_type=cfg.obs_type, reset_kind=cfg.reset, episode=episode,
-                    max_worlds=max(cfg.envs, 128), reward_fn=training_reward)
+                    max_worlds=max(cfg.envs, 128), table=TABLE, reward_fn=training_reward)
     judge_env = PushTEnv(backend=backend, reset_kind=cfg.reset, episode=episode, keep_states=False)
-    judge = _held_out(judge_env, cfg)
+    judge = _judge(judge_env, cfg)
     ckpt.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter() - (curve[-1]["wall_seconds"] if curve else 0.0)
-    last = {"t": time.perf_counter(), "skip": resume}
+    last = {"t": time.perf_counter(), "skip": resume, "params": None}
     bar = tqdm(total=cfg.evals + 1, initial=len(curve), desc="ppo", unit="eval", disable=not progress)
+
+    def bad(step: int, what: str) -> TrainError:
+        good = f"judgement {len(curve) - 1}'s policy stays in {out / 'policy.msgpack'}" if curve else "nothing was saved"
+        return TrainError(f"PPO: {what} at judgement {len(curve)} ({step:,} env steps); {good}")
 
     def on_params(step, make_policy, params):
         if last["skip"]:  # a resumed run's first call: the restored policy, judged already
             last["skip"] = False
             return
         step = int(step) + done
+        if not _finite(params):  # the normaliser's running mean holds every training observation: one NaN reaches it
+            raise bad(step, "a training observation, the normaliser or the networks went non-finite")
         t_judge = time.perf_counter()
-        dense, meta = to_checkpoint(params, cfg.obs_type)
+        dense, meta = to_checkpoint(params, cfg.obs_type, cfg.act)
         meta |= {"iteration": len(curve), "env_steps": int(step), "config": config_dict(cfg)}
-        success, cov = judge(dense, meta)
+        judged = judge(dense, meta)
+        if judged["non_finite"]:
+            raise bad(step, f"{judged['non_finite']} judged episodes' observations went non-finite")
+        success, cov = judged[cfg.act, "held_out"]
         k, n = int(success.sum()), len(success)
         lo, hi = wilson(k, n)
         now = time.perf_counter()
-        judged = now - t_judge
+        t_judge = now - t_judge
         curve.append({"iteration": len(curve), "beta": 0.0, "env_steps": int(step), "samples": int(step),
                       "loss": None, "success": k / n, "success_lo": lo, "success_hi": hi,
-                      "coverage": float(cov.mean()), "sim_seconds": judged,
-                      "learn_seconds": now - last["t"] - judged if curve else 0.0, "wall_seconds": now - t0})
-        last["t"] = now
+                      "coverage": float(cov.mean()), "sim_seconds": t_judge,
+                      "learn_seconds": now - last["t"] - t_judge if curve else 0.0, "wall_seconds": now - t0,
+                      "validation_success": float(judged[cfg.act, "validation"][0].mean()), "validation_beta": 0.0}
+                     | {f"success_{a}": float(judged[a, "held_out"][0].mean()) for a in PPO_ACTS})
+        last["t"], last["params"] = now, params
         save(ckpt / f"policy_{len(curve) - 1:03d}.msgpack", dense, meta)
         save(out / "policy.msgpack", dense, meta)
         write_curve(out, curve, f"Brax PPO from {cfg.obs_type} (running)", rerun=False)  # a killed run keeps its curve
         _save_resume(ckpt / RESUME, cfg, params, curve)
         bar.update(1)
         bar.set_postfix(success=f"{k / n:.1%}", steps=int(step))
-        if minutes is not None and curve[-1]["wall_seconds"] > 60 * minutes:
+
+    def on_metrics(step, metrics):
+        """Brax's loss metrics of the epoch that made the last judged policy (called after on_params)."""
+        names = {"policy_loss": "policy_loss", "v_loss": "v_loss", "entropy_loss": "entropy_loss", "kl_mean": "kl",
+                 "policy_dist_mean_std": "sigma", "total_loss": "total_loss"}
+        if curve and last["params"] is not None:
+            curve[-1].update({f"brax_{v}": float(metrics[f"training/{k}"]) for k, v in names.items()
+                              if f"training/{k}" in metrics})
+            write_curve(out, curve, f"Brax PPO from {cfg.obs_type} (running)", rerun=False)
+            _save_resume(ckpt / RESUME, cfg, last["params"], curve)
+        if minutes is not None and curve and curve[-1]["wall_seconds"] > 60 * minutes:
             raise _BudgetSpent
 
     try:
@@ -218,11 +280,17 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
             discounting=cfg.discounting, unroll_length=cfg.unroll_length, batch_size=cfg.batch_size,
             num_minibatches=cfg.num_minibatches, num_updates_per_batch=cfg.updates_per_batch,
             reward_scaling=cfg.reward_scaling, normalize_observations=True, seed=cfg.seed + len(curve),
-            num_evals=evals_left + 1, run_evals=False, policy_params_fn=on_params, restore_params=restored,
+            num_evals=evals_left + 1, run_evals=False, policy_params_fn=on_params, progress_fn=on_metrics,
+            restore_params=restored,
             network_factory=functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=cfg.hidden))
     except _BudgetSpent:
         bar.write(f"stopping after judgement {len(curve) - 1}: the {minutes:g}-minute budget is spent")
     bar.close()
+    kept = kept_row(curve, keep)
+    if kept is not None and kept["iteration"] != curve[-1]["iteration"]:
+        shutil.copyfile(ckpt / f"policy_{kept['iteration']:03d}.msgpack", out / "policy.msgpack")
+        print(f"keeping judgement {kept['iteration']}'s policy: {kept['validation_success']:.1%} on the "
+              f"{len(cfg.validation_seeds())} validation seeds (held-out {kept['success']:.1%})")
     return curve
 
 

@@ -95,7 +95,7 @@ def restore(path, cfg, learner):
     from flax import serialization
 
     tree = resume_tree(path, cfg, ("iterations",))
-    try:  # the optimiser's layout is this version's: one Adam a part of the network (dagger._parts)
+    try:  # the optimiser's layout is this version's: one Adam a part of the network (learner._parts)
         learner.opt_state = serialization.from_state_dict(learner.opt_state, tree["opt_state"])
     except (KeyError, ValueError, TypeError) as e:
         raise TrainError(f"--resume: {path} holds an optimiser state this version does not use ({type(e).__name__}; "

@@ -20,7 +20,7 @@ import numpy as np
 
 from mjx_pusht.study.stats import wilson
 from mjx_pusht.train.curve import kept as kept_fit
-from mjx_pusht.train.resume import RESUME_EVERY_S, checkpoint, config_dict, restore
+from mjx_pusht.train.resume import RESUME_EVERY_S, TrainError, checkpoint, config_dict, restore
 from mjx_pusht.train.summary import write_summary
 
 
@@ -45,7 +45,8 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     from mjx_pusht.backends.cpu import default_threads
     from mjx_pusht.envs.functional import PushTEnv
     from mjx_pusht.task.episode import Episode
-    from mjx_pusht.train.dagger import Learner, Rollouts
+    from mjx_pusht.train.dagger import Rollouts
+    from mjx_pusht.train.learner import Learner
     from mjx_pusht.train.policy import save
 
     out = Path(out)
@@ -109,6 +110,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         if pending is not None or one_shape:  # the last fit's judgement, in the same batch
             seeds, beta = np.concatenate([seeds, held_out]), np.concatenate([beta, np.zeros(len(held_out), np.float32)])
         (x, y, outcome), sim = _timed(rollouts, learner.params, learner.norm or _unit(cfg), seeds, beta, i, cfg.envs)
+        _stop_if_non_finite(non_finite(outcome, seeds, x, y), f"iteration {i}'s rollout", curve, out)
         if pending is not None:
             stop = judged({k: v[cfg.envs:] for k, v in outcome.items()}, 0.0,
                           {k: v[:cfg.envs] for k, v in outcome.items()}, float(cfg.beta(i)))
@@ -119,6 +121,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         env_steps += len(x)
         learner.add(x, y, keep=i == 0)
         loss, learn = _timed(learner.fit, i)
+        _stop_if_non_finite(None if np.isfinite(loss) else f"the loss is {loss}", f"iteration {i}'s fit", curve, out)
         pending = (i, loss, learn, sim)
         if minutes is not None and time.perf_counter() - t_start > 60 * minutes:
             break  # judged alone below: no rollout past the budget
@@ -128,6 +131,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
             seeds, n_train = np.concatenate([cfg.train_seeds(pending[0] + 1), held_out]), cfg.envs
         (_, _, held), sim_judge = _timed(rollouts, learner.params, learner.norm, seeds, 0.0, cfg.iterations + pending[0],
                                          0)
+        _stop_if_non_finite(non_finite(held, seeds), f"iteration {pending[0]}'s judgement", curve, out)
         judged({k: v[n_train:] for k, v in held.items()}, sim_judge,
                {k: v[:n_train] for k, v in held.items()} if n_train else None, 0.0 if n_train else None)
     if writer[0] is not None:
@@ -142,6 +146,28 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         bar.write(f"keeping iteration {kept['iteration']}'s policy: {kept['validation_success']:.1%} on its "
                   f"validation rollout (held-out {kept['success']:.1%})")
     return write_summary(cfg, backend, out, curve, rerun, kept=kept, keep=keep)
+
+
+def non_finite(outcome: dict, seeds: np.ndarray, *arrays) -> str | None:
+    """What went non-finite in a rollout (its episodes' states, by the env's own invariant, or its samples and
+    labels), naming the first such seed; None when all is finite."""
+    import jax.numpy as jnp
+
+    bad = np.flatnonzero(~np.asarray(outcome["finite"], bool))
+    if bad.size:
+        return f"{bad.size} episodes' states went non-finite (first seed {int(seeds[bad[0]])})"
+    if not all(bool(jnp.isfinite(a).all()) for a in arrays if a is not None and a.size):
+        return "a sample or label went non-finite"
+    return None
+
+
+def _stop_if_non_finite(what: str | None, where: str, curve: list[dict], out: Path) -> None:
+    """A non-finite rollout or fit ends the run in one line naming the iteration; the files of the last judged fit
+    (policy.msgpack, its checkpoint, the resume file) were written before it and stay."""
+    if what is not None:
+        good = f"iteration {curve[-1]['iteration']}'s policy stays in {out / 'policy.msgpack'}" if curve else \
+            "no policy was saved"
+        raise TrainError(f"DAgger: in {where}, {what}; {good}")
 
 
 def _unit(cfg):

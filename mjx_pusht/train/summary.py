@@ -28,8 +28,11 @@ def write_summary(cfg, backend, out: Path, curve, rerun: bool = True, method: st
         "learning_seconds": round(sum(r["learn_seconds"] for r in curve), 3),
         "held_out": {"seeds": f"{cfg.held_out_seeds()[0]}:{cfg.held_out_seeds()[-1] + 1}", "reset": cfg.reset,
                      "success_coverage": 0.95, "max_steps": cfg.max_steps},
-        "final_success": final["success"] if final else None,
-        "final_success_ci95": [final["success_lo"], final["success_hi"]] if final else None,
+        # the trainer's own judgement of the kept policy (its jitted rollout, in its batch); `train` adds eval's
+        # (held_out_success), the number to report: the same policy and seeds in eval's episode programs, equal on
+        # the CPU and parting on a GPU only where float32 rounding turns a contact-rich episode (notebook change 24)
+        "trainer_success": final["success"] if final else None,
+        "trainer_success_ci95": [final["success_lo"], final["success_hi"]] if final else None,
         "kept": {"rule": keep, "iteration": final["iteration"], "validation_success": final.get("validation_success"),
                  "validation_beta": final.get("validation_beta")} if final else None,
         "policy": "policy.msgpack",  # paths in a summary are relative to its folder, never the machine's

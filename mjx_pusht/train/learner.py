@@ -1,0 +1,178 @@
+"""DAgger's learner: the student network, its optimisers and the dataset ring, and the jitted fit (minibatch
+regression onto the teacher's labels; a pixel student's image reader taught the pose apart)."""
+
+from __future__ import annotations
+
+from functools import partial
+
+import numpy as np
+
+from mjx_pusht.errors import ConfigError
+from mjx_pusht.train.dagger import MEMORY_WEIGHT, RENDER_KEY, DaggerConfig
+from mjx_pusht.train.policy import POSE_SCALE, feature_size, network
+
+
+# -- the fit: minibatch regression onto the expert's labels ------------------------------------------
+class Learner:
+    """The student network, its optimisers (one a part of the network, `_parts`) and the dataset ring, on the
+    default JAX device. A pixel student needs `render`: a jittable (n, RENDER_KEY) states -> (n, H, W, 3) uint8
+    images for n = cfg.image_batch (`PushTEnv.images`), the same images its rollouts showed it."""
+
+    def __init__(self, cfg: DaggerConfig, render=None):
+        import jax
+        import jax.numpy as jnp
+        import optax
+
+        if cfg.image and render is None:
+            raise ConfigError("a pixel student's Learner needs the env's renderer (PushTEnv.images)")
+        self.cfg = cfg
+        self.model = network(cfg.hidden, cfg.activation, cfg.image)
+        width = feature_size(cfg.obs_type)
+        image = (jnp.zeros((1, cfg.image, cfg.image, 3), jnp.uint8), jnp.zeros((1, 2))) if cfg.image else ()  # image, pusher
+        self.params = self.model.init(jax.random.key(cfg.seed), jnp.zeros((1, width)), *image)["params"]
+        # Each fit anneals the learning rate from its value to 5% (cosine, restarted every iteration): the
+        # policy judged after a fit is then a settled one, not a snapshot of Adam at full step size (measured
+        # with a constant rate: held-out success swinging 36-78% between neighbouring iterations, notebook change 14).
+        # A pixel student's two parts (the acting layers, the image reader) share no parameters and are fitted apart
+        # (`_fit`), each with an Adam of its own annealed over its own steps.
+        self.opts = tuple(_adam(cfg.learning_rate, steps) for steps in
+                          ((cfg.fit_steps, cfg.reader_steps) if cfg.image else (cfg.fit_steps,)))
+        self.opt_state = tuple(opt.init(part) for opt, part in zip(self.opts, _parts(self.params, cfg.image)))
+        self.x = jnp.zeros((cfg.max_samples, cfg.sample_width), jnp.float32)
+        self.y = jnp.zeros((cfg.max_samples, 3), jnp.float32)  # _label: action, memory
+        self.filled, self.head, self.floor = 0, 0, 0  # samples held; where the next goes; kept below here
+        self.norm = None  # (mean, std) of the features, fixed from the first iteration's data
+        self.pose_error_mm = None  # a pixel student's last fit: its pose estimate's RMS error per number, mm
+        self._fit = jax.jit(partial(_fit, self.model, self.opts, cfg.batch, cfg.image_batch,
+                                    (cfg.fit_steps, cfg.reader_steps), render))
+
+    def add(self, x, y, keep: bool = False) -> None:
+        """Append samples; when the ring is full the oldest student-visited ones go, never those added with
+        `keep` (the expert's own demonstrations, iteration 0): measured, a ring that let them go lost the
+        student what it had learned as the later, stalled episodes filled it (notebook, change 12)."""
+        import jax.numpy as jnp
+
+        x, y = jnp.asarray(x, jnp.float32), jnp.asarray(y, jnp.float32)
+        if self.norm is None:  # of the features (not of a pixel student's image keys, which come first)
+            f = x[:, RENDER_KEY:] if self.cfg.image else x
+            self.norm = (np.asarray(f.mean(0)), np.asarray(f.std(0)) + 1e-3)
+        room = self.cfg.max_samples - self.floor
+        if keep:
+            room = room // 2  # demonstrations take at most half the ring
+        m = min(len(x), room)
+        x, y = x[-m:], y[-m:]
+        idx = self.floor + (self.head - self.floor + jnp.arange(m)) % (self.cfg.max_samples - self.floor)
+        self.x, self.y = self.x.at[idx].set(x), self.y.at[idx].set(y)
+        self.filled = min(self.filled + m, self.cfg.max_samples)
+        if keep:
+            self.floor = self.head = self.filled
+        else:
+            self.head = self.floor + (self.head - self.floor + m) % (self.cfg.max_samples - self.floor)
+
+    def fit(self, iteration: int) -> float:
+        import jax
+        import jax.numpy as jnp
+
+        norm = tuple(jnp.asarray(a) for a in self.norm)
+        key = jax.random.fold_in(jax.random.key(self.cfg.seed + 1), iteration)
+        self.params, self.opt_state, loss, pose_mse = self._fit(self.params, self.opt_state, self.x, self.y,
+                                                                jnp.int32(self.filled), norm, key)
+        if self.cfg.image:
+            self.pose_error_mm = float(np.sqrt(pose_mse / 4) * POSE_SCALE * 1000)
+        return float(loss)
+
+
+def _adam(learning_rate: float, steps: int):
+    """Adam whose rate anneals from `learning_rate` to 5% over each `steps` (cosine, restarted every fit)."""
+    import optax
+
+    decay = optax.cosine_decay_schedule(learning_rate, steps, alpha=0.05)
+    return optax.adam(lambda count: decay(count % steps))
+
+
+READER = ("Conv_", "Pose_")  # a pixel student's image reader: its layers' names begin so; the acting layers' Dense_
+
+
+def _parts(params: dict, image: int) -> tuple[dict, ...]:
+    """The parameters a fit updates apart: (acting layers, image reader) for a pixel student, else (all,)."""
+    if not image:
+        return (params,)
+    reader = {k: v for k, v in params.items() if k.startswith(READER)}
+    return {k: v for k, v in params.items() if k not in reader}, reader
+
+
+def _fit(model, opts, batch, image_batch, steps, render, params, opt_state, x, y, filled, norm, key):
+    """Adam steps on minibatches of `batch` samples from the ring; returns the new parameters and optimiser states,
+    the loss and (a pixel student) the pose estimate's squared error, each over the last tenth of its steps.
+    `steps` is (the actions' steps, the image reader's steps); a state student takes the first.
+
+    A pixel student has two parts that share no parameters, fitted one after the other. Its Dense layers learn the
+    teacher's action and memory from the *true* pose (`pose_target`: what the image shows), as a state student
+    does, in `steps[0]` steps of `batch` samples with no image; then the convolutions and the pose reader learn that
+    pose from the first `image_batch` of each of `steps[1]` minibatches, rendered. The student is then "read the
+    pose, act on it": at run time the Dense layers get the reader's estimate. Measured on one H100 (notebook change
+    25): taught the actions through the images as well, the reader's error grew to ~3 mm (the teacher's labels,
+    discontinuous at the mm scale, are not a function of an image, and their averaged gradients blurred what it
+    saw) and held-out success stayed at 3-9% for 20 minutes; taught the pose alone, it read to 0.8 mm and the
+    student reached 70% in 8 minutes. Fitted apart, the actions need not pay for rendering (~2 ms per 512 images),
+    so they can take as many steps as a state student's (notebook change 26). With equal steps the two fits are the
+    one-scan, one-Adam fit of change 25 (Adam is elementwise, and neither loss reaches the other part's weights:
+    a test checks it)."""
+    import jax
+    import jax.numpy as jnp
+    import optax
+
+    from mjx_pusht.task.controllers import NEAR
+    from mjx_pusht.task.rules import CTRL_LIMIT
+    from mjx_pusht.train.policy import LATCHES, MOVES, pose_target
+
+    def imitation(head, yb):
+        pred = jnp.tanh(head[:, :2]) * CTRL_LIMIT
+        mse = jnp.mean(jnp.sum((pred - yb[:, :2]) ** 2, axis=-1))
+        memory = yb[:, 2].astype(jnp.int32)
+        move = optax.softmax_cross_entropy_with_integer_labels(head[:, 2:2 + MOVES], memory & (NEAR - 1))
+        bits = jnp.stack([(memory & b) != 0 for b in LATCHES], -1).astype(jnp.float32)
+        latch = optax.sigmoid_binary_cross_entropy(head[:, 2 + MOVES:], bits).sum(-1)
+        # the memory terms weighted so a wrong move costs what a 0.1 m/s action error does: both matter
+        return mse + MEMORY_WEIGHT * jnp.mean(move + latch)
+
+    def minibatch(k, n):
+        """The first n of `batch` samples drawn from the ring: (features normalised, labels, image state or None)."""
+        idx = jax.random.randint(k, (batch,), 0, filled)[:n]
+        xb, state = x[idx], None
+        if render is not None:  # a pixel student's sample: its image's state first, then the features
+            state, xb = xb[:, :RENDER_KEY], xb[:, RENDER_KEY:]
+        return (xb - norm[0]) / norm[1], y[idx], state
+
+    def acting(p, fixed, k):  # the actions and memory, from the features (and a pixel student's true pose)
+        xb, yb, state = minibatch(k, batch)
+        if render is None:
+            return imitation(model.apply({"params": p}, xb), yb)
+        return imitation(model.apply({"params": {**fixed, **p}}, xb, None, state[:, :2], pose_target(state))[0], yb)
+
+    def reading(p, fixed, k):  # a pixel student's pose estimate from the images, against the true pose
+        xb, _, state = minibatch(k, image_batch)
+        _, pose = model.apply({"params": {**fixed, **p}}, xb, render(state), state[:, :2])
+        return jnp.mean(jnp.sum((pose - pose_target(state)) ** 2, axis=-1))
+
+    def descend(loss_fn, opt, part, state, fixed, n, k):
+        def step(c, k):
+            p, o = c
+            loss, g = jax.value_and_grad(loss_fn)(p, fixed, k)
+            updates, o = opt.update(g, o, p)
+            return (optax.apply_updates(p, updates), o), loss
+
+        (part, state), losses = jax.lax.scan(step, (part, state), jax.random.split(k, n))
+        return part, state, losses[-max(1, n // 10):].mean()
+
+    if render is None:
+        params, state, loss = descend(acting, opts[0], params, opt_state[0], {}, steps[0], key)
+        return params, (state,), loss, jnp.zeros(())
+    actor, reader = _parts(params, True)
+    actor, actor_state, loss = descend(acting, opts[0], actor, opt_state[0], reader, steps[0], key)
+    # the same key as the actions' minibatches: with equal steps each step shows the reader the first
+    # `image_batch` samples of the actions' minibatch, as change 25's one scan did
+    reader, reader_state, pose_mse = descend(reading, opts[1], reader, opt_state[1], actor, steps[1], key)
+    # the loss reported: the actions' and the pose's (POSE_SCALE units: 2 mm off in each of the 4 numbers is 0.0016,
+    # about what a 0.04 m/s action error costs), as change 25's one loss was
+    return {**actor, **reader}, (actor_state, reader_state), loss + pose_mse, pose_mse
