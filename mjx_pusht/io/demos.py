@@ -110,7 +110,6 @@ def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str =
     complete. Returns a summary (episodes, frames, success rate, seconds)."""
     import gymnasium as gym
 
-    import mjx_pusht  # noqa: F401 - registers the drop-in
     from mjx_pusht.backends.base import resolve
     from mjx_pusht.io.outputs import OutputError, claim_out_dir
     from mjx_pusht.task.controllers import ControllerError, load

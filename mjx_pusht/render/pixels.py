@@ -191,7 +191,8 @@ def _free(gl, mjr) -> None:
     """mjr_freeContext deletes GL objects by name in the current context: make ours current first."""
     try:
         gl.make_current()
-    except RuntimeError:  # current on another thread (EGL_BAD_ACCESS): destroying the context frees its objects,
+    except Exception:  # noqa: BLE001 - current on another thread (EGL_BAD_ACCESS, an EGLError or a RuntimeError, by
+        # platform; a renderer made on a worker thread, render.state_images): destroying the context frees its objects,
         _STRANDED.append(mjr)  # and this MjrContext must never free names in whatever context is current here
     else:
         mjr.free()
