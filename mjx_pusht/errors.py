@@ -14,3 +14,7 @@ class MjxPushtError(Exception):
 
 class ConfigError(MjxPushtError, ValueError):
     """A setting's value is out of range or unknown (an obs type, a step count, a shape)."""
+
+
+class ResetNeeded(MjxPushtError, RuntimeError):
+    """An env was stepped or rendered before its first reset (a RuntimeError, as gymnasium's order check raises)."""

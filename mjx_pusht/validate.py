@@ -19,7 +19,7 @@ import numbers
 
 import numpy as np
 
-from mjx_pusht.errors import ConfigError
+from mjx_pusht.errors import ConfigError, ResetNeeded
 
 SEED_MAX = 2**63 - 1  # task.reset.SEED_MAX (a seed is a non-negative int64)
 RENDER_MODES = (None, "rgb_array")
@@ -42,9 +42,12 @@ def choice(name: str, value, options) -> object:
     return value
 
 
-def render_mode(value) -> str | None:
-    if value not in RENDER_MODES:
-        raise ConfigError(f"render_mode must be None or 'rgb_array', got {_show(value)}")
+def render_mode(value, human: bool = False) -> str | None:
+    """None or 'rgb_array'; 'human' too where `human` (a single env, which opens its window up front)."""
+    modes = RENDER_MODES + (("human",) if human else ())
+    if value not in modes:
+        raise ConfigError(f"render_mode must be {' or '.join(map(repr, modes))}, got {_show(value)}"
+                          + ("" if human or value != "human" else " (a vector env has no window: use 'rgb_array')"))
     return value
 
 
@@ -65,8 +68,39 @@ def image_size(value, name: str = "image size") -> int:
 
 
 def episode_limit(value, name: str = "max_episode_steps") -> int | None:
-    """A positive number of control steps, or None (no limit of the env's own: gymnasium's TimeLimit's)."""
+    """A positive number of control steps, or None or -1: no limit (gymnasium's own meaning of -1: no TimeLimit)."""
+    if value is None or (isinstance(value, numbers.Integral) and not isinstance(value, bool) and value == -1):
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+        raise ConfigError(f"{name} must be a positive integer (or -1 or None: no limit), got {_show(value)}")
+    return int(value)
+
+
+def threads(value, name: str = "threads") -> int | None:
+    """None (the env picks) or a positive number of threads (0 is not 'the default': it is refused)."""
     return None if value is None else positive_int(name, value)
+
+
+def pixels(value, name: str = "pixels") -> int:
+    """0 (no images) or an image side from 8 to 2048."""
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool) and value == 0:
+        return 0
+    if not isinstance(value, numbers.Integral) or isinstance(value, bool) or not 8 <= value <= 2048:
+        raise ConfigError(f"{name} must be 0 (no images) or an image size from 8 to 2048, got {_show(value)}")
+    return int(value)
+
+
+def fraction(name: str, value) -> float:
+    """A real number in (0, 1] (a coverage threshold): NaN, 0 and anything past 1 would never or always end."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0 < float(value) <= 1:
+        raise ConfigError(f"{name} must be a number in (0, 1], got {_show(value)}")
+    return float(value)
+
+
+def started(state, call: str = "step") -> None:
+    """An env's `call` (step, render) needs its first reset to have run."""
+    if state is None:
+        raise ResetNeeded(f"call reset() before {call}(): the env has no episode yet")
 
 
 def seed(value, name: str = "seed") -> int | None:
@@ -108,7 +142,10 @@ def seed_array(value, name: str = "seeds") -> np.ndarray:
 
 def mask(value, n: int, name: str = "reset_mask") -> np.ndarray:
     """(n,) booleans (a 0/1 integer array is accepted; anything else is refused, never cast)."""
-    a = np.asarray(value)
+    try:
+        a = np.asarray(value)
+    except ValueError:  # a ragged list
+        raise ConfigError(f"{name} must be ({n},) booleans, got {_show(value)}") from None
     if a.shape != (n,) or not (a.dtype == bool or (a.dtype.kind in "iu" and np.isin(a, (0, 1)).all())):
         raise ConfigError(f"{name} must be ({n},) booleans, got {a.dtype} of shape {a.shape}")
     return a.astype(bool)

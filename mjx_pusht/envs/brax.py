@@ -39,6 +39,8 @@ try:
 except ImportError as e:  # optional: say what to install
     raise ImportError("the Brax adapter needs brax: pip install 'mjx-pusht[brax]'") from e
 
+from mjx_pusht import validate
+from mjx_pusht.backends import actions as action_check
 from mjx_pusht.envs.functional import PushTEnv
 from mjx_pusht.errors import ConfigError
 
@@ -75,14 +77,18 @@ class BraxPushT(Env):
             raise ConfigError(f"the Brax adapter observes {' or '.join(OBS_TYPES)}, not {obs_type!r}")
         if backend == "cpu":
             raise ConfigError("Brax runs jitted JAX: use backend mjx-warp or mjx-jax (cpu is MuJoCo C on the host)")
+        max_worlds, self.table = validate.positive_int("max_worlds", max_worlds), validate.positive_int("table", table)
+        self.first_seed = validate.seed(first_seed, "first_seed")
+        validate.seed(self.first_seed + self.table - 1, "first_seed + table - 1 (the table's last seed)")
         self.env = PushTEnv(backend=backend, reset_kind=reset_kind, episode=episode)
         self.obs_type, self.reward_fn = obs_type, reward_fn
-        self.first_seed, self.table = int(first_seed), int(table)
         seeds = np.arange(self.first_seed, self.first_seed + self.table, dtype=np.int64)
         if starts is None:
             starts = start_poses(seeds, reset=reset_kind)
         elif np.shape(starts) != (self.table, 5):
             raise ConfigError(f"starts must be ({self.table}, 5) (one row per table entry), got {np.shape(starts)}")
+        else:
+            starts = self.env.given_starts(starts)
         qpos = self.env.layout.initial_qpos(self.env.model, np.asarray(starts, np.float64))
         self._qpos = jnp.asarray(qpos, self.env.runner.dtype)
         self._keys = jnp.asarray(seed_key(seeds))
@@ -94,6 +100,8 @@ class BraxPushT(Env):
         metrics = {**(metrics or {}), "coverage": m["coverage"], "success": m["success"].astype(jnp.float32)}
         if s.dropped is not None:
             metrics["dropped"] = s.dropped.astype(jnp.float32)
+        if "bad_action" in pipeline_info:
+            metrics["bad_action"] = (pipeline_info["bad_action"]["step"] >= 0).astype(jnp.float32)
         done = (s.terminated | s.truncated).astype(jnp.float32)
         return State(pipeline_state=s, obs=s.obs[self.obs_type], reward=reward, done=done, metrics=metrics,
                      info=pipeline_info)
@@ -101,12 +109,37 @@ class BraxPushT(Env):
     def reset(self, rng: jax.Array) -> State:
         i = jax.random.randint(rng, (), 0, self.table)
         s = self.env.fresh_one(self._d0, self._qpos[i], self._keys[i])
-        return self._brax(s, jnp.zeros((), s.reward.dtype), {"seed": self.first_seed + i})
+        info = {"seed": self.first_seed + i, "bad_action": action_check.record_init((), s.reward.dtype, jnp)}
+        return self._brax(s, jnp.zeros((), s.reward.dtype), info)
 
     def step(self, state: State, action: jax.Array) -> State:
-        s = self.env.advance_one(state.pipeline_state, action)
-        reward = s.reward if self.reward_fn is None else self.reward_fn(state.pipeline_state, s)
-        return self._brax(s, reward, state.info, state.metrics)
+        """One world's control step. A non-finite action never reaches the physics: called eagerly it is a
+        `ConfigError` at once; inside jit it is zeroed and recorded per world (info["bad_action"]: the first
+        such control step and value, metrics["bad_action"]: 1.0 from then on), and `check(state)` raises it
+        on the host: a jitted program cannot raise, and a check per step would cost a round trip."""
+        if tuple(jnp.shape(action)) != (2,):
+            raise ConfigError(f"action must have shape (2,), one (x, y) for this world; got {tuple(jnp.shape(action))}")
+        if not isinstance(action, jax.core.Tracer):
+            validate.actions(np.asarray(action), (2,), -np.inf, np.inf)
+        p = state.pipeline_state
+        action, record = action_check.record_update(state.info["bad_action"], jnp.asarray(action), ~p.carry["ep"]["done"],
+                                                    p.step, jnp)
+        s = self.env.advance_one(p, action)
+        reward = s.reward if self.reward_fn is None else self.reward_fn(p, s)
+        return self._brax(s, reward, {**state.info, "bad_action": record}, state.metrics)
+
+    def check(self, state: State) -> State:
+        """Raise a one-line `ConfigError` if any world of `state` (one or a batch) got a non-finite action since
+        its reset, naming the world, its seed, the control step and the value; else return `state`."""
+        step = np.atleast_1d(np.asarray(state.info["bad_action"]["step"]))
+        rows = np.flatnonzero(step >= 0)
+        if len(rows):
+            r = rows[np.argmin(step[rows])]
+            value = np.asarray(state.info["bad_action"]["value"]).reshape(-1, 2)[r].tolist()
+            seed = int(np.atleast_1d(np.asarray(state.info["seed"]))[r])
+            raise ConfigError(f"actions must be finite: world {r} (seed {seed}) got {value} at control step "
+                              f"{int(step[r])}; {len(rows)} world(s) got one (zeroed before the physics)")
+        return state
 
     @property
     def observation_size(self) -> int:

@@ -87,7 +87,25 @@ class Pictures:
     """rgb_array pictures for the envs (the CPU renderer at `render_size`, made on demand), and closing what
     renders: only this env's own GL contexts, so closing one env never touches another's images."""
 
-    _viewer = None
+    _viewer = _window = None
+
+    def _open_window(self) -> None:
+        """render_mode='human': open the window now, so a machine without a display is refused at make. This
+        instance's render modes are those that work here (render.window.render_modes)."""
+        from mjx_pusht.render.window import render_modes
+
+        self.metadata = {**self.metadata, "render_modes": render_modes(self.metadata["render_modes"])}
+        if self.render_mode == "human":
+            from mjx_pusht.render.window import Window
+
+            self._window = Window(self.render_size, self._fps)
+
+    def _shown(self, img: np.ndarray):
+        """rgb_array: the picture; human: the picture in the window, and None (gymnasium's convention)."""
+        if self._window is None:
+            return img
+        self._window.show(img)
+        return None
 
     def _draw(self, qpos) -> np.ndarray:
         if self._viewer is None:
@@ -100,7 +118,9 @@ class Pictures:
         """Free this env's GL contexts (only its own); rendering after this makes new ones."""
         if self._viewer is not None:
             self._viewer.close()
-        self._viewer = None
+        if self._window is not None:
+            self._window.close()
+        self._viewer = self._window = None
         if getattr(self, "_env", None) is not None and self._env.backend == "cpu":
             self._env.close()
 

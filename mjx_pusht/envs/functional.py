@@ -39,13 +39,25 @@ from mjx_pusht.task.episode import (
     begin,
     control_step,
 )
-from mjx_pusht.task.reset import start_poses
-from mjx_pusht.task.rules import ACTION_TYPES, WORKSPACE_HALF, observe
+from mjx_pusht.task.reset import PUSHER_RADIUS, start_poses
+from mjx_pusht.task.rules import ACTION_TYPES, WORKSPACE_HALF, distance_to_tee, observe
 
 
 # reset_to_state [tee x, y, yaw, pusher x, y] in metres: both positions inside the walls (yaw unbounded)
 START_LO = np.array([-WORKSPACE_HALF, -WORKSPACE_HALF, np.nan, -WORKSPACE_HALF, -WORKSPACE_HALF])
 START_HI = -START_LO
+
+
+def clear_of_tee(starts: np.ndarray, variant: str) -> np.ndarray:
+    """reset_to_state's pusher must not overlap the T: MuJoCo would fling them apart on the first step. The
+    gym-pusht variant takes overlaps, as gym-pusht does (its own random resets make them)."""
+    if variant == "chapter" and starts.shape[1] == 5:
+        inside = distance_to_tee(starts[:, 3:5], starts[:, 0:3]) < PUSHER_RADIUS
+        if inside.any():
+            r = np.flatnonzero(inside)
+            raise ConfigError(f"reset_to_state puts the pusher (radius {PUSHER_RADIUS} m) inside the T in row(s) "
+                              f"{', '.join(map(str, r[:8]))}: {starts[r[0]].tolist()}")
+    return starts
 
 
 class State(NamedTuple):
@@ -118,6 +130,7 @@ class PushTEnv:
 
         if self.action_type not in ACTION_TYPES:
             raise ConfigError(f"unknown action type {self.action_type!r}; choose from {', '.join(ACTION_TYPES)}")
+        self.pixels, self.threads = validate.pixels(self.pixels), validate.positive_int("threads", self.threads)
         if self.backend not in ("cpu", "mjx-jax", "mjx-warp"):
             raise BackendError(f"the environment runs on cpu, mjx-jax or mjx-warp, not {self.backend!r}")
         if self.scene.variant == "gym-pusht" and self.reset_kind == "task":
@@ -195,11 +208,12 @@ class PushTEnv:
     def reset(self, seeds) -> State:
         """A fresh episode per seed, from the reset distribution's start pose for that seed."""
         seeds = validate.seed_array(seeds)
-        return self.reset_to(start_poses(seeds, reset=self.reset_kind), seeds)
+        return self.reset_to(start_poses(seeds, reset=self.reset_kind), seeds, drawn=True)
 
-    def reset_to(self, starts, seeds=None) -> State:
-        """Episodes from given (N, 5) starts: tee x, y, yaw and pusher x, y (seeds key random controllers)."""
-        starts = self._starts(starts)
+    def reset_to(self, starts, seeds=None, drawn: bool = False) -> State:
+        """Episodes from given (N, 5) starts: tee x, y, yaw and pusher x, y (seeds key random controllers).
+        A given start (not `drawn` by a reset distribution) must not put the pusher inside the T."""
+        starts = self._starts(starts) if drawn else self.given_starts(starts)
         seeds = np.zeros(len(starts), np.int64) if seeds is None else validate.seed_array(seeds)
         if len(seeds) != len(starts):
             raise ConfigError(f"seeds: {len(seeds)} seeds for {len(starts)} start states")
@@ -211,6 +225,10 @@ class PushTEnv:
             data = _Lockstep(self.model, self.model, qpos0, self.episode.frame_skip, self.threads)
             return self._state(data, begin(self.layout, qpos0, key, self._ctrl, self.episode, np), qpos0, key, 0)
         return self._reset_mjx(qpos0, key)
+
+    def given_starts(self, starts) -> np.ndarray:
+        """A user's starts, checked as `_starts` checks any, and the pusher clear of the T (`clear_of_tee`)."""
+        return clear_of_tee(self._starts(starts), self.scene.variant)
 
     def _starts(self, starts) -> np.ndarray:
         """(N, 5) tee x, y, yaw, pusher x, y (or (N, 3) tee only), finite, the positions inside the walls

@@ -60,8 +60,7 @@ MAX_EPISODE_STEPS = 300  # both ids' registered limit, as gym-pusht registers it
 
 def one_action(state, action, shape_what: str, low, high) -> np.ndarray:
     """A single env's action as (2,) float64 (after reset), checked and clipped by the one validation layer."""
-    if state is None:
-        raise RuntimeError("call reset() before step()")
+    validate.started(state)
     return validate.actions(action, (2,), low, high, shape_what)
 
 
@@ -71,13 +70,13 @@ class PushTGymEnv(Pictures, gym.Env):
     `max_episode_steps`: None (the default, and what `gym.make` passes) leaves truncation to gymnasium's
     TimeLimit, which the registration sets to 300; an integer makes the env truncate on its own."""
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
     def __init__(self, obs_type: str = "state", action_type: str = "velocity", render_mode: str | None = None,
                  observation_size: int = IMAGE_SIZE, render_size: int = 512, reset_kind: str = "task",
                  max_episode_steps: int | None = None, frame_skip: int = 10):
         check_kwargs(obs_type, action_type, observation_size)
-        self.render_mode = validate.render_mode(render_mode)
+        self.render_mode = validate.render_mode(render_mode, human=True)
         self.obs_type, self.action_type = obs_type, action_type
         self.render_size = validate.image_size(render_size, "render_size")
         self._env = functional("cpu", obs_type, action_type, observation_size, reset_kind,
@@ -86,6 +85,7 @@ class PushTGymEnv(Pictures, gym.Env):
         self._low, self._high = action_bounds(action_type)
         self.metadata = {**self.metadata, "render_fps": self._fps}
         self._state = None
+        self._open_window()
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         seed = validate.seed(seed)
@@ -99,11 +99,15 @@ class PushTGymEnv(Pictures, gym.Env):
             # seed from the env's own generator, as gymnasium envs do
             episode_seed = seed if seed is not None else int(self.np_random.integers(SEED_MAX))
             self._state = self._env.reset([episode_seed])
+        if self.render_mode == "human":
+            self.render()
         return self._obs(), self._info()
 
     def step(self, action):
         a = one_action(self._state, action, "(x, y) pair", self._low, self._high)
         self._state = s = self._env.step(self._state, a[None])
+        if self.render_mode == "human":
+            self.render()
         return self._obs(), float(s.reward[0]), bool(s.terminated[0]), bool(s.truncated[0]), self._info()
 
     def _obs(self):
@@ -137,7 +141,11 @@ class PushTGymEnv(Pictures, gym.Env):
         return info
 
     def render(self):
-        return self._draw(self._state.data.qpos[-1])[0] if self.render_mode == "rgb_array" else None
+        """rgb_array: the picture; human: shown in the window (None); no render_mode: None."""
+        if self.render_mode is None:
+            return None
+        validate.started(self._state, "render")
+        return self._shown(self._draw(self._state.data.qpos[-1])[0])
 
     def close(self):
         self._close_renderers()

@@ -40,13 +40,13 @@ START_HI = np.array([512.0] * 4 + [np.nan])
 CONTACT_PX = 1.0  # a gap this small counts as touching (n_contacts)
 
 
-def _check_kwargs(obs_type, width, height, render_mode, block_cog, damping) -> None:
+def _check_kwargs(obs_type, width, height, render_mode, block_cog, damping, human: bool = False) -> None:
     validate.choice("obs_type", obs_type, OBS_TYPES)
     validate.image_size(width, "observation_width")
     validate.image_size(height, "observation_height")
     if width != height:
         raise ConfigError(f"images are square here: observation_width {width} != observation_height {height}")
-    validate.render_mode(render_mode)
+    validate.render_mode(render_mode, human)
     if block_cog is not None or damping is not None:
         raise ConfigError("block_cog and damping are pymunk settings: this physics is MuJoCo's "
                           "(see docs/envs/dropin.md)")
@@ -130,12 +130,12 @@ class GymPushTEnv(Pictures, base.gym.Env):
     """One episode at a time on MuJoCo C, with gym-pusht's interface. Resets draw from the env's generator
     exactly as gym-pusht's do, so `reset(seed=s)` and every later reset start where gym-pusht's start."""
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
     def __init__(self, obs_type: str = "state", render_mode: str | None = "rgb_array", block_cog=None, damping=None,
                  observation_width: int = 96, observation_height: int = 96, visualization_width: int = 680,
                  visualization_height: int = 680):
-        _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping)
+        _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping, human=True)
         validate.image_size(visualization_width, "visualization_width")
         validate.image_size(visualization_height, "visualization_height")
         if visualization_width != visualization_height:
@@ -151,6 +151,7 @@ class GymPushTEnv(Pictures, base.gym.Env):
         self._env = functional("cpu", obs_type, "target", observation_width, "gym-pusht", None, 10,
                                variant="gym-pusht")
         self._state, self._last_action = None, None
+        self._open_window()
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         seed = validate.seed(seed)
@@ -166,6 +167,8 @@ class GymPushTEnv(Pictures, base.gym.Env):
         self._last_action = None
         obs, info = self._view()
         info["is_success"] = False
+        if self.render_mode == "human":
+            self.render()
         return obs, info
 
     def step(self, action):
@@ -173,6 +176,8 @@ class GymPushTEnv(Pictures, base.gym.Env):
         self._last_action = a
         self._state = self._env.step(self._state, frame.to_world(a)[None])
         obs, info = self._view()
+        if self.render_mode == "human":
+            self.render()
         return obs, float(info["reward"]), bool(info["is_success"]), False, info
 
     def _view(self):
@@ -187,10 +192,12 @@ class GymPushTEnv(Pictures, base.gym.Env):
         return obs, info
 
     def render(self):
-        if self.render_mode != "rgb_array":
+        """rgb_array: the picture (with gym-pusht's cross at the last target); human: shown in the window."""
+        if self.render_mode is None:
             return None
+        validate.started(self._state, "render")
         img = self._draw(self._state.data.qpos[-1])[0]
-        return img if self._last_action is None else _marker(img, self._last_action, self.render_size)
+        return self._shown(img if self._last_action is None else _marker(img, self._last_action, self.render_size))
 
     def close(self):
         self._close_renderers()

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mjx_pusht import validate
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.reset import start_poses
 
@@ -14,23 +15,31 @@ from mjx_pusht.task.reset import start_poses
 def reset_where(env, state, mask, seeds=None, starts=None):
     """`state` with the rows where `mask` holds started afresh (from `seeds`' start poses, or `starts`),
     every other row untouched."""
-    mask = np.asarray(mask, bool).reshape(-1)
+    mask = validate.mask(mask, len(state.step), "mask")
     rows = np.flatnonzero(mask)
     if not len(rows):
         return state
     if state.info is not None:  # a wrapper's arrays are not per world: they pass through
         return env.reset_where(state._replace(info=None), mask, seeds, starts)._replace(info=state.info)
     if starts is None:
-        seeds = np.asarray(seeds, np.int64).reshape(-1)
+        if seeds is None:
+            raise ConfigError("reset_where needs seeds (one per reset row) or starts")
+        seeds = validate.seed_array(seeds)
         starts = start_poses(seeds, reset=env.reset_kind)
-        starts_seeds = seeds
+        starts_seeds, drawn = seeds, True
     else:
         starts = np.atleast_2d(np.asarray(starts, np.float64))
-        starts_seeds = np.zeros(len(starts), np.int64) if seeds is None else np.asarray(seeds, np.int64)
+        starts_seeds = np.zeros(len(starts), np.int64) if seeds is None else validate.seed_array(seeds)
+        drawn = False
+    if len(starts_seeds) != len(starts):
+        raise ConfigError(f"seeds: {len(starts_seeds)} seeds for {len(starts)} start states")
+    if not drawn:  # a given start: the same checks as reset_to's, once, here
+        starts = env.given_starts(starts)
     if len(starts) != len(rows):
-        raise ConfigError(f"{len(rows)} rows to reset but {len(starts)} start states")
+        what = "starts" if drawn is False else "seeds"
+        raise ConfigError(f"{what}: {len(starts)} for the {len(rows)} rows the mask resets")
     if env.backend == "cpu":
-        fresh = env.reset_to(starts, starts_seeds)
+        fresh = env.reset_to(starts, starts_seeds, drawn=True)
 
         def put(old, new):
             out = np.array(old, copy=True)
@@ -47,7 +56,7 @@ def reset_where(env, state, mask, seeds=None, starts=None):
     full[rows] = starts
     full_seeds = np.zeros(n, np.int64)
     full_seeds[rows] = starts_seeds
-    fresh = env.reset_to(full, full_seeds)
+    fresh = env.reset_to(full, full_seeds, drawn=True)  # the given rows were checked above
     m = jnp.asarray(mask)
 
     def pick(old, new):

@@ -70,7 +70,7 @@ class PushTVectorEnv(Pictures, VectorEnv):
         self.num_envs = validate.positive_int("num_envs", num_envs)
         validate.render_mode(render_mode)
         validate.image_size(render_size, "render_size")
-        max_episode_steps = validate.positive_int("max_episode_steps", max_episode_steps)
+        max_episode_steps = validate.episode_limit(max_episode_steps)  # -1 or None: no limit, as gymnasium says
         self.backend, _ = resolve(backend)
         self.obs_type, self.action_type, self.render_mode = obs_type, action_type, render_mode
         # by enum, by value ("SameStep"), by name ("SAME_STEP") or in snake case ("same_step")
@@ -84,7 +84,7 @@ class PushTVectorEnv(Pictures, VectorEnv):
             raise ConfigError("the cpu backend steps MuJoCo C on the host: its arrays are NumPy (array_type='numpy')")
         self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
         self.render_size = render_size
-        threads = threads or (min(default_threads(), max(1, self.num_envs // 64)) if self.backend == "cpu" else 1)
+        threads = validate.threads(threads) or (min(default_threads(), max(1, self.num_envs // 64)) if self.backend == "cpu" else 1)
         self._env = functional(self.backend, obs_type, action_type, observation_size, reset_kind,
                                 max_episode_steps, frame_skip, threads, variant)
         self._dtype = np.float64 if self.backend == "cpu" else np.dtype(self._env.runner.dtype)
@@ -175,8 +175,7 @@ class PushTVectorEnv(Pictures, VectorEnv):
         return np.array(out, np.int64)
 
     def step(self, actions):
-        if self._state is None:
-            raise RuntimeError("call reset() before step()")
+        validate.started(self._state)
         actions = self._checked(actions)
         actions = self._actions_in(actions)
         if self._ar is not None:
@@ -280,6 +279,7 @@ class PushTVectorEnv(Pictures, VectorEnv):
         about 4 ms each at 512 x 512 on this project's 2-core machine, so mind it for thousands of envs."""
         if self.render_mode != "rgb_array":
             return None
+        validate.started(self._state, "render")
         return tuple(self._draw(self._state.data.qpos[-1] if self.backend == "cpu" else self._state.data.qpos))
 
     def close_extras(self, **kwargs):

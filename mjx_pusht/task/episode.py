@@ -8,6 +8,7 @@ which backend called them; the backends only differ in how they step MuJoCo.
 from __future__ import annotations
 
 import dataclasses
+import numbers
 
 import numpy as np
 
@@ -41,10 +42,13 @@ class Episode:
     end_covered_start: bool = True
 
     def __post_init__(self) -> None:
-        if self.frame_skip < 1:
-            raise ConfigError(f"frame_skip must be a positive number of physics steps, got {self.frame_skip}")
-        if self.max_steps < 1:
-            raise ConfigError(f"max_steps must be a positive number of control steps, got {self.max_steps}")
+        from mjx_pusht import validate
+
+        if isinstance(self.frame_skip, bool) or not isinstance(self.frame_skip, numbers.Integral) or self.frame_skip < 1:
+            raise ConfigError(f"frame_skip must be a positive number of physics steps, got {self.frame_skip!r}")
+        if isinstance(self.max_steps, bool) or not isinstance(self.max_steps, numbers.Integral) or self.max_steps < 1:
+            raise ConfigError(f"max_steps must be a positive number of control steps, got {self.max_steps!r}")
+        validate.fraction("success", self.success)  # NaN never ends an episode, 2.0 never succeeds, 0 always does
 
     @property
     def physics_steps(self) -> int:
