@@ -69,6 +69,57 @@ def within_pusher_bounds(r):
     return ok, f"agent at {np.round(np.asarray(obs)[:2], 1).tolist()} px (space [0, 512])"
 
 
+def human_shown(env_id):
+    """render_mode='human' on a headless SDL driver: the env opens its window, and after a step the window shows
+    the step's picture (an rgb_array env's render of the same state). Returns (ok, note)."""
+    def run():
+        import os
+
+        os.environ["SDL_VIDEODRIVER"] = "dummy"
+        try:
+            env = _gym().make(env_id, render_mode="human")
+            env.reset(seed=0)
+            env.step(env.action_space.sample() * 0)
+            import pygame
+
+            shown = np.swapaxes(pygame.surfarray.array3d(pygame.display.get_surface()), 0, 1)
+            u = env.unwrapped
+            u._window, window = None, u._window
+            want = u.render()  # the same picture, handed back instead of shown
+            u._window = window
+            env.close()
+            ok = shown.shape == want.shape and bool(np.array_equal(shown, want))
+            return ok, f"window {shown.shape} shows the frame: {ok}"
+        finally:
+            os.environ.pop("SDL_VIDEODRIVER")
+
+    return run
+
+
+def vec_length(env_fn, limit: int):
+    """Vector steps with zero actions until env 0's episode ends (or `limit` + 5)."""
+    def run():
+        env = env_fn()
+        for k in range(1, limit + 6):
+            _, _, term, trunc, _ = env.step(np.zeros((env.num_envs, 2)))
+            if term[0] or trunc[0]:
+                return k
+        return None
+
+    return run
+
+
+def _reset_dropin(state):
+    env = _gym().make(DROP_IN)
+    env.reset(options={"reset_to_state": state})
+    return env
+
+
+def _restart_row0():
+    env = functional()
+    return env.reset_where(env.step(env.reset([0, 1]), np.zeros((2, 2))), [True, False], seeds=[7])
+
+
 def functional(**kw):
     from mjx_pusht.envs.functional import PushTEnv
 
@@ -94,11 +145,14 @@ def tries(root: Path) -> list[Try]:
         # PushT-v0, the single env on MuJoCo C
         a("PushT-v0", "make(obs_type='bogus')", make(obs_type="bogus")),
         a("PushT-v0", "make(action_type='bogus')", make(action_type="bogus")),
-        a("PushT-v0", "make(render_mode='human')", make(render_mode="human")),
+        a("PushT-v0", "make(render_mode='human') (no display on this machine)", make(render_mode="human")),
+        a("PushT-v0", "make(render_mode='human') with SDL_VIDEODRIVER=dummy: frames shown", human_shown(ID), "honour",
+          lambda r: r),
         a("PushT-v0", "make(obs_type='pixels', observation_size=0)", make(obs_type="pixels", observation_size=0)),
         a("PushT-v0", "make(obs_type='pixels', observation_size=100000)", make(obs_type="pixels", observation_size=100000)),
         a("PushT-v0", "make(max_episode_steps=0)", make(max_episode_steps=0)),
-        a("PushT-v0", "make(max_episode_steps=-1)", make(max_episode_steps=-1)),
+        a("PushT-v0", "make(max_episode_steps=-1) (gymnasium's 'no TimeLimit'): runs past 300",
+          episode_length(lambda: single(max_episode_steps=-1), 300), "honour", lambda k: (k is None, f"ended after {k} steps")),
         a("PushT-v0", "make(max_episode_steps=1.5)", make(max_episode_steps=1.5)),
         a("PushT-v0", "make(frame_skip=0)", make(frame_skip=0)),
         a("PushT-v0", "make(reset_kind='bogus')", make(reset_kind="bogus")),
@@ -142,6 +196,18 @@ def tries(root: Path) -> list[Try]:
         a("vector", "make_vec(array_type='jax') on cpu", lambda: vec(array_type="jax")),
         a("vector", "make_vec(threads=0)", lambda: vec(threads=0)),
         a("vector", "make_vec(threads=-2)", lambda: vec(threads=-2)),
+        a("vector", "make_vec(threads=1.5)", lambda: vec(threads=1.5)),
+        a("vector", "make_vec(render_mode='human')", lambda: vec(render_mode="human")),
+        a("vector", "make_vec(max_episode_steps=-2)", lambda: vec(max_episode_steps=-2)),
+        a("vector", "make_vec(max_episode_steps=-1) (no limit, as PushT-v0): runs past 300",
+          vec_length(lambda: vec_reset(max_episode_steps=-1), 300), "honour", lambda k: (k is None, f"ended after {k} steps")),
+        a("vector", "make_vec(max_episode_steps=5): ends at step 5", vec_length(lambda: vec_reset(max_episode_steps=5), 5),
+          "honour", lambda k: (k == 5, f"ended after {k} steps")),
+        a("vector", "render before reset", lambda: vec(render_mode="rgb_array").render()),
+        a("vector", "reset(options={'reset_to_state': [0.01, 0.01, 0, 0.011, 0.011]}) (pusher inside the T)",
+          lambda: vec().reset(options={"reset_to_state": [0.01, 0.01, 0, 0.011, 0.011]})),
+        a("vector", "reset(options={'reset_mask': [[True, False]]})", lambda: vec_reset().reset(options={"reset_mask": [[True, False]]})),
+        a("vector", "reset(options={'reset_mask': [True, 'x']})", lambda: vec_reset().reset(options={"reset_mask": [True, "x"]})),
         a("vector", "make_vec(depth=0)", lambda: vec(depth=0)),
         a("vector", "make_vec(variant='bogus')", lambda: vec(variant="bogus")),
         a("vector", "make_vec(max_episode_steps=0)", lambda: vec(max_episode_steps=0)),
@@ -168,7 +234,17 @@ def tries(root: Path) -> list[Try]:
           lambda: _gym().make(DROP_IN, observation_width=64, observation_height=96)),
         a("drop-in", "make(obs_type='pixels', observation_width=-5, observation_height=-5)",
           lambda: dropin(obs_type="pixels", observation_width=-5, observation_height=-5)),
-        a("drop-in", "make(render_mode='human')", lambda: _gym().make(DROP_IN, render_mode="human")),
+        a("drop-in", "make(render_mode='human') (no display on this machine)", lambda: _gym().make(DROP_IN, render_mode="human")),
+        a("drop-in", "make(render_mode='human') with SDL_VIDEODRIVER=dummy: frames shown", human_shown(DROP_IN), "honour",
+          lambda r: r),
+        a("drop-in", "make_vec(render_mode='human')", lambda: _gym().make_vec(DROP_IN, num_envs=2, backend="cpu",
+                                                                             render_mode="human")),
+        a("drop-in", "make_vec(num_envs=2, threads=0)", lambda: _gym().make_vec(DROP_IN, num_envs=2, backend="cpu", threads=0)),
+        a("drop-in", "make_vec step before reset", lambda: _gym().make_vec(DROP_IN, num_envs=2, backend="cpu").step(
+            np.zeros((2, 2)))),
+        a("drop-in", "reset_to_state [256, 300, 256, 300, 0] (agent on the block: gym-pusht takes it)",
+          lambda: step_then(lambda: _reset_dropin([256, 300, 256, 300, 0]), np.array([256.0, 300.0]))(), "honour",
+          finite_contained),
         a("drop-in", "make(block_cog=[nan, 0])", lambda: _gym().make(DROP_IN, block_cog=[NAN, 0])),
         a("drop-in", "make(damping=-1)", lambda: _gym().make(DROP_IN, damping=-1)),
         a("drop-in", "make(visualization_width=0, visualization_height=0)",
@@ -198,6 +274,13 @@ def tries(root: Path) -> list[Try]:
         a("functional", "PushTEnv(pixels=5)", lambda: functional(pixels=5)),
         a("functional", "PushTEnv(threads=0)", lambda: functional(threads=0)),
         a("functional", "PushTEnv(threads=-3)", lambda: functional(threads=-3).reset([0, 1, 2, 3, 4, 5, 6, 7])),
+        a("functional", "PushTEnv(threads=1.5)", lambda: functional(threads=1.5)),
+        a("functional", "PushTEnv(pixels=True)", lambda: functional(pixels=True)),
+        a("functional", "PushTEnv(pixels=100000)", lambda: functional(pixels=100000)),
+        a("functional", "PushTEnv(episode=Episode(frame_skip=1.5))", lambda: functional(episode=Episode(frame_skip=1.5))),
+        a("functional", "PushTEnv(episode=Episode(success=0))", lambda: functional(episode=Episode(success=0))),
+        a("functional", "PushTEnv(episode=Episode(success=1.0)) (valid)", lambda: functional(episode=Episode(success=1.0)),
+          "honour"),
         a("functional", "PushTEnv(episode=Episode(max_steps=0))", lambda: functional(episode=Episode(max_steps=0))),
         a("functional", "PushTEnv(episode=Episode(success=2.0))", lambda: functional(episode=Episode(success=2.0))),
         a("functional", "PushTEnv(episode=Episode(success=nan))", lambda: functional(episode=Episode(success=NAN))),
@@ -223,6 +306,15 @@ def tries(root: Path) -> list[Try]:
         a("functional", "reset_where(state, mask of 3) for 2 rows", lambda: functional().reset_where(f_state(), [True, False, True], seeds=[5, 6])),
         a("functional", "reset_where(state, [True, False], seeds=[-1])", lambda: functional().reset_where(f_state(), [True, False], seeds=[-1])),
         a("functional", "reset_where(state, [True, True], seeds=[1])", lambda: functional().reset_where(f_state(), [True, True], seeds=[1])),
+        a("functional", "reset_where(state, [[True, False]], seeds=[1])", lambda: functional().reset_where(f_state(), [[True, False]], seeds=[1])),
+        a("functional", "reset_where(state, [True, False]) (no seeds, no starts)", lambda: functional().reset_where(f_state(), [True, False])),
+        a("functional", "reset_where(state, [True, False], starts=[[0, 0, 0, 0, 0]]) (pusher inside the T)",
+          lambda: functional().reset_where(f_state(), [True, False], starts=[[0, 0, 0, 0, 0]])),
+        a("functional", "reset_where(state, [True, False], starts=[[nan]*5])",
+          lambda: functional().reset_where(f_state(), [True, False], starts=[[NAN] * 5])),
+        a("functional", "reset_where(state, [True, False], seeds=[7]) (valid): row 0 restarts, row 1 runs on",
+          _restart_row0,
+          "honour", lambda s: (bool(np.asarray(s.step).tolist() == [0, 1]), f"steps {np.asarray(s.step).tolist()}")),
     ]
     t += _brax_tries(a)
     return t
@@ -234,15 +326,24 @@ def _brax_tries(a) -> list[Try]:
 
         return BraxPushT(**{"backend": "mjx-jax", "max_worlds": 2, "table": 8, **kw})
 
-    def step(action):
+    def step(action, jit=True, check=False):
+        """One world's step (jitted, or eager); `check`: then `env.check(state)`, as the documented contract says."""
         def run():
             import jax
             import jax.numpy as jnp
 
             env = brax()
             s = jax.jit(env.reset)(jax.random.PRNGKey(0))
-            return jax.jit(env.step)(s, jnp.asarray(action, jnp.float32))
+            s = (jax.jit(env.step) if jit else env.step)(s, jnp.asarray(action, jnp.float32))
+            return env.check(s) if check else s
         return run
+
+    def flagged(s):
+        ok = bool(np.asarray(s.metrics["bad_action"]) == 1 and np.isfinite(np.asarray(s.obs)).all())
+        return ok, f"metrics['bad_action'] {float(np.asarray(s.metrics['bad_action']))}, obs finite: {ok}"
+
+    def inside_starts():
+        return brax(starts=np.array([[0.01, 0.01, 0.0, 0.011, 0.011]] * 8))
 
     return [
         a("brax", "BraxPushT(obs_type='pixels')", lambda: brax(obs_type="pixels")),
@@ -256,8 +357,24 @@ def _brax_tries(a) -> list[Try]:
         a("brax", "BraxPushT(reset_kind='bogus')", lambda: brax(reset_kind="bogus")),
         a("brax", "BraxPushT(episode=Episode(max_steps=0))",
           lambda: brax(episode=__import__("mjx_pusht.task.episode", fromlist=["Episode"]).Episode(max_steps=0))),
-        a("brax", "step(state, [nan, 0]) (jitted)", step([NAN, 0.0])),
+        a("brax", "BraxPushT(max_worlds=1.5)", lambda: brax(max_worlds=1.5)),
+        a("brax", "BraxPushT(table=True)", lambda: brax(table=True)),
+        a("brax", "BraxPushT(first_seed=1.5)", lambda: brax(first_seed=1.5)),
+        a("brax", "BraxPushT(first_seed=2**63-4, table=8) (the table's last seed past 2**63-1)",
+          lambda: brax(first_seed=2**63 - 4)),
+        a("brax", "BraxPushT(starts=...) with the pusher inside the T", inside_starts),
+        a("brax", "BraxPushT(starts=[[nan]*5]*8)", lambda: brax(starts=np.full((8, 5), NAN))),
+        a("brax", "BraxPushT(episode=Episode(success=nan))",
+          lambda: brax(episode=__import__("mjx_pusht.task.episode", fromlist=["Episode"]).Episode(success=NAN))),
+        a("brax", "step(state, [nan, 0]) (eager)", step([NAN, 0.0], jit=False)),
+        a("brax", "step(state, [inf, 0]) (eager)", step([INF, 0.0], jit=False)),
+        a("brax", "step(state, [nan, 0]) (jitted), then env.check(state)", step([NAN, 0.0], check=True)),
+        a("brax", "step(state, [-inf, 0]) (jitted), then env.check(state)", step([-INF, 0.0], check=True)),
+        a("brax", "step(state, [nan, 0]) (jitted): zeroed, flagged in metrics['bad_action']", step([NAN, 0.0]), "honour",
+          flagged),
         a("brax", "step(state, [0, 0, 0]) (jitted)", step([0.0, 0.0, 0.0])),
+        a("brax", "step(state, [[0, 0]]) (jitted)", step([[0.0, 0.0]])),
+        a("brax", "step(state, [0, 0]) (jitted), then env.check(state) (valid)", step([0.0, 0.0], check=True), "honour"),
         a("brax", "step(state, [1e9, -1e9]) (jitted, clipped)", step([1e9, -1e9]), "honour",
           lambda s: (bool(np.isfinite(np.asarray(s.obs)).all()), f"obs finite: {bool(np.isfinite(np.asarray(s.obs)).all())}")),
     ]

@@ -83,6 +83,31 @@ def test_the_hostile_pass_over_the_cli_finds_every_bad_input_refused_in_one_line
     assert not bad, "\n".join(bad)
 
 
+@pytest.mark.slow
+def test_the_hostile_pass_over_the_api_finds_every_bad_input_refused_in_one_line_or_honoured(tmp_path):
+    """benchmarks.hostile_pass's API tries, rerun: the gymnasium single and vector envs, the drop-in, the functional
+    env and the Brax adapter each refuse every bad input in one line (an MjxPushtError, or gymnasium's own check) or
+    honour it as documented; none silent, none a traceback."""
+    pytest.importorskip("gymnasium")
+    from benchmarks import hostile_pass
+
+    out = tmp_path / "pass.md"
+    assert hostile_pass.main(["--only", "api", "--memory-gb", "0", "--out", str(out)]) == 0
+    rows = [line.split("|") for line in out.read_text().splitlines()
+            if line.startswith("| ") and line.split("|")[1].strip().isdigit()]
+    surfaces = [r[2].strip() for r in rows]
+    for surface in ("PushT-v0", "vector", "drop-in", "functional") + (("brax",) if _has("brax") else ()):
+        assert surfaces.count(surface) >= 10, (surface, surfaces.count(surface))
+    bad = ["|".join(r) for r in rows if r[-2].strip() != "ok"]
+    assert not bad, "\n".join(bad)
+
+
+def _has(module: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(module) is not None
+
+
 def test_train_seeds_reports_every_committed_seed_run_and_their_spread(tmp_path):
     """The committed DAgger-from-state runs (seed 0; seed 1, last and best) aggregated as one result: each row is
     eval's held-out count over its episodes, the mean / sd / min are those of the three rates, and a run folder
