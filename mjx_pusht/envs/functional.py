@@ -299,8 +299,11 @@ class PushTEnv:
         held = state.carry["ep"]["done"] & ~((state.step == 0) & state.terminated)
         qpos = data.qpos if not isinstance(data, np.ndarray) else data
         ep = carry["ep"]
-        step = xp.where(held, state.step, state.step + 1)
-        reward = xp.where(held, 0.0, ep["coverage"])
+        if isinstance(held, np.ndarray) and not held.any():  # the host's usual step: nothing held, no selects
+            step, reward = state.step + 1, ep["coverage"].astype(np.result_type(0.0, ep["coverage"]))
+        else:
+            step = xp.where(held, state.step, state.step + 1)
+            reward = xp.where(held, 0.0, ep["coverage"])
         terminated = ep["done"] & ep["success"]
         truncated = ~terminated & (step >= self.episode.max_steps)
         carry = {**carry, "ep": {**ep, "done": ep["done"] | truncated}}
@@ -327,7 +330,9 @@ class PushTEnv:
         from mjx_pusht.backends.cpu import cpu_physics
 
         worlds = state.data.copy() if self.keep_states else state.data
-        physics = cpu_physics(self.layout, self.episode.frame_skip, self._settle)
+        physics = self.__dict__.get("_cpu_physics")
+        if physics is None:
+            physics = self._cpu_physics = cpu_physics(self.layout, self.episode.frame_skip, self._settle)
         qpos = state.data.qpos[-1]
         qpos, carry, _ = control_step((worlds, None), state.carry, qpos, state.step, action, self.action_type, physics,
                                       self.layout, self.episode, np)

@@ -15,6 +15,7 @@ from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.invariants import invariants_fold, invariants_init, invariants_update
 from mjx_pusht.task.rules import (
     SUCCESS_COVERAGE,
+    all_live,
     coverage,
     episode_init,
     episode_update,
@@ -132,6 +133,8 @@ def after_control_step(carry, k, layout, qpos, episode: Episode, xp):
         # no coverage per step inside its 160-step scan.
         return {**carry, "final": tee, "pusher_final": layout.pusher_xy(qpos)}
     ep = episode_update(carry["ep"], coverage(tee), k, episode.success, episode.terminate)
+    if all_live(carry["ep"]["done"]):  # every row live: the selects below would pick the new poses
+        return {**carry, "ep": ep, "final": tee, "pusher_final": layout.pusher_xy(qpos)}
     return {
         **carry,
         "ep": ep,
