@@ -123,3 +123,16 @@ def test_the_host_tee_pose_and_ctrl_are_the_array_formulas():
     for kind, u in (("velocity", a), ("position", POSITION_GAIN * (a - p))):
         ref = np.clip(np.where(np.isfinite(u), u, 0.0), -CTRL_LIMIT, CTRL_LIMIT)
         np.testing.assert_array_equal(to_ctrl(a, p, kind), ref)
+
+
+def test_the_drop_ins_host_stack_is_np_stack():
+    from mjx_pusht.model.gym_pusht import _stack
+
+    rng = np.random.default_rng(5)
+    for shape in ((), (1,), (7,), (3, 8)):
+        parts = [rng.normal(size=shape) for _ in range(3)]
+        got = _stack(np, parts)
+        assert got.dtype == np.float64
+        np.testing.assert_array_equal(got, np.stack(parts, axis=-1))
+    with np.testing.assert_raises(ValueError):  # parts of different shapes: np.stack's error, never a broadcast
+        _stack(np, [np.zeros(2), np.zeros(3)])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import mujoco
 import numpy as np
@@ -13,9 +14,14 @@ PUSHER_START_Y = -0.25  # the chapter's pusher start (m), for starts that place 
 def _take(qpos, idx: tuple):
     """qpos[..., idx] as a new array. Host addresses in a row are copied as a slice (the same values as the
     gather, without building an index array: an env's step reads these several times)."""
-    if isinstance(qpos, np.ndarray) and idx == tuple(range(idx[0], idx[0] + len(idx))):
-        return qpos[..., idx[0] : idx[0] + len(idx)].copy()
-    return qpos[..., list(idx)]
+    run = _run(idx) if isinstance(qpos, np.ndarray) else None
+    return qpos[..., run].copy() if run is not None else qpos[..., list(idx)]
+
+
+@functools.lru_cache(maxsize=16)
+def _run(idx: tuple) -> slice | None:
+    """The slice of consecutive addresses `idx`, or None where they are not consecutive."""
+    return slice(idx[0], idx[0] + len(idx)) if idx == tuple(range(idx[0], idx[0] + len(idx))) else None
 
 
 @dataclasses.dataclass(frozen=True)
