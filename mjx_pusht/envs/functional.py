@@ -326,7 +326,10 @@ class PushTEnv:
 
     def _step_cpu(self, state: State, action) -> State:
         """The batch's control step on MuJoCo C: the same episode.py functions on NumPy arrays."""
-        action = validate.actions(action, (len(state.step), 2), -np.inf, np.inf)
+        return self._step_checked(state, validate.actions(action, (len(state.step), 2), -np.inf, np.inf))
+
+    def _step_checked(self, state: State, action: np.ndarray) -> State:
+        """`_step_cpu` of actions already through `validate.actions` (a gymnasium env checks its own)."""
         from mjx_pusht.backends.cpu import cpu_physics
 
         worlds = state.data.copy() if self.keep_states else state.data

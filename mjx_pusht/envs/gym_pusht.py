@@ -171,7 +171,7 @@ class GymPushTEnv(Pictures, base.gym.Env):
     def step(self, action):
         a = base.one_action(self._state, action, "(x, y) target in pixels", *TARGET_BOUNDS)
         self._last_action = a
-        self._state = self._env.step(self._state, frame.to_world(a)[None])
+        self._state = self._env._step_checked(self._state, frame.to_world(a)[None])  # finite: `a` was checked
         obs, info = self._view()
         return obs, float(info["reward"]), bool(info["is_success"]), False, info
 

@@ -102,7 +102,8 @@ def control_step(sim, carry, qpos, k, action, action_type: str, physics, layout,
     copies, an mjx.Data), passed through untouched. Returns (qpos, carry, sim).
     """
     u = to_ctrl(xp.astype(xp.asarray(action), qpos.dtype), layout.pusher_xy(qpos), action_type)
-    u = xp.where(carry["ep"]["done"][..., None], 0.0, u)
+    if not all_live(carry["ep"]["done"]):  # (on the host with every row live, the select would keep u)
+        u = xp.where(carry["ep"]["done"][..., None], 0.0, u)
     qpos, carry, sim = physics(sim, u, carry, k)
     return qpos, after_control_step(carry, k, layout, qpos, episode, xp), sim
 
