@@ -219,10 +219,13 @@ def _coverage_few(pose, target=TARGET_POSE) -> np.ndarray:
     """`coverage` of a few host poses in plain Python floats: the array code's operations, one by one, in its
     order (its 8-slot sum is NumPy's pairwise sum), so the same bits (test: against `coverage_np`)."""
     out = np.zeros(len(pose))
-    cos, sin = np.cos(pose[:, 2]).tolist(), np.sin(pose[:, 2]).tolist()  # NumPy's cos/sin, as the array code's
     tgts = [_target_few(tuple(target))] * len(pose) if np.ndim(target) == 1 else [
         _target_few(tuple(t)) for t in np.broadcast_to(np.asarray(target, np.float64), pose.shape).tolist()]
-    for i, (x, y, _) in enumerate(pose.tolist()):
+    rows = pose.tolist()
+    if all(math.hypot(x - g[0][0], y - g[0][1]) >= 2 * T_REACH for (x, y, _), g in zip(rows, tgts)):
+        return out  # every pose too far away to overlap (below): no cos/sin to compute
+    cos, sin = np.cos(pose[:, 2]).tolist(), np.sin(pose[:, 2]).tolist()  # NumPy's cos/sin, as the array code's
+    for i, (x, y, _) in enumerate(rows):
         (gx, gy), quads = tgts[i]
         if math.hypot(x - gx, y - gy) >= 2 * T_REACH:
             continue  # too far apart to overlap (coverage_np's exact shortcut)
