@@ -118,6 +118,7 @@ class _Lockstep:
         for m, src, dst in zip(self.models, self.datas, new.datas):
             mujoco.mj_copyData(dst, m, src)
         new.qpos, new.qvel, new.sens = self.qpos.copy(), self.qvel.copy(), self.sens.copy()
+        new._view_cache = None
         return new
 
     def splice(self, rows, other: _Lockstep, inplace: bool = False) -> _Lockstep:
@@ -128,16 +129,25 @@ class _Lockstep:
             new.qpos[:, i], new.qvel[:, i], new.sens[:, i] = other.qpos[:, j], other.qvel[:, j], other.sens[:, j]
         return new
 
+    def _views(self):
+        """Per world: (model, data, and NumPy views of its ctrl, qpos, qvel, sensordata), made once: each
+        attribute read of an MjData builds a new array, which cost more than the copy it fed (an MjData's
+        buffers never move, and `splice` copies into the same MjData)."""
+        if getattr(self, "_view_cache", None) is None or len(self._view_cache) != len(self.datas):
+            self._view_cache = [(m, d, d.ctrl, d.qpos, d.qvel, d.sensordata) for m, d in zip(self.models, self.datas)]
+        return self._view_cache
+
     def _step_rows(self, u, rows):
-        step = mujoco.mj_step
+        step, views = mujoco.mj_step, self._views()
         for i in rows:
-            m, d = self.models[i], self.datas[i]
-            d.ctrl[:] = u[i]
+            m, d, ctrl, q, v, s = views[i]
+            ctrl[:] = u[i]
+            qs, vs, ss = self.qpos[:, i], self.qvel[:, i], self.sens[:, i]
             for j in range(self.fs):
                 step(m, d)
-                self.qpos[j, i] = d.qpos
-                self.qvel[j, i] = d.qvel
-                self.sens[j, i] = d.sensordata
+                qs[j] = q
+                vs[j] = v
+                ss[j] = s
 
     def advance(self, u, live):
         rows = np.flatnonzero(live)  # an ended episode is not stepped: nothing it does is kept

@@ -317,8 +317,11 @@ class PushTEnv:
         held = state.carry["ep"]["done"] & ~((state.step == 0) & state.terminated)
         qpos = data.qpos if not isinstance(data, np.ndarray) else data
         ep = carry["ep"]
-        step = xp.where(held, state.step, state.step + 1)
-        reward = xp.where(held, 0.0, ep["coverage"])
+        if isinstance(held, np.ndarray) and not held.any():  # the host's usual step: nothing held, no selects
+            step, reward = state.step + 1, ep["coverage"].astype(np.result_type(0.0, ep["coverage"]))
+        else:
+            step = xp.where(held, state.step, state.step + 1)
+            reward = xp.where(held, 0.0, ep["coverage"])
         terminated = ep["done"] & ep["success"]
         truncated = ~terminated & (step >= self.episode.max_steps)
         carry = {**carry, "ep": {**ep, "done": ep["done"] | truncated}}
@@ -341,11 +344,16 @@ class PushTEnv:
 
     def _step_cpu(self, state: State, action) -> State:
         """The batch's control step on MuJoCo C: the same episode.py functions on NumPy arrays."""
-        action = validate.actions(action, (len(state.step), 2), -np.inf, np.inf)
+        return self._step_checked(state, validate.actions(action, (len(state.step), 2), -np.inf, np.inf))
+
+    def _step_checked(self, state: State, action: np.ndarray) -> State:
+        """`_step_cpu` of actions already through `validate.actions` (a gymnasium env checks its own)."""
         from mjx_pusht.backends.cpu import cpu_physics
 
         worlds = state.data.copy() if self.keep_states else state.data
-        physics = cpu_physics(self.layout, self.episode.frame_skip, self._settle)
+        physics = self.__dict__.get("_cpu_physics")
+        if physics is None:
+            physics = self._cpu_physics = cpu_physics(self.layout, self.episode.frame_skip, self._settle)
         qpos = state.data.qpos[-1]
         qpos, carry, _ = control_step((worlds, None), state.carry, qpos, state.step, action, self.action_type, physics,
                                       self.layout, self.episode, np)

@@ -105,7 +105,7 @@ class PushTGymEnv(Pictures, gym.Env):
 
     def step(self, action):
         a = one_action(self._state, action, "(x, y) pair", self._low, self._high)
-        self._state = s = self._env.step(self._state, a[None])
+        self._state = s = self._env._step_checked(self._state, a[None])  # `a` is checked and clipped
         if self.render_mode == "human":
             self.render()
         return self._obs(), float(s.reward[0]), bool(s.terminated[0]), bool(s.truncated[0]), self._info()

@@ -84,7 +84,7 @@ def gym_view(obs_type: str, obs: dict, coverage, terminated, xp, dtype):
         "pos_agent": agent,
         "vel_agent": frame.velocity_to_px(obs["pusher_vel"], xp),
         "block_pose": xp.concatenate([origin, angle[..., None]], axis=-1),
-        "goal_pose": xp.broadcast_to(xp.asarray(frame.GOAL_PX, dtype=agent.dtype), origin.shape[:-1] + (3,)),
+        "goal_pose": _goal(origin.shape[:-1] + (3,), agent.dtype, xp),
         "n_contacts": n_contacts(s[..., 0:2], s[..., 2:5], corners, xp),
         "is_success": terminated,
         "coverage": coverage,
@@ -105,7 +105,18 @@ def n_contacts(pusher_xy, tee_pose, corners_px, xp):
 
 
 def reward_of(coverage, xp):
-    return xp.clip(coverage / SUCCESS_COVERAGE, 0.0, 1.0)
+    # clip as minimum(maximum()): what np.clip and jnp.clip compute, without np.clip's checks
+    return xp.minimum(xp.maximum(coverage / SUCCESS_COVERAGE, 0.0), 1.0)
+
+
+def _goal(shape, dtype, xp):
+    """gym-pusht's goal pose in every row: on the host a new array filled with it (np.broadcast_to's
+    Python-level checks cost more than the copy for one env), elsewhere a broadcast."""
+    if xp is np:
+        out = np.empty(shape, dtype)
+        out[...] = frame.GOAL_PX
+        return out
+    return xp.broadcast_to(xp.asarray(frame.GOAL_PX, dtype=dtype), shape)
 
 
 def _check_state(state, rows: int) -> np.ndarray:
@@ -174,7 +185,7 @@ class GymPushTEnv(Pictures, base.gym.Env):
     def step(self, action):
         a = base.one_action(self._state, action, "(x, y) target in pixels", *TARGET_BOUNDS)
         self._last_action = a
-        self._state = self._env.step(self._state, frame.to_world(a)[None])
+        self._state = self._env._step_checked(self._state, frame.to_world(a)[None])  # finite: `a` was checked
         obs, info = self._view()
         if self.render_mode == "human":
             self.render()

@@ -3,11 +3,25 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import mujoco
 import numpy as np
 
 PUSHER_START_Y = -0.25  # the chapter's pusher start (m), for starts that place only the tee
+
+
+def _take(qpos, idx: tuple):
+    """qpos[..., idx] as a new array. Host addresses in a row are copied as a slice (the same values as the
+    gather, without building an index array: an env's step reads these several times)."""
+    run = _run(idx) if isinstance(qpos, np.ndarray) else None
+    return qpos[..., run].copy() if run is not None else qpos[..., list(idx)]
+
+
+@functools.lru_cache(maxsize=16)
+def _run(idx: tuple) -> slice | None:
+    """The slice of consecutive addresses `idx`, or None where they are not consecutive."""
+    return slice(idx[0], idx[0] + len(idx)) if idx == tuple(range(idx[0], idx[0] + len(idx))) else None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,10 +66,14 @@ class QposLayout:
         """(..., 3) tee (x, y, yaw) from (..., nq) qpos; NumPy or JAX arrays alike."""
         xp = qpos.__array_namespace__()
         if self.tee is not None:
-            pose = qpos[..., list(self.tee)]
+            pose = _take(qpos, self.tee)
             if self.anchor is None:
                 return pose
             dx, dy = self._swing(pose[..., 2], xp)
+            if isinstance(pose, np.ndarray):  # the same sums, added in place into the new array: no stack
+                pose[..., 0] += dx
+                pose[..., 1] += dy
+                return pose
             return xp.stack([pose[..., 0] + dx, pose[..., 1] + dy, pose[..., 2]], axis=-1)
         a = self.tee_free
         w, x, y, z = (qpos[..., a + 3 + k] for k in range(4))
@@ -63,7 +81,7 @@ class QposLayout:
         return xp.stack([qpos[..., a], qpos[..., a + 1], yaw], axis=-1)
 
     def pusher_xy(self, qpos):
-        return qpos[..., list(self.pusher)]
+        return _take(qpos, self.pusher)
 
     def qpos_of_state(self, qpos0: np.ndarray, state):
         """(..., nq) qpos from (..., 5) observation states (pusher x, y, tee x, y, yaw; `observe`'s order):

@@ -16,6 +16,7 @@ from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.invariants import invariants_fold, invariants_init, invariants_update
 from mjx_pusht.task.rules import (
     SUCCESS_COVERAGE,
+    all_live,
     coverage,
     episode_init,
     episode_update,
@@ -105,7 +106,8 @@ def control_step(sim, carry, qpos, k, action, action_type: str, physics, layout,
     copies, an mjx.Data), passed through untouched. Returns (qpos, carry, sim).
     """
     u = to_ctrl(xp.astype(xp.asarray(action), qpos.dtype), layout.pusher_xy(qpos), action_type)
-    u = xp.where(carry["ep"]["done"][..., None], 0.0, u)
+    if not all_live(carry["ep"]["done"]):  # (on the host with every row live, the select would keep u)
+        u = xp.where(carry["ep"]["done"][..., None], 0.0, u)
     qpos, carry, sim = physics(sim, u, carry, k)
     return qpos, after_control_step(carry, k, layout, qpos, episode, xp), sim
 
@@ -136,6 +138,8 @@ def after_control_step(carry, k, layout, qpos, episode: Episode, xp):
         # no coverage per step inside its 160-step scan.
         return {**carry, "final": tee, "pusher_final": layout.pusher_xy(qpos)}
     ep = episode_update(carry["ep"], coverage(tee), k, episode.success, episode.terminate)
+    if all_live(carry["ep"]["done"]):  # every row live: the selects below would pick the new poses
+        return {**carry, "ep": ep, "final": tee, "pusher_final": layout.pusher_xy(qpos)}
     return {
         **carry,
         "ep": ep,
