@@ -2,6 +2,7 @@
 
     python benchmarks/env_bisect.py N STEPS physics_only,plain,full,percall_plain,percall_full [PIXELS]
     python benchmarks/env_bisect.py 16384 30 full,percall_full,percall_final,percall_render,gym_jax,gym_torch 96
+    python benchmarks/env_bisect.py 16384 30 physics_only,full,percall_full,percall_pooled,percall_render 96 gym-pusht
 
 One process, one N, MJX-Warp (MJX_PUSHT_ENV_GRAPH_MODE picks the CUDA-graph mode). Variants:
 `physics_only` (the env's mjx.Data, frame_skip mjx.steps at the action's ctrl, nothing else),
@@ -13,7 +14,9 @@ episode's last image, as the vector env's same-step mode did for `final_obs`: tw
 `percall_pooled` (the same outputs from one render a step, the new episodes' first images taken from the
 start pool: what the vector env's same-step mode runs since docs/notebook/samestep.md), `percall_render`
 (the render alone, on the state's Data) and `gym_jax` / `gym_torch` (the gymnasium vector env, same-step
-autoreset, jax or torch arrays out, zero actions). Figures are N x STEPS / seconds of the second call.
+autoreset, jax or torch arrays out, zero actions). A fifth argument, `gym-pusht`, runs the drop-in's scene (its view, its servos, target actions: the
+policy's output in metres) in place of the chapter's, so the two scenes' physics and renders compare.
+Figures are N x STEPS / seconds of the second call.
 Results: notebook changes 13 and 22.
 """
 import json
@@ -31,7 +34,13 @@ from mjx_pusht.envs.wrappers import AutoReset
 n, steps = int(sys.argv[1]), int(sys.argv[2])
 variants = sys.argv[3].split(",")
 pixels = int(sys.argv[4]) if len(sys.argv) > 4 else 0
-env = PushTEnv(backend="mjx-warp", pixels=pixels)
+variant = sys.argv[5] if len(sys.argv) > 5 else "chapter"  # gym-pusht: the drop-in's scene, target actions
+if variant == "gym-pusht":
+    from mjx_pusht.model.scene import SceneSpec
+
+    env = PushTEnv(backend="mjx-warp", pixels=pixels, scene=SceneSpec(variant="gym-pusht"), action_type="target")
+else:
+    env = PushTEnv(backend="mjx-warp", pixels=pixels)
 ar = AutoReset(env, mode="same_step")
 ar_final = AutoReset(env, mode="same_step", final_pixels=True, image_pool=False)
 ar_pooled = AutoReset(env, mode="same_step", final_pixels=True)
@@ -40,7 +49,7 @@ s_final = ar_final.reset(np.arange(n)) if "percall_final" in variants else None
 s_pooled = ar_pooled.reset(np.arange(n)) if "percall_pooled" in variants else None
 W = jax.random.normal(jax.random.PRNGKey(0), (5, 2)) * 0.5
 d0 = env.template(n)
-out = {"n": n, "steps": steps, "pixels": pixels, "device": str(jax.devices()[0])}
+out = {"n": n, "steps": steps, "pixels": pixels, "variant": variant, "device": str(jax.devices()[0])}
 
 def plain(s):
     a = jnp.tanh(s.obs["state"] @ W)
