@@ -14,8 +14,9 @@ episode's last image, as the vector env's same-step mode did for `final_obs`: tw
 `percall_pooled` (the same outputs from one render a step, the new episodes' first images taken from the
 start pool: what the vector env's same-step mode runs since docs/notebook/samestep.md), `percall_render`
 (the render alone, on the state's Data) and `gym_jax` / `gym_torch` (the gymnasium vector env, same-step
-autoreset, jax or torch arrays out, zero actions). A fifth argument, `gym-pusht`, runs the drop-in's scene (its view, its servos, target actions: the
-policy's output in metres) in place of the chapter's, so the two scenes' physics and renders compare.
+autoreset, jax or torch arrays out, zero actions). A fifth argument, `gym-pusht`, runs the drop-in's
+scene (its view, its servos, target actions: the policy's output in metres) in place of the chapter's,
+so the two scenes' physics and renders compare (`gym_*` stay PushT-v0's).
 Figures are N x STEPS / seconds of the second call.
 Results: notebook changes 13 and 22.
 """

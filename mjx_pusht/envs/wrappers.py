@@ -28,8 +28,9 @@ and the ended rows' last ones), and takes each new episode's first image from th
 rendered when its start pose was drawn (`info["pool_pixels"]`, (depth, N, size, size, 3) uint8: 3.6 GB
 at 16,384 envs and depth 8, in chunks of N // 8 worlds on a renderer of that size). A full render of
 N worlds is ~21 ms of a ~60 ms step on an H100 at 16,384 (notebook change 22); a start is rendered
-once, at a refill, instead of every row again each step. `image_pool=False` renders twice a step. `mode="next_step"` is gymnasium's default: the step after the end starts the new
-episode, ignores that row's action and reports reward 0, not terminated.
+once, at a refill, instead of every row again each step. `image_pool=False` renders twice a step.
+`mode="next_step"` is gymnasium's default: the step after the end starts the new episode, ignores
+that row's action and reports reward 0, not terminated.
 """
 
 from __future__ import annotations
