@@ -2,6 +2,7 @@
 
     python benchmarks/env_bisect.py N STEPS physics_only,plain,full,percall_plain,percall_full [PIXELS]
     python benchmarks/env_bisect.py 16384 30 full,percall_full,percall_final,percall_render,gym_jax,gym_torch 96
+    python benchmarks/env_bisect.py 16384 30 physics_only,full,percall_full,percall_pooled,percall_render 96 gym-pusht
 
 One process, one N, MJX-Warp (MJX_PUSHT_ENV_GRAPH_MODE picks the CUDA-graph mode). Variants:
 `physics_only` (the env's mjx.Data, frame_skip mjx.steps at the action's ctrl, nothing else),
@@ -9,9 +10,14 @@ One process, one N, MJX-Warp (MJX_PUSHT_ENV_GRAPH_MODE picks the CUDA-graph mode
 each in a `lax.scan` of STEPS steps, and `percall_*` the same step jitted once and called STEPS
 times from Python. With PIXELS (an image size) the env renders in its step, and three more variants
 split the pixel vector env's step: `percall_final` (the autoreset that also renders each ended
-episode's last image, as the vector env's same-step mode does for `final_obs`), `percall_render`
+episode's last image, as the vector env's same-step mode did for `final_obs`: two renders a step),
+`percall_pooled` (the same outputs from one render a step, the new episodes' first images taken from the
+start pool: what the vector env's same-step mode runs since docs/notebook/samestep.md), `percall_render`
 (the render alone, on the state's Data) and `gym_jax` / `gym_torch` (the gymnasium vector env, same-step
-autoreset, jax or torch arrays out, zero actions). Figures are N x STEPS / seconds of the second call.
+autoreset, jax or torch arrays out, zero actions). A fifth argument, `gym-pusht`, runs the drop-in's
+scene (its view, its servos, target actions: the policy's output in metres) in place of the chapter's,
+so the two scenes' physics and renders compare (`gym_*` stay PushT-v0's).
+Figures are N x STEPS / seconds of the second call.
 Results: notebook changes 13 and 22.
 """
 import json
@@ -29,14 +35,22 @@ from mjx_pusht.envs.wrappers import AutoReset
 n, steps = int(sys.argv[1]), int(sys.argv[2])
 variants = sys.argv[3].split(",")
 pixels = int(sys.argv[4]) if len(sys.argv) > 4 else 0
-env = PushTEnv(backend="mjx-warp", pixels=pixels)
+variant = sys.argv[5] if len(sys.argv) > 5 else "chapter"  # gym-pusht: the drop-in's scene, target actions
+if variant == "gym-pusht":
+    from mjx_pusht.model.scene import SceneSpec
+
+    env = PushTEnv(backend="mjx-warp", pixels=pixels, scene=SceneSpec(variant="gym-pusht"), action_type="target")
+else:
+    env = PushTEnv(backend="mjx-warp", pixels=pixels)
 ar = AutoReset(env, mode="same_step")
-ar_final = AutoReset(env, mode="same_step", final_pixels=True)
+ar_final = AutoReset(env, mode="same_step", final_pixels=True, image_pool=False)
+ar_pooled = AutoReset(env, mode="same_step", final_pixels=True)
 s = ar.reset(np.arange(n))
 s_final = ar_final.reset(np.arange(n)) if "percall_final" in variants else None
+s_pooled = ar_pooled.reset(np.arange(n)) if "percall_pooled" in variants else None
 W = jax.random.normal(jax.random.PRNGKey(0), (5, 2)) * 0.5
 d0 = env.template(n)
-out = {"n": n, "steps": steps, "pixels": pixels, "device": str(jax.devices()[0])}
+out = {"n": n, "steps": steps, "pixels": pixels, "variant": variant, "device": str(jax.devices()[0])}
 
 def plain(s):
     a = jnp.tanh(s.obs["state"] @ W)
@@ -97,6 +111,12 @@ def gym(array_type):
 for v in variants:
     if v.startswith("gym_"):
         timed(v, gym(v[4:]), s)
+    elif v == "percall_pooled":  # AutoReset.step: its jitted step, the pool's images handed in beside the state
+        def run(s):
+            for _ in range(steps):
+                s = ar_pooled.step(s, jnp.tanh(s.obs["state"] @ W))
+            return s
+        timed(v, run, s_pooled)
     elif v.startswith("percall_"):
         fn = {"percall_plain": plain, "percall_full": full, "percall_final": final, "percall_render": render}[v]
         j = jax.jit(fn)

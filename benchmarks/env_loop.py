@@ -21,6 +21,10 @@ For each N (one process each, so that one size failing to fit is recorded, not f
 - `dropin_numpy` / `dropin_torch`: the gym-pusht drop-in's vector env
   (`gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", ...)`, `pixels_agent_pos` with `--obs pixels`),
   random pixel targets, NumPy out (its default, what a gym-pusht loop reads) or torch tensors.
+- `*_two_renders` (`gym_torch_two_renders`, `gym_torch_two_renders_ends`, `dropin_torch_two_renders`):
+  same_step with pixels as it ran before docs/notebook/samestep.md, rendering every world twice a step, beside the
+  default (one render, the new episodes' first images from the start pool); `dropin_torch_follow`: the
+  drop-in driven by small target moves from its observations, not targets anywhere in the frame.
 - `*_ends` (`scan_autoreset_ends`, `gym_torch_ends`, `gym_numpy_ends`, `dropin_numpy_ends`,
   `dropin_torch_ends`): the same loops with episodes of `--ends` control steps (default 10), so every
   row ends and restarts several times in the timed steps (5 times in 50): the rate with resets in it.
@@ -75,6 +79,7 @@ def attempt(name, fn):
         row[name] = {"error": f"{type(e).__name__}: {str(e).splitlines()[0][:300]}", "gpu_used_bytes": gpu_used()}
         print(json.dumps({name: row[name]}), file=sys.stderr, flush=True)
 
+TDEV = "cuda" if jax.devices()[0].platform == "gpu" else "cpu"  # torch's device: the GPU's, or the CPU in a smoke test
 env = PushTEnv(backend="mjx-warp", pixels=pixels)
 row["graph_mode"] = env.graph_mode or "MJX default"  # the mode the env resolved (MJX_PUSHT_ENV_GRAPH_MODE overrides)
 W = jax.random.normal(jax.random.PRNGKey(0), (5, 2)) * 0.5
@@ -139,18 +144,26 @@ def scan_autoreset(max_steps=None):
     record("scan_autoreset" + ("" if max_steps is None else "_ends"), dt, {"episodes_reset": ended, "max_resets_per_row": int(np.asarray(s2.info["used"]).max()),
                                   "compiles": run._cache_size()})
 
-def gym_loop(array_type, mode="same_step", max_steps=None):
+def two_renders(envs, on):
+    # the same-step pixel step as it was before docs/notebook/samestep.md: every world rendered twice a step (the ended
+    # episodes' last images, then every image again after the merge) instead of the new starts' from the pool
+    if on:
+        envs._ar.image_pool = False
+    return "_two_renders" if on else ""
+
+def gym_loop(array_type, mode="same_step", max_steps=None, twice=False):
     import gymnasium as gym
     envs = gym.make_vec("mjx_pusht/PushT-v0", num_envs=n, backend="mjx-warp", obs_type="state" if not pixels else "pixels_agent_pos",
                         array_type=array_type, autoreset_mode=mode, max_episode_steps=max_steps or 300)
+    tag = two_renders(envs, twice)
     obs, _ = envs.reset(seed=0)
     if array_type == "torch":
         import torch
-        Wt = torch.as_tensor(np.asarray(W), device="cuda")
+        Wt = torch.as_tensor(np.asarray(W), device=TDEV)
         def act(obs):
             x = obs if not pixels else torch.cat([obs["agent_pos"], obs["agent_pos"], obs["agent_pos"][:, :1]], 1)
             return torch.tanh(x @ Wt)
-        sync = torch.cuda.synchronize
+        sync = torch.cuda.synchronize if TDEV == "cuda" else (lambda: None)
     else:
         rng = np.random.default_rng(0)
         acts = [rng.uniform(-1, 1, (n, 2)).astype(np.float32) for _ in range(4)]
@@ -165,34 +178,44 @@ def gym_loop(array_type, mode="same_step", max_steps=None):
         obs, r, te, tr, info = envs.step(act(obs))
         ended = ended + (te | tr).sum()
     sync(); jax.block_until_ready(envs._state.reward)
-    record("gym_" + array_type + ("" if mode == "same_step" else "_" + mode) + ("" if max_steps is None else "_ends"),
+    record("gym_" + array_type + ("" if mode == "same_step" else "_" + mode) + tag + ("" if max_steps is None else "_ends"),
            time.perf_counter() - t0, {"output": type(r).__module__.split(".")[0], "autoreset_mode": mode,
                                       "episodes_reset": int(ended)})
     envs.close()
 
-def dropin(array_type, max_steps=None):
+def dropin(array_type, max_steps=None, twice=False, follow=False):
+    # follow: targets a policy's small moves away from the pusher (as gym_torch's policy moves it), not targets
+    # drawn anywhere in the 512 px frame each step: the same env under gentler physics
     import gymnasium as gym
     envs = gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", num_envs=n, backend="mjx-warp",
                         obs_type="pixels_agent_pos" if pixels else "state", array_type=array_type,
                         autoreset_mode="same_step", max_episode_steps=max_steps or 300)
-    envs.reset(seed=0)
+    tag = two_renders(envs, twice) + ("_follow" if follow else "")
+    obs, _ = envs.reset(seed=0)
     rng = np.random.default_rng(0)
     acts = [rng.uniform(0, 512, (n, 2)).astype(np.float32) for _ in range(4)]
     if array_type == "torch":
         import torch
-        acts = [torch.as_tensor(a, device="cuda") for a in acts]
+        acts = [torch.as_tensor(a, device=TDEV) for a in acts]
+        Wt = torch.as_tensor(np.asarray(W), device=TDEV)
+    def act(obs, i):
+        if not follow:
+            return acts[i % 4]
+        p = obs["agent_pos"] if pixels else obs[:, :2]
+        x = torch.cat([p, p, p[:, :1]], 1) / 512
+        return p + 20 * torch.tanh(x @ Wt)  # up to 20 px (4 cm) a control step
     for i in range(3):
-        envs.step(acts[i % 4])
+        obs, *_ = envs.step(act(obs, i))
     jax.block_until_ready(envs._state.reward)
     ended = 0
     t0 = time.perf_counter()
     for i in range(steps):
-        obs, r, te, tr, info = envs.step(acts[i % 4])
+        obs, r, te, tr, info = envs.step(act(obs, i))
         ended = ended + (te | tr).sum()
-    if array_type == "torch":
+    if array_type == "torch" and TDEV == "cuda":
         torch.cuda.synchronize()
     jax.block_until_ready(envs._state.reward)
-    record("dropin_" + array_type + ("" if max_steps is None else "_ends"), time.perf_counter() - t0,
+    record("dropin_" + array_type + tag + ("" if max_steps is None else "_ends"), time.perf_counter() - t0,
            {"output": type(r).__module__.split(".")[0], "episodes_reset": int(ended)})
     envs.close()
 
@@ -203,7 +226,11 @@ for c in cases:
                 "dropin_torch": lambda: dropin("torch"), "scan_autoreset_ends": lambda: scan_autoreset(ends),
                 "gym_torch_ends": lambda: gym_loop("torch", max_steps=ends),
                 "gym_numpy_ends": lambda: gym_loop("numpy", max_steps=ends),
-                "dropin_numpy_ends": lambda: dropin("numpy", ends), "dropin_torch_ends": lambda: dropin("torch", ends)}[c])
+                "dropin_numpy_ends": lambda: dropin("numpy", ends), "dropin_torch_ends": lambda: dropin("torch", ends),
+                "gym_torch_two_renders": lambda: gym_loop("torch", twice=True),
+                "gym_torch_two_renders_ends": lambda: gym_loop("torch", max_steps=ends, twice=True),
+                "dropin_torch_two_renders": lambda: dropin("torch", twice=True),
+                "dropin_torch_follow": lambda: dropin("torch", follow=True)}[c])
 if "raw" in row and "control_steps_per_s" in row["raw"]:
     for c in cases:
         if c != "raw" and "control_steps_per_s" in row.get(c, {}):

@@ -44,7 +44,10 @@ class PushTVectorEnv(Pictures, VectorEnv):
     observation and info go in info["final_obs"] / info["final_info"]) or `disabled`
     (reset(options={"reset_mask": mask}) resets the ones you pick). On MJX the autoreset runs
     on the device inside the jitted step (wrappers.AutoReset), from start poses drawn ahead
-    by each env's own generator, so the episodes are those of gymnasium's SyncVectorEnv.
+    by each env's own generator, so the episodes are those of gymnasium's SyncVectorEnv. With
+    pixels in same_step mode the pool also holds those starts' first images, so a step renders
+    once (wrappers.AutoReset): `depth` x num_envs x size^2 x 3 bytes of GPU memory (3.6 GB at
+    16,384 envs of 96 x 96 and depth 8).
 
     `array_type`: what observations, rewards, flags and infos come out as: "jax" (the default
     on MJX: arrays on the device, no copy), "torch" (tensors on the same device through DLPack,

@@ -22,8 +22,15 @@ first slot: `state.info["used"]` says how many it took, so that is visible, neve
 
 The episode that ended is reported in the step that ends it (`mode="same_step"`): its reward,
 terminated, truncated, and in `info["final"]` its observation (no image unless `final_pixels`)
-and metrics. `mode="next_step"` is gymnasium's default: the step after the end starts the new
-episode, ignores that row's action and reports reward 0, not terminated.
+and metrics. With `final_pixels` a row that ended needs two images in one step, its last one and its
+new episode's first: the step renders all N worlds once, before the merge (the running rows' images
+and the ended rows' last ones), and takes each new episode's first image from the pool, where it was
+rendered when its start pose was drawn (`info["pool_pixels"]`, (depth, N, size, size, 3) uint8: 3.6 GB
+at 16,384 envs and depth 8, in chunks of N // 8 worlds on a renderer of that size). A full render of
+N worlds is ~21 ms of a ~60 ms step on an H100 at 16,384 (notebook change 22); a start is rendered
+once, at a refill, instead of every row again each step. `image_pool=False` renders twice a step.
+`mode="next_step"` is gymnasium's default: the step after the end starts the new episode, ignores
+that row's action and reports reward 0, not terminated.
 """
 
 from __future__ import annotations
@@ -50,6 +57,8 @@ class StartPool:
         self.qpos = np.zeros((self.depth, self.n, env.model.nq), np.float64)
         self.keys = np.zeros((self.depth, self.n, 2), np.uint32)
         self.coverage = np.zeros((self.depth, self.n), np.float64)  # each start's coverage, computed here once
+        self.dirty = np.ones((self.depth, self.n), bool)  # slots whose start has no image rendered yet
+        self.pixels = None  # AutoReset's image pool: each slot's first image, on the device (final_pixels)
         self.filled = np.zeros(self.n, np.int64)  # entries drawn per row (sequence numbers < filled exist)
         self.used = np.zeros(self.n, np.int64)  # entries consumed per row, as of the last refill
 
@@ -84,6 +93,7 @@ class StartPool:
         self.qpos[slot, row] = qpos
         self.coverage[slot, row] = coverage(self.env.layout.tee_pose(qpos))
         self.keys[slot, row] = seed_key(seeds)
+        self.dirty[slot, row] = True
         self.filled[rows] = self.used[rows] + self.depth
         return True
 
@@ -96,11 +106,14 @@ class AutoReset:
     """Resets the episodes that ended, on the device, inside the step (see the module's docstring)."""
 
     def __init__(self, env, mode: str = "same_step", depth: int = 8, final_pixels: bool = False,
-                 donate: bool = False):
+                 donate: bool = False, image_pool: bool = True):
         if mode not in MODES:
             raise ConfigError(f"unknown autoreset mode {mode!r}; choose from {', '.join(MODES)}")
         self.env, self.mode, self.depth = env, mode, int(depth)
         self.final_pixels = final_pixels
+        # the new episodes' first images from the pool (one render a step), where two would be needed
+        self.image_pool = image_pool
+        self._put_images: dict = {}
         self.donate = donate  # the step may reuse the old state's memory (a stateful caller keeps no old state)
         self.pool: StartPool | None = None
         self._jitted: dict = {}
@@ -122,6 +135,8 @@ class AutoReset:
         xp = self.env._xp
         dtype = np.float64 if self.env.backend == "cpu" else self.env.runner.dtype
         info = dict(state.info or {}) | self.pool.arrays(xp, dtype) | {"used": xp.asarray(used, dtype=xp.int32)}
+        if self._pooled_images():
+            info["pool_pixels"] = self._render_pool(len(used))
         info.setdefault("broken", xp.zeros(len(used), dtype=bool))
         if self.mode == "same_step" and "final" not in info:
             info["final"] = self._final(state)
@@ -133,6 +148,8 @@ class AutoReset:
             # after every reset or refill compiled the whole step (or the user's scan of it) a second time:
             # seconds that change 13's scan benchmark timed as stepping (notebook change 16).
             info = jax.device_put(info, state.step.sharding)
+            if "pool_pixels" in info:  # the very array the next refill reuses (donates)
+                self.pool.pixels = info["pool_pixels"]
         return state._replace(info=info)
 
     def refill(self, state):
@@ -140,6 +157,44 @@ class AutoReset:
         if self.pool.refill(np.asarray(state.info["used"])):
             return self._with_pool(state, state.info["used"])
         return state
+
+    def _pooled_images(self) -> bool:
+        """Whether the step takes the new episodes' first images from the pool (same_step, with final images)."""
+        return (self.image_pool and self.mode == "same_step" and self.final_pixels and bool(self.env.pixels)
+                and self.env.backend != "cpu")
+
+    def _render_pool(self, n: int):
+        """The pool's images with every slot drawn since the last call rendered (the rest kept, in place)."""
+        import jax
+        import jax.numpy as jnp
+
+        pool, size = self.pool, self.env.pixels
+        if pool.pixels is None or pool.pixels.shape[:2] != (self.depth, n):
+            pool.pixels = jnp.zeros((self.depth, n, size, size, 3), jnp.uint8)
+            pool.dirty[:] = True
+        slot, row = np.nonzero(pool.dirty)
+        if not len(slot):
+            return pool.pixels
+        m = min(n, max(64, -(-n // 8)))  # a renderer of N // 8 worlds: a refill's new starts are few
+        if m not in self._put_images:
+            from mjx_pusht.render.pixels import WarpRenderer
+
+            renderer, d0 = WarpRenderer(self.env.model, m, size), self.env.template(m)
+
+            def put(pixels, q, s, r):
+                images = jax.vmap(lambda qp: renderer(d0.replace(qpos=qp)))(q)
+                return pixels.at[s, r].set(images)
+
+            # the pool's memory is reused (a state from before this refill holds a deleted pool: it fails loudly)
+            self._put_images[m] = jax.jit(put, donate_argnums=(0,))
+        dtype = self.env.runner.dtype
+        for lo in range(0, len(slot), m):  # padded with the chunk's last entry: the same image written twice
+            s, r = slot[lo:lo + m], row[lo:lo + m]
+            s, r = np.pad(s, (0, m - len(s)), mode="edge"), np.pad(r, (0, m - len(r)), mode="edge")
+            q = jnp.asarray(pool.qpos[s, r].astype(dtype))
+            pool.pixels = self._put_images[m](pool.pixels, q, jnp.asarray(s, jnp.int32), jnp.asarray(r, jnp.int32))
+        pool.dirty[:] = False
+        return pool.pixels
 
     # -- the step ------------------------------------------------------------------------------------
     def step(self, state, action):
@@ -155,7 +210,13 @@ class AutoReset:
         self.env._batch_fns(n)  # this batch size's renderer
         if n not in self._jitted:
             self._jitted[n] = jax.jit(self._step_batch, donate_argnums=(1,) if self.donate else ())
-        return self._jitted[n](self.env.template(n), state, action)
+        # The image pool goes in beside the state and is put back as it came: an array that a jitted program
+        # returns unchanged is copied (3.6 GB a step at 16,384 envs), unless donated
+        images = (state.info or {}).get("pool_pixels")
+        if images is not None:
+            state = state._replace(info={k: v for k, v in state.info.items() if k != "pool_pixels"})
+        out = self._jitted[n](self.env.template(n), state, action, images)
+        return out if images is None else out._replace(info={**out.info, "pool_pixels": images})
 
     def _slot(self, info, ended, xp):
         """Each ended row's next queue slot, and the counters after taking it."""
@@ -170,7 +231,7 @@ class AutoReset:
         obs = {k: v for k, v in stepped.obs.items() if k != "pixels" or self.final_pixels}
         return {"obs": obs, "metrics": stepped.metrics, "step": stepped.step}
 
-    def _step_batch(self, d0, state, action):
+    def _step_batch(self, d0, state, action, images=None):
         import jax
         import jax.numpy as jnp
 
@@ -184,25 +245,31 @@ class AutoReset:
         q, k, cov, used = self._slot(info, ended, jnp)
         fresh = jax.vmap(lambda qp, kk, c: env.fresh_one(d0, qp, kk, c))(q, k, cov)
         out = jax.vmap(_merge)(ended, fresh, stepped)
+        new_info, pooled = dict(info), images is not None and self.mode == "same_step"
         if self.mode == "same_step":
             # the step that ended an episode reports it: its reward and flags, its obs in info["final"]
             out = out._replace(reward=stepped.reward, terminated=stepped.terminated, truncated=stepped.truncated)
-            final = jax.tree.map(lambda a, b: _rows(ended, a, b),
-                                 self._final(jax.vmap(env.with_pixels)(stepped) if self.final_pixels else stepped,
-                                             ), info["final"])
-            new_info = {**info, "used": used, "final": final}
+            if self.final_pixels:  # one render of every world: the running rows' images, the ended rows' last
+                stepped = jax.vmap(env.with_pixels)(stepped)
+            final = jax.tree.map(lambda a, b: _rows(ended, a, b), self._final(stepped), info["final"])
+            new_info = {**new_info, "used": used, "final": final}
+            if pooled:  # and the new episodes' first images, rendered when their starts were drawn
+                first = images[info["used"] % self.depth, jnp.arange(len(ended))]
+                out = out._replace(obs={**out.obs, "pixels": _rows(ended, first, stepped.obs["pixels"])})
         else:
             zero = jnp.zeros_like(stepped.reward)
             out = out._replace(reward=jnp.where(ended, zero, stepped.reward),
                                terminated=jnp.where(ended, False, out.terminated),
                                truncated=jnp.where(ended, False, out.truncated))
-            new_info = {**info, "used": used}
+            new_info = {**new_info, "used": used}
         # an overflow is kept for the row whatever episode it was in: a dropped contact is never forgotten,
         # and so is a world that went non-finite or left the walls (checked by the caller when it syncs)
         m = stepped.metrics
         new_info["broken"] = info["broken"] | ~(m["finite"] & m["contained"])
         out = out._replace(dropped=stepped.dropped)
-        return jax.vmap(env.with_pixels)(out)._replace(info=new_info)
+        if not pooled:  # the image after the merge (with final_pixels and no pool: the step's second render)
+            out = jax.vmap(env.with_pixels)(out)
+        return out._replace(info=new_info)
 
     def _step_cpu(self, state, action):
         env = self.env
