@@ -231,3 +231,23 @@ def actions_on_device(a, n: int, xp) -> None:
     if not bool(xp.all(finite)):
         f = np.asarray(finite)
         raise ConfigError(f"actions must be finite: {_nonfinite(f, np.asarray(a))}")
+
+
+def actions_shape_on_device(a, n: int) -> None:
+    """A device batch's shape and dtype (no look at its values: that would wait for the device)."""
+    if tuple(a.shape) != (n, 2):
+        raise ConfigError(f"actions must have shape ({n}, 2), one (x, y) per environment; got {tuple(a.shape)} "
+                          "(never reshaped: that would scramble the environments)")
+    if not np.issubdtype(np.dtype(a.dtype), np.number) or np.dtype(a.dtype).kind == "c":
+        raise ConfigError(f"actions must be real numbers, got dtype {a.dtype}")
+
+
+def deferred_nonfinite(flags: list) -> None:
+    """Raise for the first of `flags` (step number, per-row non-finite flags, the actions, all on the device) that
+    holds a non-finite action: read where the host waits for the device anyway, never once a step."""
+    for step, bad, a in flags:
+        b = np.asarray(bad)
+        if b.any():
+            raise ConfigError(f"actions must be finite: at step {step} since reset, "
+                              f"{_nonfinite(~b[:, None].repeat(2, 1), np.asarray(a))} (those rows were held still "
+                              "from that step on; the error is raised where the host next reads the batch)")

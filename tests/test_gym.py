@@ -211,3 +211,32 @@ def test_the_vector_api_as_sync_vector_env_offers_it():
         envs.set_attr("render_size", [64, 32, 64])
     with pytest.raises(ValueError, match="unknown autoreset_mode"):
         gym.make_vec(ENV, num_envs=2, backend="cpu", autoreset_mode="sometimes")
+
+
+@pytest.mark.slow
+@pytest.mark.warp
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_a_device_batchs_non_finite_action_is_named_at_the_next_read_and_its_row_held_still(bad):
+    """On MJX the vector env reads the batch on the host every few steps, not each step: a non-finite action is
+    checked on the device, its row gets action 0 (the pusher holds still: compared with a zero action), and the
+    next read raises one line naming the row and the step."""
+    import jax.numpy as jnp
+
+    from mjx_pusht.backends.warp import warp_available
+
+    if not warp_available():
+        pytest.skip("warp-lang is not installed")
+    envs = gym.make_vec(ENV, num_envs=4, backend="mjx-warp", array_type="jax")
+    ref = gym.make_vec(ENV, num_envs=4, backend="mjx-warp", array_type="jax")
+    envs.reset(seed=7)
+    ref.reset(seed=7)
+    a = jnp.full((4, 2), 0.3)
+    envs.step(a)
+    ref.step(a)
+    held = a.at[2, 1].set(bad)
+    with pytest.raises(ValueError, match=r"at step 1 since reset, row\(s\) 2 \(of 4\)") as e:
+        for _ in range(16):  # the next read comes within depth // 2 steps
+            o1, *_ = envs.step(held)
+            o2, *_ = ref.step(a.at[2].set(0.0))
+            np.testing.assert_array_equal(np.asarray(o1), np.asarray(o2))  # row 2 held still, the others as asked
+    assert "\n" not in str(e.value)

@@ -106,7 +106,8 @@ class PushTVectorEnv(Pictures, VectorEnv):
             self._ar.pool = self._pool
         self._state = None
         self._needs_reset = np.zeros(self.num_envs, bool)
-        self._since_check = 0
+        self._since_check = self._steps_since_reset = 0
+        self._bad = []
         self._viewer = self._view_jit = None
 
     _check_args = staticmethod(check_kwargs)  # noqa: E303
@@ -124,8 +125,16 @@ class PushTVectorEnv(Pictures, VectorEnv):
         if isinstance(actions, (np.ndarray, list, tuple, int, float)) or not hasattr(actions, "__array_namespace__"):
             return validate.actions(actions, (self.num_envs, 2), *self._bounds())
         xp = actions.__array_namespace__()
-        validate.actions_on_device(actions, self.num_envs, xp)
-        return xp.clip(actions, *self._bounds())
+        if self._ar is None:  # no autoreset: every step is read on the host anyway
+            validate.actions_on_device(actions, self.num_envs, xp)
+            return xp.clip(actions, *self._bounds())
+        # On the device loop the host reads the batch only every few steps (_step_device): a look at the values
+        # here would wait for the device every step (measured on one H100: -16% at 16,384 state envs). The
+        # check runs on the device; a non-finite row is held still (action 0) and named at the next read.
+        validate.actions_shape_on_device(actions, self.num_envs)
+        bad = ~xp.all(xp.isfinite(actions), axis=1)
+        self._bad.append((self._steps_since_reset, bad, actions))
+        return xp.clip(xp.where(bad[:, None], 0.0, actions), *self._bounds())
 
     def _bounds(self) -> tuple[float, float]:
         """The action space's bounds in float64 (the single env clips to the same numbers)."""
@@ -134,6 +143,8 @@ class PushTVectorEnv(Pictures, VectorEnv):
     def reset(self, *, seed=None, options: dict | None = None):
         """Every env, or those in options["reset_mask"]; options["reset_to_state"] starts them from given states.
         Other options are ignored (as gym-pusht ignores them), seeds as SyncVectorEnv's (seed + i)."""
+        bad, self._bad = self._bad, []  # a device step's non-finite action not yet read is still an error
+        validate.deferred_nonfinite(bad)
         seeds = validate.seed_list(seed, self.num_envs)
         options = validate.reset_options(options, ("reset_mask", "reset_to_state"), type(self).__name__)
         mask = validate.mask(options.get("reset_mask", np.ones(self.num_envs, bool)), self.num_envs)
@@ -155,7 +166,8 @@ class PushTVectorEnv(Pictures, VectorEnv):
             self._pool.refill(self._pool.used)
             self._state = self._ar._with_pool(self._state, self._pool.used)
         self._needs_reset[rows] = False
-        self._since_check = 0
+        self._since_check = self._steps_since_reset = 0
+        self._bad = []
         return self._outputs(self._state, reset=True)
 
     def _episode_seeds(self, rows, given) -> np.ndarray:
@@ -210,8 +222,11 @@ class PushTVectorEnv(Pictures, VectorEnv):
         """MJX with autoreset: one jitted call; the host looks at the flags only every depth // 2 steps."""
         self._state = self._ar.step(self._state, actions)
         self._since_check += 1
+        self._steps_since_reset += 1
         if self.array_type == "numpy" or self._since_check >= max(1, self._pool.depth // 2):
             self._since_check = 0
+            bad, self._bad = self._bad, []
+            validate.deferred_nonfinite(bad)
             self._state = self._ar.refill(self._env.check(self._state))
             warn_broken({"finite": ~np.asarray(self._state.info["broken"]), "contained": True})
         out = self._outputs(self._state)
