@@ -12,7 +12,8 @@ import numpy as np
 from gymnasium import spaces
 
 from mjx_pusht import validate
-from mjx_pusht.envs.functional import START_HI, START_LO, PushTEnv
+from mjx_pusht.envs.functional import PushTEnv
+from mjx_pusht.envs.starts import START_HI, START_LO
 from mjx_pusht.render.pixels import IMAGE_SIZE
 from mjx_pusht.task.episode import Episode
 from mjx_pusht.task.rules import ACTION_TYPES, CTRL_LIMIT, WORKSPACE_HALF

@@ -39,25 +39,9 @@ from mjx_pusht.task.episode import (
     begin,
     control_step,
 )
-from mjx_pusht.task.reset import PUSHER_RADIUS, start_poses
-from mjx_pusht.task.rules import ACTION_TYPES, WORKSPACE_HALF, distance_to_tee, observe
-
-
-# reset_to_state [tee x, y, yaw, pusher x, y] in metres: both positions inside the walls (yaw unbounded)
-START_LO = np.array([-WORKSPACE_HALF, -WORKSPACE_HALF, np.nan, -WORKSPACE_HALF, -WORKSPACE_HALF])
-START_HI = -START_LO
-
-
-def clear_of_tee(starts: np.ndarray, variant: str) -> np.ndarray:
-    """reset_to_state's pusher must not overlap the T: MuJoCo would fling them apart on the first step. The
-    gym-pusht variant takes overlaps, as gym-pusht does (its own random resets make them)."""
-    if variant == "chapter" and starts.shape[1] == 5:
-        inside = distance_to_tee(starts[:, 3:5], starts[:, 0:3]) < PUSHER_RADIUS
-        if inside.any():
-            r = np.flatnonzero(inside)
-            raise ConfigError(f"reset_to_state puts the pusher (radius {PUSHER_RADIUS} m) inside the T in row(s) "
-                              f"{', '.join(map(str, r[:8]))}: {starts[r[0]].tolist()}")
-    return starts
+from mjx_pusht.envs.starts import START_HI, START_LO, clear_of_tee
+from mjx_pusht.task.reset import start_poses
+from mjx_pusht.task.rules import ACTION_TYPES, observe
 
 
 class State(NamedTuple):
