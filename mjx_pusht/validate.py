@@ -222,11 +222,7 @@ def _nonfinite(finite: np.ndarray, a) -> str:
 
 def actions_on_device(a, n: int, xp) -> None:
     """A device batch of actions (JAX): shape (n, 2) and finite, checked by one reduction on the device."""
-    if tuple(a.shape) != (n, 2):
-        raise ConfigError(f"actions must have shape ({n}, 2), one (x, y) per environment; got {tuple(a.shape)} "
-                          "(never reshaped: that would scramble the environments)")
-    if not np.issubdtype(np.dtype(a.dtype), np.number) or np.dtype(a.dtype).kind == "c":
-        raise ConfigError(f"actions must be real numbers, got dtype {a.dtype}")
+    actions_shape_on_device(a, n)
     finite = xp.isfinite(a)
     if not bool(xp.all(finite)):
         f = np.asarray(finite)
