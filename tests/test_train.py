@@ -556,3 +556,40 @@ def test_a_fit_that_goes_non_finite_ends_the_run_in_one_line_naming_the_iteratio
     assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert "iteration 0's fit, the loss is nan; no policy was saved" in r.stderr
     assert not (tmp_path / "nan" / "policy.msgpack").exists()
+
+
+def test_late_fits_fit_again_once_the_experts_share_is_at_most_one_percent(run, tmp_path_factory):
+    """--late-fits K: after a rollout whose expert's share is at most 1% the student is fitted K times (each
+    --fit-steps Adam steps on fresh minibatches); earlier iterations are fitted once, as without the setting."""
+    from flax import serialization
+
+    args = list(TINY)
+    args[args.index("--iterations") + 1] = "3"
+    late = train_run(tmp_path_factory, *args, "--beta-decay", "0.05", "--late-fits", "3")  # betas 1, 0.05, 0.0025
+
+    def adam_steps(out):
+        tree = serialization.msgpack_restore((out / "checkpoints" / "resume.msgpack").read_bytes())
+        counts = []
+
+        def walk(node):
+            if isinstance(node, dict):
+                counts.extend(int(v) for k, v in node.items() if k == "count")
+                for v in node.values():
+                    walk(v)
+        walk(tree["opt_state"])
+        return set(counts)
+
+    assert adam_steps(run) == {2 * 50}  # two iterations, one fit of 50 steps each
+    assert adam_steps(late) == {50 + 50 + 3 * 50}  # beta 1 and 0.05: once; beta 0.0025: three times
+    summary = json.loads((late / "summary.json").read_text())
+    assert summary["config"]["late_fits"] == 3
+    # the first fit is the run without the setting's, to the bit (its minibatches are drawn as before)
+    first = [load_checkpoint(out / "checkpoints" / "policy_000.msgpack")[0] for out in (run, late)]
+    for a, b in zip(jax_leaves(first[0]), jax_leaves(first[1])):
+        np.testing.assert_array_equal(a, b)
+
+
+def jax_leaves(tree):
+    import jax
+
+    return [np.asarray(a) for a in jax.tree.leaves(tree)]

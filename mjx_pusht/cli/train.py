@@ -27,7 +27,8 @@ def cmd_train(args) -> int:
                        learning_rate=args.lr or 1e-3, batch=args.batch or 4096, fit_steps=args.fit_steps,
                        beta_decay=args.beta_decay, max_samples=args.max_samples, eval_envs=args.eval_envs,
                        seed=args.seed, reset=args.reset, teacher=args.teacher,
-                       image_batch=args.image_batch or min(512, args.batch or 4096), image_steps=args.image_steps)
+                       image_batch=args.image_batch or min(512, args.batch or 4096), image_steps=args.image_steps,
+                       late_fits=args.late_fits)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)

@@ -58,6 +58,9 @@ MEMORY_WEIGHT = 0.01  # the memory heads' cross-entropy against the actions' squ
 TEACHERS = {"paced": {"push_min": 0.08, "turn_min": 0.01, "travel_min": 0.06, "pos_tol": 0.002, "yaw_done": 0.015},
             "expert": {}}
 
+# The expert's share at or below which an iteration is "late": `late_fits` fits follow its rollout
+LATE_BETA = 0.01
+
 # Held-out evaluation seeds start here; training seeds count up from 0 and must stay below it.
 HELD_OUT_FIRST = 1_000_000_000
 
@@ -86,6 +89,10 @@ class DaggerConfig:
     # A pixel student: the gradient steps an iteration that teach the reader the pose (`_fit`); None: `fit_steps`.
     # (None, not a number, when not given: a run's resume file written before this setting existed still matches.)
     image_steps: int | None = None
+    # Fits an iteration once the expert's share is at most LATE_BETA (None: one, as before this setting existed).
+    # Late in a run the rollouts add ~5% to a full ring an iteration while the fit's loss still falls: the student
+    # under-fits the data it has (notebook, training: "DAgger's seed spread"), so time goes to fitting.
+    late_fits: int | None = None
 
     def __post_init__(self) -> None:
         if self.obs_type not in OBS_TYPES:
@@ -93,7 +100,7 @@ class DaggerConfig:
         if self.activation not in ACTIVATIONS:
             raise ConfigError(f"unknown activation {self.activation!r}; choose from {', '.join(ACTIVATIONS)}")
         for name in ("envs", "iterations", "batch", "fit_steps", "max_samples", "eval_envs", "max_steps", "image_batch",
-                     "image_steps"):
+                     "image_steps", "late_fits"):
             if getattr(self, name) is not None and int(getattr(self, name)) < 1:
                 raise ConfigError(f"--{name.replace('_', '-')} must be at least 1, got {getattr(self, name)}")
         if self.envs * self.iterations >= HELD_OUT_FIRST:
@@ -132,6 +139,10 @@ class DaggerConfig:
 
     def beta(self, iteration: int) -> float:
         return self.beta_decay ** iteration
+
+    def fits(self, iteration: int) -> int:
+        """How many fits (each `fit_steps`, its learning rate annealed afresh) follow iteration `iteration`'s rollout."""
+        return (self.late_fits or 1) if self.beta(iteration) <= LATE_BETA else 1
 
     def train_seeds(self, iteration: int) -> np.ndarray:
         return np.arange(iteration * self.envs, (iteration + 1) * self.envs, dtype=np.int64)

@@ -69,12 +69,16 @@ class Learner:
         else:
             self.head = self.floor + (self.head - self.floor + m) % (self.cfg.max_samples - self.floor)
 
-    def fit(self, iteration: int) -> float:
+    def fit(self, iteration: int, part: int = 0) -> float:
+        """One fit of `fit_steps` on the ring; `part` numbers an iteration's fits (DaggerConfig.fits): each draws
+        its own minibatches."""
         import jax
         import jax.numpy as jnp
 
         norm = tuple(jnp.asarray(a) for a in self.norm)
         key = jax.random.fold_in(jax.random.key(self.cfg.seed + 1), iteration)
+        if part:  # the first fit's key as before late fits existed: a run without them is unchanged
+            key = jax.random.fold_in(key, part)
         self.params, self.opt_state, loss, pose_mse = self._fit(self.params, self.opt_state, self.x, self.y,
                                                                 jnp.int32(self.filled), norm, key)
         if self.cfg.image:

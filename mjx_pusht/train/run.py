@@ -120,8 +120,11 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
                 break
         env_steps += len(x)
         learner.add(x, y, keep=i == 0)
-        loss, learn = _timed(learner.fit, i)
-        _stop_if_non_finite(None if np.isfinite(loss) else f"the loss is {loss}", f"iteration {i}'s fit", curve, out)
+        learn = 0.0
+        for part in range(cfg.fits(i)):
+            loss, seconds = _timed(learner.fit, i, part)
+            learn += seconds
+            _stop_if_non_finite(None if np.isfinite(loss) else f"the loss is {loss}", f"iteration {i}'s fit", curve, out)
         pending = (i, loss, learn, sim)
         if minutes is not None and time.perf_counter() - t_start > 60 * minutes:
             break  # judged alone below: no rollout past the budget
