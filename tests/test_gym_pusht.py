@@ -110,6 +110,24 @@ def test_96_pixel_pictures_of_the_same_states_match_gym_pushts():
     assert np.min(iou["tee"]) >= 0.8 and np.min(iou["goal"]) >= 0.8
 
 
+def test_an_agent_over_the_wall_is_drawn_over_it_as_gym_pusht_draws_it():
+    """gym-pusht's agent is kinematic and drawn after the walls: where it passes over a wall the picture shows the
+    agent. The walls here collide but are not drawn (a grey floor under a white table draws the border)."""
+    theirs, ours = both(obs_type="pixels")
+    rng = np.random.default_rng(2)
+    shown, border = [], 0
+    for x, y in [(3, 200), (509, 300), (250, 2), (300, 510), (4, 4), (508, 12)]:
+        st = [x, y, *rng.uniform(150, 350, 2), rng.uniform(-np.pi, np.pi)]
+        (o1, _), (o2, _) = theirs.reset(options={"reset_to_state": st}), ours.reset(options={"reset_to_state": st})
+        m1, m2 = _masks(o1)["agent"], _masks(o2)["agent"]
+        shown.append((m1 & m2).sum() / m1.sum())  # of gym-pusht's agent pixels, how many show the agent here too
+        grey = np.array(frame.COLOURS["wall"])
+        border += int((np.abs(o2.astype(int) - grey).sum(-1) < 30)[[0, -1]].any())  # a wall-grey edge row is drawn
+    # measured: 0.89-1.0 (walls drawn over the agent, before: 0.13-0.40); ~10 agent pixels, so one is 10%
+    assert min(shown) >= 0.85, shown
+    assert border >= 4  # the border is still drawn where no agent covers it
+
+
 def test_info_carries_gym_pushts_keys():
     theirs, ours = both(obs_type="state")
     (_, i1), (_, i2) = theirs.reset(seed=3), ours.reset(seed=3)

@@ -136,7 +136,7 @@ def tree_differences(got: Tree, want: Tree) -> list[str]:
 def check_tree(model: mujoco.MjModel, break_it: str, variant: str = "chapter") -> Tree:
     """Return the compiled tree, or raise TreeMismatch naming every difference."""
     got, want = read_tree(model), EXPECTED_TREES[break_it]
-    if variant == "gym-pusht":  # the same tree; three more geoms that are only drawn
+    if variant == "gym-pusht":  # the same tree; EXTRA_GEOMS more that are only drawn
         want = dataclasses.replace(want, n_geoms=want.n_geoms + EXTRA_GEOMS)
     diffs = tree_differences(got, want)
     if diffs:
