@@ -40,6 +40,7 @@ except ImportError as e:  # the extra is optional: say what to install, in one l
 
 from mjx_pusht import validate
 from mjx_pusht.envs.common import (
+    OneWorld,
     Pictures,
     action_bounds,
     check_kwargs,
@@ -58,13 +59,13 @@ DROP_IN_ID = "mjx_pusht/PushT-gym-pusht-v0"
 MAX_EPISODE_STEPS = 300  # both ids' registered limit, as gym-pusht registers its env
 
 
-def one_action(state, action, shape_what: str, low, high) -> np.ndarray:
-    """A single env's action as (2,) float64 (after reset), checked and clipped by the one validation layer."""
+def one_action(state, action, shape_what: str, low, high) -> tuple[float, float]:
+    """A single env's action as two floats (after reset), checked and clipped by the one validation layer."""
     validate.started(state)
-    return validate.actions(action, (2,), low, high, shape_what)
+    return validate.action_pair(action, low, high, shape_what)
 
 
-class PushTGymEnv(Pictures, gym.Env):
+class PushTGymEnv(OneWorld, Pictures, gym.Env):
     """One PushT episode at a time on MuJoCo C, float64 (the determinism reference).
 
     `max_episode_steps`: None (the default, and what `gym.make` passes) leaves truncation to gymnasium's
@@ -104,8 +105,8 @@ class PushTGymEnv(Pictures, gym.Env):
         return self._obs(), self._info()
 
     def step(self, action):
-        a = one_action(self._state, action, "(x, y) pair", self._low, self._high)
-        self._state = s = self._env._step_checked(self._state, a[None])  # `a` is checked and clipped
+        x, y = one_action(self._state, action, "(x, y) pair", self._low, self._high)
+        self._state = s = self._step_world(x, y)  # (x, y) is checked and clipped
         if self.render_mode == "human":
             self.render()
         return self._obs(), float(s.reward[0]), bool(s.terminated[0]), bool(s.truncated[0]), self._info()
