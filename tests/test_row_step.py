@@ -256,3 +256,13 @@ def test_the_vector_env_flags_only_the_world_mujoco_reset():
     with pytest.warns(RuntimeWarning, match="non-finite or left the walls"):
         *_, info = envs.step(np.full((3, 2), 256.0))
     assert info["finite"].tolist() == [True, False, True]
+
+
+def test_the_state_observations_yaw_wrapped_in_floats_is_wrap_angles():
+    from mjx_pusht.envs.gym import wrap_yaw
+    from mjx_pusht.task.rules import wrap_angle
+
+    rng = np.random.default_rng(6)
+    yaws = np.concatenate([rng.uniform(-20, 20, 20000), np.arange(-6, 7) * np.pi, [0.0, -0.0, 1e300, -1e300]])
+    yaws = np.concatenate([yaws, np.nextafter(yaws, np.inf), np.nextafter(yaws, -np.inf)])
+    same(np.array([wrap_yaw(y) for y in yaws.tolist()]), wrap_angle(yaws))

@@ -31,6 +31,8 @@ The single env runs on NumPy and MuJoCo C only (no JAX), so it can be forked.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 try:
@@ -52,7 +54,6 @@ from mjx_pusht.envs.common import (
 from mjx_pusht.render.pixels import IMAGE_SIZE
 from mjx_pusht.envs.vector import PushTVectorEnv  # noqa: F401  (the vector entry point's historical home)
 from mjx_pusht.task.reset import SEED_MAX
-from mjx_pusht.task.rules import wrap_angle
 
 ENV_ID = "mjx_pusht/PushT-v0"
 DROP_IN_ID = "mjx_pusht/PushT-gym-pusht-v0"
@@ -63,6 +64,12 @@ def one_action(state, action, shape_what: str, low, high) -> tuple[float, float]
     """A single env's action as two floats (after reset), checked and clipped by the one validation layer."""
     validate.started(state)
     return validate.action_pair(action, low, high, shape_what)
+
+
+def wrap_yaw(a: float) -> float:
+    """`rules.wrap_angle` of one float: the same operations (Python's float % is NumPy's remainder), no arrays."""
+    w = (a + math.pi) % (2 * math.pi) - math.pi
+    return math.pi if w == -math.pi else w
 
 
 class PushTGymEnv(OneWorld, Pictures, gym.Env):
@@ -115,9 +122,8 @@ class PushTGymEnv(OneWorld, Pictures, gym.Env):
         o, t = self._state.obs, self.obs_type
         s = o["state"][0]
         if t == "state":
-            out = s.copy()
-            out[4] = wrap_angle(out[4:5])[0]
-            return out
+            px, py, tx, ty, yaw = s.tolist()
+            return np.array([px, py, tx, ty, wrap_yaw(yaw)])
         if t == "keypoints":
             return o["keypoints"][0].copy()
         if t == "pixels":
