@@ -212,6 +212,21 @@ def actions(value, shape: tuple, low, high, what: str = "(x, y)") -> np.ndarray:
     return np.minimum(np.maximum(a, low), high)  # np.clip's own checks cost more than the step's physics
 
 
+def action_pair(value, low: float, high: float, what: str = "(x, y)") -> tuple[float, float]:
+    """One env's action as two floats: `actions(value, (2,), low, high, what)`'s values (and its errors), without
+    its array calls for the usual input, a NumPy (2,) float32 or float64 array (a single env's step)."""
+    if type(value) is np.ndarray and value.shape == (2,) and value.dtype in _FLOATS:
+        x, y = value.tolist()  # float32 to float64 exactly, as astype does
+        if x - x == 0 and y - y == 0:  # finite (inf - inf and NaN are NaN)
+            lo, hi = float(low), float(high)
+            return min(max(x, lo), hi), min(max(y, lo), hi)  # np.minimum(np.maximum()) on floats
+    x, y = actions(value, (2,), low, high, what).tolist()
+    return x, y
+
+
+_FLOATS = (np.dtype(np.float32), np.dtype(np.float64))
+
+
 def _nonfinite(finite: np.ndarray, a) -> str:
     if finite.ndim == 1:
         return f"got {_show(np.asarray(a).tolist())}"

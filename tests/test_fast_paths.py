@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from mjx_pusht.task.invariants import invariants_fold, invariants_init, invariants_update
-from mjx_pusht.task.rules import T_REACH, _coverage, _coverage_few
+from mjx_pusht.task.rules import T_REACH, _coverage, _coverage_few, coverage_one
 
 
 def test_folding_the_physics_steps_at_once_equals_folding_them_one_by_one():
@@ -45,6 +45,7 @@ def test_the_coverage_of_a_few_poses_is_the_array_codes_to_the_bit():
     few = np.concatenate([_coverage_few(poses[i : i + 1]) for i in range(n)])
     np.testing.assert_array_equal(few, ref)
     assert (ref > 0).sum() > n // 5 and (ref == 1).sum() >= 50  # overlaps of every kind were compared
+    np.testing.assert_array_equal([coverage_one(*p) for p in poses.tolist()], ref)  # one pose, floats in and out
     target = np.array([0.05, -0.02, 0.7])  # another target pose, given once for all rows and row by row
     ref = _coverage(poses, np.broadcast_to(target, poses.shape))
     np.testing.assert_array_equal(np.concatenate([_coverage_few(poses[i : i + 1], target) for i in range(n)]), ref)

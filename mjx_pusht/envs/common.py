@@ -13,6 +13,7 @@ from gymnasium import spaces
 
 from mjx_pusht import validate
 from mjx_pusht.envs.functional import PushTEnv
+from mjx_pusht.envs.row import applies, step_row
 from mjx_pusht.envs.starts import START_HI, START_LO
 from mjx_pusht.render.pixels import IMAGE_SIZE
 from mjx_pusht.task.episode import Episode
@@ -82,6 +83,19 @@ def functional(backend: str, obs_type: str, action_type: str, observation_size: 
                                     end_covered_start=variant == "chapter"),
                     scene=SceneSpec(variant=variant), threads=threads, keep_states=False,
                     keypoints=obs_type == "keypoints")
+
+
+class OneWorld:
+    """The single envs' control step: the functional env's, by the row step (envs/row.py: plain floats, the same
+    bits) where it applies, else by the array path. `row_step = False` on an env takes the array path always."""
+
+    row_step = True
+
+    def _step_world(self, x: float, y: float):
+        """`self._state` stepped by the checked, clipped action (x, y) in the functional env's units."""
+        state = self._state
+        new = step_row(self._env, state, x, y) if self.row_step and applies(self._env, state) else None
+        return new if new is not None else self._env._step_checked(state, np.array([[x, y]]))
 
 
 class Pictures:

@@ -333,6 +333,7 @@ class PushTEnv:
     def _step_checked(self, state: State, action: np.ndarray) -> State:
         """`_step_cpu` of actions already through `validate.actions` (a gymnasium env checks its own)."""
         from mjx_pusht.backends.cpu import cpu_physics
+        from mjx_pusht.envs.row import unstable
 
         worlds = state.data.copy() if self.keep_states else state.data
         physics = self.__dict__.get("_cpu_physics")
@@ -341,6 +342,9 @@ class PushTEnv:
         qpos = state.data.qpos[-1]
         qpos, carry, _ = control_step((worlds, None), state.carry, qpos, state.step, action, self.action_type, physics,
                                       self.layout, self.episode, np)
+        reset = unstable(worlds)  # a world MuJoCo reset (its state went non-finite): never finite again
+        if reset.any():
+            carry = {**carry, "inv": {**carry["inv"], "finite": carry["inv"]["finite"] & ~reset}}
         return self._after(state, qpos, carry, np, qvel=worlds.qvel[-1])._replace(data=worlds)
 
     def step(self, state: State, action) -> State:  # replaced by _step_mjx on MJX

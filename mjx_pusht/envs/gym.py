@@ -31,6 +31,8 @@ The single env runs on NumPy and MuJoCo C only (no JAX), so it can be forked.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 try:
@@ -40,6 +42,7 @@ except ImportError as e:  # the extra is optional: say what to install, in one l
 
 from mjx_pusht import validate
 from mjx_pusht.envs.common import (
+    OneWorld,
     Pictures,
     action_bounds,
     check_kwargs,
@@ -51,20 +54,25 @@ from mjx_pusht.envs.common import (
 from mjx_pusht.render.pixels import IMAGE_SIZE
 from mjx_pusht.envs.vector import PushTVectorEnv  # noqa: F401  (the vector entry point's historical home)
 from mjx_pusht.task.reset import SEED_MAX
-from mjx_pusht.task.rules import wrap_angle
 
 ENV_ID = "mjx_pusht/PushT-v0"
 DROP_IN_ID = "mjx_pusht/PushT-gym-pusht-v0"
 MAX_EPISODE_STEPS = 300  # both ids' registered limit, as gym-pusht registers its env
 
 
-def one_action(state, action, shape_what: str, low, high) -> np.ndarray:
-    """A single env's action as (2,) float64 (after reset), checked and clipped by the one validation layer."""
+def one_action(state, action, shape_what: str, low, high) -> tuple[float, float]:
+    """A single env's action as two floats (after reset), checked and clipped by the one validation layer."""
     validate.started(state)
-    return validate.actions(action, (2,), low, high, shape_what)
+    return validate.action_pair(action, low, high, shape_what)
 
 
-class PushTGymEnv(Pictures, gym.Env):
+def wrap_yaw(a: float) -> float:
+    """`rules.wrap_angle` of one float: the same operations (Python's float % is NumPy's remainder), no arrays."""
+    w = (a + math.pi) % (2 * math.pi) - math.pi
+    return math.pi if w == -math.pi else w
+
+
+class PushTGymEnv(OneWorld, Pictures, gym.Env):
     """One PushT episode at a time on MuJoCo C, float64 (the determinism reference).
 
     `max_episode_steps`: None (the default, and what `gym.make` passes) leaves truncation to gymnasium's
@@ -104,8 +112,8 @@ class PushTGymEnv(Pictures, gym.Env):
         return self._obs(), self._info()
 
     def step(self, action):
-        a = one_action(self._state, action, "(x, y) pair", self._low, self._high)
-        self._state = s = self._env._step_checked(self._state, a[None])  # `a` is checked and clipped
+        x, y = one_action(self._state, action, "(x, y) pair", self._low, self._high)
+        self._state = s = self._step_world(x, y)  # (x, y) is checked and clipped
         if self.render_mode == "human":
             self.render()
         return self._obs(), float(s.reward[0]), bool(s.terminated[0]), bool(s.truncated[0]), self._info()
@@ -114,9 +122,8 @@ class PushTGymEnv(Pictures, gym.Env):
         o, t = self._state.obs, self.obs_type
         s = o["state"][0]
         if t == "state":
-            out = s.copy()
-            out[4] = wrap_angle(out[4:5])[0]
-            return out
+            px, py, tx, ty, yaw = s.tolist()
+            return np.array([px, py, tx, ty, wrap_yaw(yaw)])
         if t == "keypoints":
             return o["keypoints"][0].copy()
         if t == "pixels":

@@ -19,12 +19,14 @@ What still differs from pymunk's physics, measured, is docs/dropin-physics.md.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from gymnasium import spaces
 
 from mjx_pusht import validate
 from mjx_pusht.envs import gym as base
-from mjx_pusht.envs.common import Pictures, functional, warn_broken
+from mjx_pusht.envs.common import OneWorld, Pictures, functional, warn_broken
 from mjx_pusht.envs.vector import PushTVectorEnv
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model import gym_pusht as frame
@@ -92,6 +94,82 @@ def gym_view(obs_type: str, obs: dict, coverage, terminated, xp, dtype):
     return out, info
 
 
+def gym_view_row(obs_type: str, obs: dict, coverage: float, terminated: bool):
+    """`gym_view` of one world's host observation (`obs` rows of shape (5,), (2,)) in Python floats: the same
+    operations in the same order (NumPy's cos and sin of the angle, as the array code's), the same bits
+    (tests/test_row_step.py), without its ~40 array calls on one-row arrays (the drop-in's step)."""
+    px, py, tx, ty, yaw = obs["state"].tolist()
+    ax, ay = _px(px, py)
+    angle = (GOAL_PX2 - yaw) % (2 * math.pi)
+    bx, by = _px(tx, ty)
+    c, s = float(np.cos(angle)), float(np.sin(angle))
+    ox, oy = bx + s * frame.ORIGIN_PX, by - c * frame.ORIGIN_PX
+    corners = [v for kx, ky in _KEYPOINTS for v in (c * kx - s * ky + ox, s * kx + c * ky + oy)]
+    agent = np.array([ax, ay])
+    if obs_type == "state":
+        out = np.array([ax, ay, ox, oy, angle])
+    elif obs_type == "environment_state_agent_pos":
+        out = {"environment_state": np.array(corners), "agent_pos": np.array([ax, ay])}
+    elif obs_type == "pixels":
+        out = obs["pixels"]
+    else:
+        out = {"pixels": obs["pixels"], "agent_pos": np.array([ax, ay])}
+    vx, vy = obs["pusher_vel"].tolist()
+    lx, ly = vx / frame.PX, -vy / frame.PX
+    lo, hi = frame.WALL_INNER_PX
+    if c - c == 0 and s - s == 0 and ox - ox == 0 and oy - oy == 0:  # every corner finite: min and max are exact
+        wall = min(corners) <= lo + CONTACT_PX or max(corners) >= hi - CONTACT_PX
+    else:
+        wall = any(v <= lo + CONTACT_PX or v >= hi - CONTACT_PX for v in corners)
+    touch = _distance_to_tee(px, py, tx, ty, yaw) <= (frame.AGENT_RADIUS_PX + CONTACT_PX) * frame.PX
+    info = {
+        "pos_agent": agent,
+        "vel_agent": np.array([_GC * lx - _GS * ly, _GS * lx + _GC * ly]),
+        "block_pose": np.array([ox, oy, angle]),
+        "goal_pose": np.array(frame.GOAL_PX),
+        "n_contacts": int(touch or wall),
+        "is_success": terminated,
+        "coverage": coverage,
+    }
+    return out, info
+
+
+GOAL_PX2 = frame.GOAL_PX[2]
+_GC, _GS = math.cos(GOAL_PX2), math.sin(GOAL_PX2)  # frame.to_px's and velocity_to_px's rotation
+_KEYPOINTS = [tuple(k) for k in frame.KEYPOINTS_LOCAL_PX.tolist()]
+
+
+def _px(x: float, y: float) -> tuple[float, float]:
+    """`frame.to_px` of one world position, in floats."""
+    lx, ly = x / frame.PX, frame.ORIGIN_PX - y / frame.PX
+    return _GC * lx - _GS * ly + frame.GOAL_PX[0], _GS * lx + _GC * ly + frame.GOAL_PX[1]
+
+
+def _world(x: float, y: float) -> tuple[float, float]:
+    """`frame.to_world` of one pixel position, in floats."""
+    gx, gy, gt = frame.GOAL_PX
+    c, s = math.cos(-gt), math.sin(-gt)
+    dx, dy = x - gx, y - gy
+    lx, ly = c * dx - s * dy, s * dx + c * dy
+    return lx * frame.PX, (frame.ORIGIN_PX - ly) * frame.PX
+
+
+def _distance_to_tee(x: float, y: float, tx: float, ty: float, yaw: float) -> float:
+    """`rules.distance_to_tee` of one point and pose, in floats (NumPy's cos and sin, minimum and maximum's NaN)."""
+    from mjx_pusht.task.rules import T_RECTS
+
+    c, s = float(np.cos(yaw)), float(np.sin(yaw))
+    dx, dy = x - tx, y - ty
+    lx, ly = c * dx + s * dy, -s * dx + c * dy
+    out = None
+    for cx, cy, hx, hy in T_RECTS:
+        ox, oy = abs(lx - cx) - hx, abs(ly - cy) - hy
+        ox, oy = (ox if ox >= 0.0 or ox != ox else 0.0), (oy if oy >= 0.0 or oy != oy else 0.0)
+        d = math.sqrt(ox * ox + oy * oy)
+        out = d if out is None or d != d or (d < out and out == out) else out
+    return out
+
+
 def n_contacts(pusher_xy, tee_pose, corners_px, xp):
     """gym-pusht's n_contacts, which its formula makes 1 when anything touched in the step and 0 otherwise
     (contact points / 1000, rounded up): here 1 when the pusher touches the T or a corner of the T
@@ -137,7 +215,7 @@ def _marker(img: np.ndarray, action, size: int) -> np.ndarray:
     return img
 
 
-class GymPushTEnv(Pictures, base.gym.Env):
+class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
     """One episode at a time on MuJoCo C, with gym-pusht's interface. Resets draw from the env's generator
     exactly as gym-pusht's do, so `reset(seed=s)` and every later reset start where gym-pusht's start."""
 
@@ -183,9 +261,9 @@ class GymPushTEnv(Pictures, base.gym.Env):
         return obs, info
 
     def step(self, action):
-        a = base.one_action(self._state, action, "(x, y) target in pixels", *TARGET_BOUNDS)
-        self._last_action = a
-        self._state = self._env._step_checked(self._state, frame.to_world(a)[None])  # finite: `a` was checked
+        x, y = base.one_action(self._state, action, "(x, y) target in pixels", *TARGET_BOUNDS)
+        self._last_action = (x, y)
+        self._state = self._step_world(*_world(x, y))  # finite: (x, y) was checked
         obs, info = self._view()
         if self.render_mode == "human":
             self.render()
@@ -194,9 +272,9 @@ class GymPushTEnv(Pictures, base.gym.Env):
     def _view(self):
         s = self._state
         m = s.metrics
-        obs, info = gym_view(self.obs_type, {k: v[0] for k, v in s.obs.items()}, float(m["coverage"][0]),
-                             bool(s.terminated[0]), np, np.float64)
-        info = {**info, "n_contacts": int(info["n_contacts"]), "reward": float(reward_of(m["coverage"][0], np)),
+        cov = m["coverage"].item()
+        obs, info = gym_view_row(self.obs_type, {k: v[0] for k, v in s.obs.items()}, cov, bool(s.terminated[0]))
+        info = {**info, "reward": min(max(cov / SUCCESS_COVERAGE, 0.0), 1.0),  # reward_of, on a float
                 "finite": bool(m["finite"][0]), "contained": bool(m["contained"][0])}
         if not (info["finite"] and info["contained"]):
             warn_broken(info)

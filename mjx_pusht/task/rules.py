@@ -226,17 +226,30 @@ def _coverage_few(pose, target=TARGET_POSE) -> np.ndarray:
         return out  # every pose too far away to overlap (below): no cos/sin to compute
     cos, sin = np.cos(pose[:, 2]).tolist(), np.sin(pose[:, 2]).tolist()  # NumPy's cos/sin, as the array code's
     for i, (x, y, _) in enumerate(rows):
-        (gx, gy), quads = tgts[i]
-        if math.hypot(x - gx, y - gy) >= 2 * T_REACH:
-            continue  # too far apart to overlap (coverage_np's exact shortcut)
-        c, s = cos[i], sin[i]
-        area = [_overlap_few(_corners_few(x, y, c, s, ra), quad)
-                if math.hypot(c * ra[0] - s * ra[1] + x - centre[0], s * ra[0] + c * ra[1] + y - centre[1]) < reach
-                else 0.0  # the rectangles' circumcircles (widened by 1 um) apart: their overlap is exactly 0
-                for ra in T_RECTS for (quad, centre, reach) in
-                ((q, cen, math.hypot(ra[2], ra[3]) + r) for q, cen, r in quads)]
-        out[i] = min(max((((area[0] + area[1]) + area[2]) + area[3]) / T_AREA, 0.0), 1.0)
+        out[i] = _cover(x, y, cos[i], sin[i], tgts[i])
     return out
+
+
+def coverage_one(x: float, y: float, yaw: float) -> float:
+    """`coverage` of one host pose at the target, from floats to a float: `_coverage_few`'s computation for
+    one row (the gymnasium single env's step), without its array in and out."""
+    tgt = _target_few(TARGET_POSE)
+    if math.hypot(x - tgt[0][0], y - tgt[0][1]) >= 2 * T_REACH:
+        return 0.0
+    return _cover(x, y, float(np.cos(yaw)), float(np.sin(yaw)), tgt)
+
+
+def _cover(x, y, c, s, tgt) -> float:
+    """One pose's coverage of one target (`_target_few`), its yaw's cos and sin given."""
+    (gx, gy), quads = tgt
+    if math.hypot(x - gx, y - gy) >= 2 * T_REACH:
+        return 0.0  # too far apart to overlap (coverage_np's exact shortcut)
+    area = [_overlap_few(_corners_few(x, y, c, s, ra), quad)
+            if math.hypot(c * ra[0] - s * ra[1] + x - centre[0], s * ra[0] + c * ra[1] + y - centre[1]) < reach
+            else 0.0  # the rectangles' circumcircles (widened by 1 um) apart: their overlap is exactly 0
+            for ra in T_RECTS for (quad, centre, reach) in
+            ((q, cen, math.hypot(ra[2], ra[3]) + r) for q, cen, r in quads)]
+    return min(max((((area[0] + area[1]) + area[2]) + area[3]) / T_AREA, 0.0), 1.0)
 
 
 @functools.lru_cache(maxsize=64)
