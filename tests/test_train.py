@@ -502,6 +502,13 @@ def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
         r = cli("train", "--algo", "ppo", *extra, "--out", str(tmp_path / "p"), "--no-rerun")
         assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and why in r.stderr, r.stderr
         assert not (tmp_path / "p" / "checkpoints").exists()
+    # one method's settings given to the other are refused, not ignored
+    for algo, extra, why in (("ppo", ("--late-fits", "2"), "--late-fits is DAgger's"),
+                             ("dagger", ("--max-grad-norm", "1"), "are PPO's"),
+                             ("dagger", ("--lr-schedule", "adaptive-kl"), "are PPO's")):
+        r = cli("train", "--algo", algo, "--backend", "mjx-jax", *extra, "--out", str(tmp_path / "q"), "--no-rerun")
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and why in r.stderr, r.stderr
+        assert not (tmp_path / "q").exists()
 
 
 @pytest.mark.slow
@@ -527,6 +534,7 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp
     assert (out / "policy.msgpack").read_bytes() == kept.read_bytes()
     for name in ("policy.msgpack", "checkpoints/policy_000.msgpack", "checkpoints/policy_001.msgpack", "curve.png"):
         assert (out / name).is_file(), name
+    assert _moved(out) > 1e-3  # 256 Adam steps at 3e-4 move the layers (see the --max-grad-norm test)
     # the trainer's judge (its own jitted scan) and `eval --controller policy:...` (the backend's episode
     # machinery) on the same held-out seeds: MJX-JAX on the CPU is deterministic, so they agree
     rows = pq.read_table(out / "eval" / "per_episode.parquet").to_pydict()
@@ -593,3 +601,26 @@ def jax_leaves(tree):
     import jax
 
     return [np.asarray(a) for a in jax.tree.leaves(tree)]
+
+
+def _moved(out) -> float:
+    """The largest change of any policy weight from the first judgement (the initial network) to the second."""
+    first, second = (load_checkpoint(out / "checkpoints" / f"policy_{i:03d}.msgpack")[0] for i in (0, 1))
+    return max(float(np.max(np.abs(a - b))) for a, b in zip(jax_leaves(first), jax_leaves(second)))
+
+
+@pytest.mark.slow
+def test_ppo_max_grad_norm_and_adaptive_kl_reach_braxs_optimiser(tmp_path):
+    """--max-grad-norm clips the gradient before Adam in Brax's own trainer: clipped to 1e-12, each of the run's 256
+    Adam steps moves a weight by at most lr |g| / (|g| + 1e-8) <= 1e-2 x 1e-4 (ADAPTIVE_KL's highest rate), so the
+    network stays within 2.6e-4 of its start, where the same run unclipped moves it by more than 1e-3 (the test
+    above)."""
+    pytest.importorskip("brax")
+    out = tmp_path / "ppo"
+    r = cli("train", "--algo", "ppo", "--backend", "mjx-jax", "--envs", "8", "--batch", "8", "--timesteps", "10240",
+            "--iterations", "1", "--eval-envs", "4", "--hidden", "32,32", "--no-rerun", "--record", "0", "--no-progress",
+            "--out", str(out), "--max-grad-norm", "1e-12", "--lr-schedule", "adaptive-kl")
+    assert r.returncode == 0, r.stderr
+    config = json.loads((out / "summary.json").read_text())["config"]
+    assert config["max_grad_norm"] == 1e-12 and config["lr_schedule"] == "adaptive-kl"
+    assert _moved(out) < 2.6e-4

@@ -202,6 +202,11 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--ppo-act", choices=("sample", "mean"), default="sample",
                    help="PPO: the saved policy acts with a draw from its Gaussian keyed by seed and step, what PPO "
                         "trains (default), or with the Gaussian's mean, Brax's deterministic action")
+    t.add_argument("--max-grad-norm", type=_positive_float, default=None,
+                   help="PPO: clip the gradient's global norm to this before Adam (Brax's max_grad_norm; default none)")
+    t.add_argument("--lr-schedule", choices=("adaptive-kl",), default=None,
+                   help="PPO: adaptive-kl, Brax's ADAPTIVE_KL (the rate follows the epochs' KL toward 0.01); "
+                        "default a constant rate")
     t.add_argument("--hidden", type=_widths, default=(256, 256, 256), help="hidden widths (default 256,256,256)")
     t.add_argument("--lr", type=_positive_float, default=None, help="Adam's learning rate (default 1e-3; PPO 3e-4)")
     t.add_argument("--beta-decay", type=_fraction, default=0.7,

@@ -22,7 +22,11 @@ def cmd_train(args) -> int:
 
     name, why = resolve(args.backend)
     if args.algo == "ppo":
+        if args.late_fits is not None:
+            raise TrainError("--late-fits is DAgger's (fits after each rollout); PPO's updates are Brax's")
         return _cmd_ppo(args, name, why)
+    if args.max_grad_norm is not None or args.lr_schedule is not None:
+        raise TrainError("--max-grad-norm and --lr-schedule are PPO's (--algo ppo); DAgger's fit is plain Adam")
     cfg = DaggerConfig(obs_type=args.obs, envs=args.envs, iterations=args.iterations, hidden=tuple(args.hidden),
                        learning_rate=args.lr or 1e-3, batch=args.batch or 4096, fit_steps=args.fit_steps,
                        beta_decay=args.beta_decay, max_samples=args.max_samples, eval_envs=args.eval_envs,
@@ -76,7 +80,8 @@ def _cmd_ppo(args, name: str, why: str) -> int:
         raise TrainError(f"--algo ppo needs Brax ({e.name} is missing): pip install 'mjx-pusht[train]'") from None
     cfg = PPOConfig(obs_type=args.obs, envs=args.envs, timesteps=args.timesteps, evals=args.iterations,
                     hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
-                    eval_envs=args.eval_envs, seed=args.seed, reset=args.reset, act=args.ppo_act)
+                    eval_envs=args.eval_envs, seed=args.seed, reset=args.reset, act=args.ppo_act,
+                    max_grad_norm=args.max_grad_norm, lr_schedule=args.lr_schedule)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)
     _restart(out, args)
     _check_rerun(args)

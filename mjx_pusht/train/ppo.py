@@ -73,12 +73,21 @@ class PPOConfig:
     seed: int = 0
     act: str = "sample"  # the saved policy's action (ppo_policy.py): "sample", what PPO trains, or "mean"
     validation_envs: int = 0  # --keep best judges on this many seeds, neither trained on nor held out (0: eval_envs / 4)
+    # Brax's limits on an update (None: Brax's defaults, none; None, not a value, so older resume files still match).
+    # Measured on one H100 (docs/notebook/lead.md): every collapse of the judged policy (100% -> 0-6%) followed an
+    # epoch whose KL between old and new policy was 1.3-51, against 0.02-0.04 in the epochs around it.
+    max_grad_norm: float | None = None  # the gradient's global norm clipped to this before Adam
+    lr_schedule: str | None = None  # "adaptive-kl": Brax's ADAPTIVE_KL, the rate /1.5 or x1.5 toward desired_kl 0.01
 
     def __post_init__(self) -> None:
         if self.act not in PPO_ACTS:
             raise ConfigError(f"PPO acts with its Gaussian's {' or '.join(PPO_ACTS)}, not {self.act!r}")
         if self.obs_type not in ("state", "keypoints"):
             raise ConfigError(f"PPO trains from state or keypoints observations, not {self.obs_type!r}")
+        if self.lr_schedule not in (None, "adaptive-kl"):
+            raise ConfigError(f"PPO: --lr-schedule is adaptive-kl (or not given: constant), not {self.lr_schedule!r}")
+        if self.max_grad_norm is not None and not self.max_grad_norm > 0:
+            raise ConfigError(f"PPO: --max-grad-norm must be above 0, got {self.max_grad_norm}")
         if self.validation_envs < 0:
             raise ConfigError(f"PPO: validation_envs must be at least 0, got {self.validation_envs}")
         for name in ("envs", "timesteps", "evals", "eval_envs", "max_steps", "unroll_length", "batch_size"):
@@ -281,7 +290,8 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
             num_minibatches=cfg.num_minibatches, num_updates_per_batch=cfg.updates_per_batch,
             reward_scaling=cfg.reward_scaling, normalize_observations=True, seed=cfg.seed + len(curve),
             num_evals=evals_left + 1, run_evals=False, policy_params_fn=on_params, progress_fn=on_metrics,
-            restore_params=restored,
+            restore_params=restored, max_grad_norm=cfg.max_grad_norm,
+            **({"learning_rate_schedule": "ADAPTIVE_KL"} if cfg.lr_schedule == "adaptive-kl" else {}),
             network_factory=functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=cfg.hidden))
     except _BudgetSpent:
         bar.write(f"stopping after judgement {len(curve) - 1}: the {minutes:g}-minute budget is spent")
