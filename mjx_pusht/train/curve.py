@@ -44,11 +44,14 @@ def write_curve(out: Path, curve: list[dict], title: str, rerun: bool = True) ->
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    lines = [",".join(CURVE_COLUMNS)] + [",".join(f"{r[c]:.6g}" if isinstance(r.get(c), float) else
-                                                  "" if r.get(c) is None else str(r[c])
-                                                  for c in CURVE_COLUMNS) for r in curve]
+    # a method's own columns after the shared ones (PPO: both actions' success, Brax's loss metrics)
+    columns = list(CURVE_COLUMNS) + sorted({k for r in curve for k in r} - set(CURVE_COLUMNS))
+    lines = [",".join(columns)] + [",".join(f"{r[c]:.6g}" if isinstance(r.get(c), float) else
+                                            "" if r.get(c) is None else str(r[c])
+                                            for c in columns) for r in curve]
     atomic_write_bytes(out / "curve.csv", ("\n".join(lines) + "\n").encode())
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
+    kl = [(r["wall_seconds"] / 60, r["brax_kl"]) for r in curve if r.get("brax_kl") is not None]
+    fig, axes = plt.subplots(1, 3 if kl else 2, figsize=(15 if kl else 10, 3.8))
     for ax, key, label in ((axes[0], "env_steps", "env control steps (millions)"),
                            (axes[1], "wall_seconds", "training wall-clock (minutes)")):
         scale = 1e6 if key == "env_steps" else 60.0
@@ -56,12 +59,17 @@ def write_curve(out: Path, curve: list[dict], title: str, rerun: bool = True) ->
         ax.fill_between(xs, [100 * r["success_lo"] for r in curve], [100 * r["success_hi"] for r in curve], alpha=0.3)
         ax.plot(xs, [100 * r["success"] for r in curve], "o-", label="held-out success")
         val = [(x, 100 * r["validation_success"]) for x, r in zip(xs, curve) if validated(r)]
-        if val:  # what --keep best chooses by: the next rollout's fresh training seeds
-            ax.plot(*zip(*val), ".--", alpha=0.6, label="validation (training seeds, expert share <= 1%)")
+        if val:  # what --keep best chooses by: seeds never held out (DAgger: the next rollout's, expert share <= 1%)
+            ax.plot(*zip(*val), ".--", alpha=0.6, label="validation (seeds never held out)")
         ax.set_xlabel(label)
+        ax.set_ylim(0, 100)
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("success, % (coverage >= 0.95 in 300 steps)")
-    axes[0].set_ylim(0, 100)
+    if kl:  # PPO: the policy's change in the epoch before each judgement (a spike came before every collapse)
+        axes[2].semilogy(*zip(*kl), "o-", color="tab:red")
+        axes[2].set_xlabel("training wall-clock (minutes)")
+        axes[2].set_ylabel("Brax's KL, old to new policy, that epoch")
+        axes[2].grid(alpha=0.3, which="both")
     axes[0].legend(loc="lower right", fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
