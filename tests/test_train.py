@@ -503,9 +503,11 @@ def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
         assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and why in r.stderr, r.stderr
         assert not (tmp_path / "p" / "checkpoints").exists()
     # one method's settings given to the other are refused, not ignored
-    for algo, extra, why in (("ppo", ("--late-fits", "2"), "--late-fits is DAgger's"),
-                             ("dagger", ("--max-grad-norm", "1"), "are PPO's"),
-                             ("dagger", ("--lr-schedule", "adaptive-kl"), "are PPO's")):
+    for algo, extra, why in (("ppo", ("--late-fits", "2"), "--late-fits: DAgger's setting, not PPO's"),
+                             ("ppo", ("--fit-steps", "5", "--teacher", "expert"), "--fit-steps, --teacher: DAgger's"),
+                             ("dagger", ("--max-grad-norm", "1"), "--max-grad-norm: PPO's"),
+                             ("dagger", ("--lr-schedule", "adaptive-kl", "--timesteps", "9"), "--timesteps, --lr-schedule"),
+                             ("dagger", ("--ppo-act", "mean"), "--ppo-act: PPO's")):
         r = cli("train", "--algo", algo, "--backend", "mjx-jax", *extra, "--out", str(tmp_path / "q"), "--no-rerun")
         assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and why in r.stderr, r.stderr
         assert not (tmp_path / "q").exists()

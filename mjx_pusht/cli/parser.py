@@ -181,8 +181,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--envs", type=_worlds, default=4096, help="episodes rolled out per iteration (default 4096)")
     t.add_argument("--iterations", type=_positive, default=10,
                    help="DAgger iterations, or PPO's held-out judgements over the run (default 10)")
-    t.add_argument("--timesteps", type=_positive, default=50_000_000, help="PPO: env control steps in all (default 50M)")
-    t.add_argument("--fit-steps", type=_positive, default=2000, help="gradient steps per iteration (default 2000)")
+    t.add_argument("--timesteps", type=_positive, default=None, help="PPO: env control steps in all (default 50M)")
+    t.add_argument("--fit-steps", type=_positive, default=None, help="DAgger: gradient steps per iteration (default 2000)")
     t.add_argument("--batch", type=_positive, default=None,
                    help="DAgger: samples per gradient step (default 4096); PPO: Brax's batch_size (default 256)")
     t.add_argument("--image-batch", type=_positive, default=None,
@@ -199,7 +199,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "most on that iteration's fresh training seeds once the expert's share there is at most 1%%; "
                         "PPO: the judged policy that succeeded most on validation seeds past its training starts "
                         "(both chosen without the held-out seeds)")
-    t.add_argument("--ppo-act", choices=("sample", "mean"), default="sample",
+    t.add_argument("--ppo-act", choices=("sample", "mean"), default=None,
                    help="PPO: the saved policy acts with a draw from its Gaussian keyed by seed and step, what PPO "
                         "trains (default), or with the Gaussian's mean, Brax's deterministic action")
     t.add_argument("--max-grad-norm", type=_positive_float, default=None,
@@ -209,13 +209,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "default a constant rate")
     t.add_argument("--hidden", type=_widths, default=(256, 256, 256), help="hidden widths (default 256,256,256)")
     t.add_argument("--lr", type=_positive_float, default=None, help="Adam's learning rate (default 1e-3; PPO 3e-4)")
-    t.add_argument("--beta-decay", type=_fraction, default=0.7,
-                   help="the expert's share of control steps: 1, then times this each iteration (default 0.7)")
-    t.add_argument("--teacher", choices=("paced", "expert"), default="paced",
+    t.add_argument("--beta-decay", type=_fraction, default=None,
+                   help="DAgger: the expert's share of control steps: 1, then times this each iteration (default 0.7)")
+    t.add_argument("--teacher", choices=("paced", "expert"), default=None,
                    help="DAgger: whom the student learns from: the expert paced for a student (its slowest actions "
                         "faster, its last trims coarser, so a student's small errors still move the T; default), or "
                         "the expert as is")
-    t.add_argument("--max-samples", type=_int_at_least(1, 1 << 30, " samples"), default=8_000_000, help="dataset ring size (default 8,000,000)")
+    t.add_argument("--max-samples", type=_int_at_least(1, 1 << 30, " samples"), default=None,
+                   help="DAgger: dataset ring size (default 8,000,000)")
     t.add_argument("--reset", choices=("task", "chapter"), default="task",
                    help="start distribution trained and judged on (default task)")
     t.add_argument("--eval-envs", type=_worlds, default=4096,

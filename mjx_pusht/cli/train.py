@@ -13,6 +13,24 @@ from mjx_pusht.train.resume import TrainError
 from mjx_pusht.train.summary import write_summary
 
 
+# Each method's own settings and their defaults: given to the other method, a setting is refused, not ignored.
+DAGGER_ONLY = {"fit_steps": 2000, "beta_decay": 0.7, "max_samples": 8_000_000, "teacher": "paced",
+               "image_batch": None, "image_steps": None, "late_fits": None}
+PPO_ONLY = {"timesteps": 50_000_000, "ppo_act": "sample", "max_grad_norm": None, "lr_schedule": None}
+
+
+def _method_settings(args) -> None:
+    """Refuse the other method's settings in one line; fill this method's defaults (the parser leaves them None)."""
+    own, other = (PPO_ONLY, DAGGER_ONLY) if args.algo == "ppo" else (DAGGER_ONLY, PPO_ONLY)
+    given = ["--" + k.replace("_", "-") for k in other if getattr(args, k) is not None]
+    if given:
+        method, theirs = ("PPO", "DAgger's") if args.algo == "ppo" else ("DAgger", "PPO's (--algo ppo)")
+        raise TrainError(f"{', '.join(given)}: {theirs} setting{'s' if len(given) > 1 else ''}, not {method}'s")
+    for k, default in own.items():
+        if getattr(args, k) is None:
+            setattr(args, k, default)
+
+
 def cmd_train(args) -> int:
     """`mjx-pusht train`: check everything, train, then judge the policy with `eval` on the held-out seeds."""
     from mjx_pusht.backends.base import resolve
@@ -20,13 +38,10 @@ def cmd_train(args) -> int:
     from mjx_pusht.io.outputs import claim_out_dir
     from mjx_pusht.train.dagger import DaggerConfig
 
+    _method_settings(args)
     name, why = resolve(args.backend)
     if args.algo == "ppo":
-        if args.late_fits is not None:
-            raise TrainError("--late-fits is DAgger's (fits after each rollout); PPO's updates are Brax's")
         return _cmd_ppo(args, name, why)
-    if args.max_grad_norm is not None or args.lr_schedule is not None:
-        raise TrainError("--max-grad-norm and --lr-schedule are PPO's (--algo ppo); DAgger's fit is plain Adam")
     cfg = DaggerConfig(obs_type=args.obs, envs=args.envs, iterations=args.iterations, hidden=tuple(args.hidden),
                        learning_rate=args.lr or 1e-3, batch=args.batch or 4096, fit_steps=args.fit_steps,
                        beta_decay=args.beta_decay, max_samples=args.max_samples, eval_envs=args.eval_envs,
