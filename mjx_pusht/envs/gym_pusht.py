@@ -30,7 +30,7 @@ from mjx_pusht.envs.common import OneWorld, Pictures, functional, warn_broken
 from mjx_pusht.envs.vector import PushTVectorEnv
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model import gym_pusht as frame
-from mjx_pusht.task.rules import SUCCESS_COVERAGE
+from mjx_pusht.task.rules import SUCCESS_COVERAGE, T_RECTS
 
 ENV_ID = "mjx_pusht/PushT-gym-pusht-v0"
 OBS_TYPES = ("state", "environment_state_agent_pos", "pixels", "pixels_agent_pos")
@@ -100,7 +100,7 @@ def gym_view_row(obs_type: str, obs: dict, coverage: float, terminated: bool):
     (tests/test_row_step.py), without its ~40 array calls on one-row arrays (the drop-in's step)."""
     px, py, tx, ty, yaw = obs["state"].tolist()
     ax, ay = _px(px, py)
-    angle = (GOAL_PX2 - yaw) % (2 * math.pi)
+    angle = (_GOAL_YAW - yaw) % (2 * math.pi)
     bx, by = _px(tx, ty)
     c, s = float(np.cos(angle)), float(np.sin(angle))
     ox, oy = bx + s * frame.ORIGIN_PX, by - c * frame.ORIGIN_PX
@@ -134,8 +134,9 @@ def gym_view_row(obs_type: str, obs: dict, coverage: float, terminated: bool):
     return out, info
 
 
-GOAL_PX2 = frame.GOAL_PX[2]
-_GC, _GS = math.cos(GOAL_PX2), math.sin(GOAL_PX2)  # frame.to_px's and velocity_to_px's rotation
+_GOAL_YAW = frame.GOAL_PX[2]
+_GC, _GS = math.cos(_GOAL_YAW), math.sin(_GOAL_YAW)  # frame.to_px's and velocity_to_px's rotation
+_WC, _WS = math.cos(-_GOAL_YAW), math.sin(-_GOAL_YAW)  # frame.to_world's
 _KEYPOINTS = [tuple(k) for k in frame.KEYPOINTS_LOCAL_PX.tolist()]
 
 
@@ -147,17 +148,13 @@ def _px(x: float, y: float) -> tuple[float, float]:
 
 def _world(x: float, y: float) -> tuple[float, float]:
     """`frame.to_world` of one pixel position, in floats."""
-    gx, gy, gt = frame.GOAL_PX
-    c, s = math.cos(-gt), math.sin(-gt)
-    dx, dy = x - gx, y - gy
-    lx, ly = c * dx - s * dy, s * dx + c * dy
+    dx, dy = x - frame.GOAL_PX[0], y - frame.GOAL_PX[1]
+    lx, ly = _WC * dx - _WS * dy, _WS * dx + _WC * dy
     return lx * frame.PX, (frame.ORIGIN_PX - ly) * frame.PX
 
 
 def _distance_to_tee(x: float, y: float, tx: float, ty: float, yaw: float) -> float:
     """`rules.distance_to_tee` of one point and pose, in floats (NumPy's cos and sin, minimum and maximum's NaN)."""
-    from mjx_pusht.task.rules import T_RECTS
-
     c, s = float(np.cos(yaw)), float(np.sin(yaw))
     dx, dy = x - tx, y - ty
     lx, ly = c * dx + s * dy, -s * dx + c * dy
