@@ -120,7 +120,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # what fits: ppo 2 seeds (~11.5 min each), dagger-state 3 (~6.5), dagger-pixels 1 (~22); aggregate the
           # holds' copied-back runs here with `python -m benchmarks.train_seeds --collect DIR... --out DIR`.
           # LATE_FITS (DAgger): --late-fits, fits an iteration once the expert's share is at most 1%.
-          # MAX_GRAD_NORM, LR_SCHEDULE (PPO): --max-grad-norm, --lr-schedule (adaptive-kl).
+          # MAX_GRAD_NORM, LR_SCHEDULE (PPO): --max-grad-norm (default 1.0; off: unclipped), --lr-schedule (adaptive-kl).
           run=$HOME/runs/seeds-${RECIPE:?RECIPE=ppo, dagger-state or dagger-pixels}; mkdir -p "$run"
           case "$RECIPE" in
             ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes 10 \

@@ -506,6 +506,7 @@ def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
     for algo, extra, why in (("ppo", ("--late-fits", "2"), "--late-fits: DAgger's setting, not PPO's"),
                              ("ppo", ("--fit-steps", "5", "--teacher", "expert"), "--fit-steps, --teacher: DAgger's"),
                              ("dagger", ("--max-grad-norm", "1"), "--max-grad-norm: PPO's"),
+                             ("dagger", ("--max-grad-norm", "off"), "--max-grad-norm: PPO's"),
                              ("dagger", ("--lr-schedule", "adaptive-kl", "--timesteps", "9"), "--timesteps, --lr-schedule"),
                              ("dagger", ("--ppo-act", "mean"), "--ppo-act: PPO's")):
         r = cli("train", "--algo", algo, "--backend", "mjx-jax", *extra, "--out", str(tmp_path / "q"), "--no-rerun")
@@ -524,12 +525,19 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["method"] == "ppo" and [c["env_steps"] for c in summary["curve"]] == [0, 10240]
+    assert summary["config"]["max_grad_norm"] == 1.0  # clipped by default: unclipped, PPO's curves collapsed (issue 40)
     # every judgement: both actions on the held-out seeds, the saved one's on the validation seeds, and after
     # training, Brax's own loss metrics of the epoch that made it
     for row in summary["curve"]:
         assert row["success"] == row["success_sample"] and 0 <= row["success_mean"] <= 1
         assert 0 <= row["validation_success"] <= 1 and row["validation_beta"] == 0.0
-    assert all(np.isfinite(summary["curve"][1][f"brax_{k}"]) for k in ("v_loss", "policy_loss", "entropy_loss", "sigma"))
+    first = summary["curve"][1]
+    assert all(np.isfinite(first[f"brax_{k}"]) for k in ("v_loss", "policy_loss", "entropy_loss", "sigma"))
+    assert 0 < first["brax_sigma_min"] <= first["brax_sigma"] and first["brax_loc_min"] <= first["brax_loc_max"]
+    # the normaliser's largest relative std change since the judgement before: the two checkpoints' own stds
+    stds = [np.asarray(load_checkpoint(out / "checkpoints" / f"policy_00{i}.msgpack")[1]["in_std"]) for i in (0, 1)]
+    assert summary["curve"][0]["norm_std_change"] is None
+    assert 0 < first["norm_std_change"] == pytest.approx(np.abs(stds[1] / stds[0] - 1).max(), rel=1e-6)
     best = max(reversed(summary["curve"]), key=lambda r: r["validation_success"])
     assert summary["kept"]["rule"] == "best" and summary["kept"]["iteration"] == best["iteration"]
     kept = out / "checkpoints" / f"policy_{best['iteration']:03d}.msgpack"
@@ -545,6 +553,8 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp
     # --resume goes on from the last judged policy: the finished judgements stay, more are added; --minutes
     # (spent at once here) stops it at the first judgement past the budget, 20,480 of the 30,720 steps asked
     args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "30720", "3"
+    r = cli(*args, "--resume", "--max-grad-norm", "off")  # unclipped is another trainer: not resumed into
+    assert r.returncode == 1 and "max_grad_norm" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     r = cli(*args, "--resume", "--minutes", "0.0001")
     assert r.returncode == 0, r.stderr
     assert "the 0.0001-minute budget is spent" in r.stdout + r.stderr

@@ -47,6 +47,16 @@ _frame_skip = _int_at_least(1, 1_000, " physics steps a control step")
 _worlds = _int_at_least(1, 1 << 22, " episodes at once")
 
 
+def _grad_norm(text: str) -> float | str:
+    """An argparse type: a finite float > 0, or "off"."""
+    if text == "off":
+        return text
+    try:
+        return _positive_float(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0 or 'off', got {text}") from None
+
+
 def _positive_float(text: str) -> float:
     """An argparse type: a finite float > 0."""
     try:
@@ -202,8 +212,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--ppo-act", choices=("sample", "mean"), default=None,
                    help="PPO: the saved policy acts with a draw from its Gaussian keyed by seed and step, what PPO "
                         "trains (default), or with the Gaussian's mean, Brax's deterministic action")
-    t.add_argument("--max-grad-norm", type=_positive_float, default=None,
-                   help="PPO: clip the gradient's global norm to this before Adam (Brax's max_grad_norm; default none)")
+    t.add_argument("--max-grad-norm", type=_grad_norm, default=None,
+                   help="PPO: clip the gradient's global norm to this before Adam (Brax's max_grad_norm; default 1.0, "
+                        "'off': unclipped, whose runs collapsed from 99-100%% to 0-6%% and back)")
     t.add_argument("--lr-schedule", choices=("adaptive-kl",), default=None,
                    help="PPO: adaptive-kl, Brax's ADAPTIVE_KL (the rate follows the epochs' KL toward 0.01); "
                         "default a constant rate")

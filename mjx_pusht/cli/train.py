@@ -16,7 +16,7 @@ from mjx_pusht.train.summary import write_summary
 # Each method's own settings and their defaults: given to the other method, a setting is refused, not ignored.
 DAGGER_ONLY = {"fit_steps": 2000, "beta_decay": 0.7, "max_samples": 8_000_000, "teacher": "paced",
                "image_batch": None, "image_steps": None, "late_fits": None}
-PPO_ONLY = {"timesteps": 50_000_000, "ppo_act": "sample", "max_grad_norm": None, "lr_schedule": None}
+PPO_ONLY = {"timesteps": 50_000_000, "ppo_act": "sample", "max_grad_norm": 1.0, "lr_schedule": None}
 
 
 def _method_settings(args) -> None:
@@ -96,7 +96,7 @@ def _cmd_ppo(args, name: str, why: str) -> int:
     cfg = PPOConfig(obs_type=args.obs, envs=args.envs, timesteps=args.timesteps, evals=args.iterations,
                     hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
                     eval_envs=args.eval_envs, seed=args.seed, reset=args.reset, act=args.ppo_act,
-                    max_grad_norm=args.max_grad_norm, lr_schedule=args.lr_schedule)
+                    max_grad_norm=None if args.max_grad_norm == "off" else args.max_grad_norm, lr_schedule=args.lr_schedule)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)
     _restart(out, args)
     _check_rerun(args)

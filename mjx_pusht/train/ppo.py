@@ -76,7 +76,9 @@ class PPOConfig:
     # Brax's limits on an update (None: Brax's defaults, none; None, not a value, so older resume files still match).
     # Measured on one H100 (docs/notebook/lead.md): every collapse of the judged policy (100% -> 0-6%) followed an
     # epoch whose KL between old and new policy was 1.3-51, against 0.02-0.04 in the epochs around it.
-    max_grad_norm: float | None = None  # the gradient's global norm clipped to this before Adam
+    # the gradient's global norm clipped to this before Adam (None: unclipped). Unclipped, every run collapsed from
+    # 99-100% to 0-6% 3-4 times in 10 minutes, each after an epoch of KL 1.1-51; clipped at 1.0, none did (KL <= 0.14)
+    max_grad_norm: float | None = 1.0
     lr_schedule: str | None = None  # "adaptive-kl": Brax's ADAPTIVE_KL, the rate /1.5 or x1.5 toward desired_kl 0.01
 
     def __post_init__(self) -> None:
@@ -179,6 +181,15 @@ def _judge(env, cfg: PPOConfig):
     return judge
 
 
+def _std_change(before, after) -> float | None:
+    """The largest relative change of the observation normaliser's std over the inputs since the last judgement:
+    one far-out training observation moves it at once (Brax's running statistics), and every input the policy
+    sees with it (a suspect for a collapse, recorded per judgement as `norm_std_change`)."""
+    if before is None:
+        return None
+    return float(np.max(np.abs(np.asarray(after) / np.asarray(before) - 1.0)))
+
+
 def _finite(tree) -> bool:
     import jax
 
@@ -196,7 +207,8 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
 
     Each curve row has the held-out success of the action the policy is saved with (`cfg.act`) and of both
     actions (success_mean, success_sample), the saved action's success on the validation seeds, and Brax's own
-    loss metrics of the epoch before it (brax_*: policy, value and entropy losses, KL, the Gaussian's mean sigma).
+    loss metrics of the epoch before it (brax_*: policy, value and entropy losses, KL, the Gaussian's mean and least
+    sigma, its largest and least pre-tanh mean), and norm_std_change (`_std_change`).
     `resume`: go on from the last judged policy in `out` (Brax's `restore_params`: the normaliser, policy and
     value networks; Brax restores no optimiser state, so Adam starts afresh) up to `cfg.timesteps`.
     `minutes`: stop at the first judgement past this much training wall-clock (resumable from there).
@@ -231,7 +243,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     judge = _judge(judge_env, cfg)
     ckpt.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter() - (curve[-1]["wall_seconds"] if curve else 0.0)
-    last = {"t": time.perf_counter(), "skip": resume, "params": None}
+    last = {"t": time.perf_counter(), "skip": resume, "params": None, "in_std": None}
     bar = tqdm(total=cfg.evals + 1, initial=len(curve), desc="ppo", unit="eval", disable=not progress)
 
     def bad(step: int, what: str) -> TrainError:
@@ -261,8 +273,9 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
                       "coverage": float(cov.mean()), "sim_seconds": t_judge,
                       "learn_seconds": now - last["t"] - t_judge if curve else 0.0, "wall_seconds": now - t0,
                       "validation_success": float(judged[cfg.act, "validation"][0].mean()), "validation_beta": 0.0}
-                     | {f"success_{a}": float(judged[a, "held_out"][0].mean()) for a in PPO_ACTS})
-        last["t"], last["params"] = now, params
+                     | {f"success_{a}": float(judged[a, "held_out"][0].mean()) for a in PPO_ACTS}
+                     | {"norm_std_change": _std_change(last["in_std"], meta["in_std"])})
+        last["t"], last["params"], last["in_std"] = now, params, meta["in_std"]
         save(ckpt / f"policy_{len(curve) - 1:03d}.msgpack", dense, meta)
         save(out / "policy.msgpack", dense, meta)
         write_curve(out, curve, f"Brax PPO from {cfg.obs_type} (running)", rerun=False)  # a killed run keeps its curve
@@ -273,7 +286,8 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     def on_metrics(step, metrics):
         """Brax's loss metrics of the epoch that made the last judged policy (called after on_params)."""
         names = {"policy_loss": "policy_loss", "v_loss": "v_loss", "entropy_loss": "entropy_loss", "kl_mean": "kl",
-                 "policy_dist_mean_std": "sigma", "total_loss": "total_loss"}
+                 "policy_dist_mean_std": "sigma", "policy_dist_min_std": "sigma_min", "policy_dist_max_loc": "loc_max",
+                 "policy_dist_min_loc": "loc_min", "total_loss": "total_loss"}
         if curve and last["params"] is not None:
             curve[-1].update({f"brax_{v}": float(metrics[f"training/{k}"]) for k, v in names.items()
                               if f"training/{k}" in metrics})
