@@ -7,8 +7,9 @@ The first form runs `mjx-pusht train ARGS --seed S --out OUT/seed-S` for each se
 folder already holds a finished run is read, not run again, so a killed sweep goes on where it stopped);
 the second reads finished runs. Either writes OUT/seeds.json and OUT/seeds.md: each seed's held-out
 success as `eval` judged it (with its 95% interval), the trainer's own judgement beside it, the kept
-iteration, iterations and training wall-clock; then the mean, sample sd, min and max of the held-out
-rates over the seeds, and the share of seeds at or above --goal. Nothing is dropped: a run that failed is
+iteration, iterations and training wall-clock, and the lowest held-out judgement after the curve first reached
+80% (`low_after`, later judgements only: a curve that rises and stays keeps it high; one that collapses and recovers does not); then the mean, sample sd, min and max of the held-out
+rates over the seeds, and the share of seeds at or above --goal; and OUT/seeds.png, every seed's held-out curve. Nothing is dropped: a run that failed is
 listed as failed, and the aggregate says over how many seeds it is.
 """
 
@@ -25,6 +26,16 @@ from pathlib import Path
 from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json
 
 
+RISEN = 0.8  # low_after: the lowest judgement after the first at or above this
+
+
+def low_after(curve: list[dict], risen: float = RISEN) -> float | None:
+    """The lowest held-out judgement later than the first at or above `risen` (None if there is none)."""
+    first = next((i for i, r in enumerate(curve) if r["success"] >= risen), None)
+    later = [] if first is None else [r["success"] for r in curve[first + 1:]]
+    return min(later) if later else None
+
+
 def row(run: Path) -> dict:
     """One finished run's line: eval's held-out rate (what to report) and the trainer's own judgement."""
     s = json.loads((run / "summary.json").read_text())
@@ -37,7 +48,7 @@ def row(run: Path) -> dict:
             "n_episodes": ev["n_episodes"], "trainer_success": trainer,
             "kept": (s.get("kept") or {}).get("iteration", s["curve"][-1]["iteration"] if s.get("curve") else None),
             "keep": (s.get("kept") or {}).get("rule", "last"), "iterations_run": s["iterations_run"],
-            "env_steps": s["env_steps"], "wall_seconds": s["wall_seconds"]}
+            "env_steps": s["env_steps"], "wall_seconds": s["wall_seconds"], "low_after": low_after(s.get("curve") or [])}
 
 
 def aggregate(rows: list[dict], goal: float | None) -> dict:
@@ -52,17 +63,46 @@ def aggregate(rows: list[dict], goal: float | None) -> dict:
 
 def markdown(rows: list[dict], agg: dict, failed: list[str]) -> str:
     lines = ["| seed | held-out (eval) | 95% interval | trainer's judgement | kept iteration | iterations | "
-             "training wall-clock |", "|---|---|---|---|---|---|---|"]
+             f"training wall-clock | lowest judgement after first {RISEN:.0%} |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lo, hi = r["held_out_ci95"]
         lines.append(f"| {r['seed']} | {r['held_out_success']:.1%} | {lo:.1%}-{hi:.1%} | {r['trainer_success']:.1%} | "
-                     f"{r['kept']} ({r['keep']}) | {r['iterations_run']} | {r['wall_seconds'] / 60:.1f} min |")
+                     f"{r['kept']} ({r['keep']}) | {r['iterations_run']} | {r['wall_seconds'] / 60:.1f} min | "
+                     f"{'n/a' if r['low_after'] is None else format(r['low_after'], '.1%')} |")
     sd = "n/a" if agg["sd"] is None else f"{agg['sd']:.1%}"
     lines += ["", f"{agg['n_seeds']} seeds on {rows[0]['device']}: mean {agg['mean']:.1%}, sd {sd}, "
               f"min {agg['min']:.1%}, max {agg['max']:.1%}" +
               (f"; {agg['seeds_at_goal']} of {agg['n_seeds']} at or above {agg['goal']:.0%}" if "goal" in agg else "")]
     lines += [f"failed (not in the aggregate): {f}" for f in failed]
     return "\n".join(lines) + "\n"
+
+
+def plot(runs: list[Path], path: Path) -> None:
+    """seeds.png: every seed's held-out curve by training wall-clock on one axis (a collapse shows as a fall)."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 3.8))
+    for run in runs:
+        s = json.loads((run / "summary.json").read_text())
+        curve = s["curve"]
+        ax.plot([r["wall_seconds"] / 60 for r in curve], [100 * r["success"] for r in curve], "o-", ms=3,
+                label=f"seed {s['config']['seed']}")
+    ax.axhline(100 * RISEN, color="grey", lw=0.8, ls=":")
+    ax.set_xlabel("training wall-clock (minutes)")
+    ax.set_ylabel("held-out success, %")
+    ax.set_ylim(0, 100)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    atomic_write_bytes(path, buf.getvalue())
 
 
 def main(argv=None) -> int:
@@ -109,6 +149,7 @@ def main(argv=None) -> int:
     atomic_write_json(args.out / "seeds.json", {"runs": rows, "aggregate": agg, "failed": failed})
     text = markdown(rows, agg, failed)
     atomic_write_bytes(args.out / "seeds.md", text.encode())
+    plot([Path(r["run"]) for r in rows], args.out / "seeds.png")
     print(text, end="")
     return 0 if not failed else 1
 

@@ -136,3 +136,18 @@ def test_train_seeds_reports_every_committed_seed_run_and_their_spread(tmp_path)
     assert len(out["failed"]) == 1 and "cut" in out["failed"][0]
     table_rows = [line for line in (tmp_path / "agg" / "seeds.md").read_text().splitlines() if line[:3] in ("| 0", "| 1")]
     assert len(table_rows) == 3  # every run, the two of seed 1 included
+
+
+def test_train_seeds_names_a_collapse_the_curve_recovered_from():
+    """`low_after` is the lowest held-out judgement later than the first at or above 80%: the committed unclipped PPO
+    runs (issue 40's collapses) fell below 10% after it; the clipped ones (the default since) never left 99%."""
+    from benchmarks import train_seeds
+
+    root = Path(__file__).resolve().parents[1] / "outputs" / "reports" / "train"
+    assert train_seeds.low_after([{"success": s} for s in (0.1, 0.5, 0.85, 0.3, 0.9)]) == 0.3
+    assert train_seeds.low_after([{"success": s} for s in (0.1, 0.79)]) is None
+    assert train_seeds.low_after([{"success": s} for s in (0.1, 0.85)]) is None  # no judgement after it
+    for folder, bound in (("history/ppo-state-unclipped", lambda low: low < 0.1), ("ppo-state-seeds", lambda low: low > 0.99)):
+        for run in sorted((root / folder).glob("seed-*")):
+            curve = json.loads((run / "summary.json").read_text())["curve"]
+            assert bound(train_seeds.row(run)["low_after"]), (run, [r["success"] for r in curve])
