@@ -73,11 +73,11 @@ class PPOConfig:
     seed: int = 0
     act: str = "sample"  # the saved policy's action (ppo_policy.py): "sample", what PPO trains, or "mean"
     validation_envs: int = 0  # --keep best judges on this many seeds, neither trained on nor held out (0: eval_envs / 4)
-    # Brax's limits on an update (None: Brax's defaults, none; None, not a value, so older resume files still match).
-    # Measured on one H100 (docs/notebook/lead.md): every collapse of the judged policy (100% -> 0-6%) followed an
-    # epoch whose KL between old and new policy was 1.3-51, against 0.02-0.04 in the epochs around it.
-    # the gradient's global norm clipped to this before Adam (None: unclipped). Unclipped, every run collapsed from
-    # 99-100% to 0-6% 3-4 times in 10 minutes, each after an epoch of KL 1.1-51; clipped at 1.0, none did (KL <= 0.14)
+    # Brax's limits on an update. max_grad_norm: the gradient's global norm clipped to this before Adam (None:
+    # unclipped). Measured on one H100 (docs/notebook/lead3.md): unclipped, two 10-minute runs fell from 99-100% to
+    # 0-6% eight times in 57 judgements, each after an epoch whose KL was 1.1-51 (0.02-0.07 otherwise): a sharp
+    # policy (sigma ~0.005) gives one minibatch a gradient far above those Adam has seen. Clipped at 1.0, three runs
+    # held 99.3-100% from their third judgement on, epoch KL <= 0.14.
     max_grad_norm: float | None = 1.0
     lr_schedule: str | None = None  # "adaptive-kl": Brax's ADAPTIVE_KL, the rate /1.5 or x1.5 toward desired_kl 0.01
 
