@@ -7,10 +7,11 @@ The first form runs `mjx-pusht train ARGS --seed S --out OUT/seed-S` for each se
 folder already holds a finished run is read, not run again, so a killed sweep goes on where it stopped);
 the second reads finished runs. Either writes OUT/seeds.json and OUT/seeds.md: each seed's held-out
 success as `eval` judged it (with its 95% interval), the trainer's own judgement beside it, the kept
-iteration, iterations and training wall-clock, and the lowest held-out judgement after the curve first reached
-80% (`low_after`, later judgements only: a curve that rises and stays keeps it high; one that collapses and recovers does not); then the mean, sample sd, min and max of the held-out
-rates over the seeds, and the share of seeds at or above --goal; and OUT/seeds.png, every seed's held-out curve. Nothing is dropped: a run that failed is
-listed as failed, and the aggregate says over how many seeds it is.
+iteration, iterations and training wall-clock, and the lowest held-out judgement later than the first at or
+above 80% (`low_after`: a curve that rises and stays keeps it high, one that collapses and recovers does not);
+then the mean, sample sd, min and max of the held-out rates over the seeds, and the share of seeds at or above
+--goal; and OUT/seeds.png, every seed's held-out curve. Nothing is dropped: a run that failed is listed as
+failed, and the aggregate says over how many seeds it is.
 """
 
 from __future__ import annotations

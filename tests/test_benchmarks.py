@@ -147,7 +147,8 @@ def test_train_seeds_names_a_collapse_the_curve_recovered_from():
     assert train_seeds.low_after([{"success": s} for s in (0.1, 0.5, 0.85, 0.3, 0.9)]) == 0.3
     assert train_seeds.low_after([{"success": s} for s in (0.1, 0.79)]) is None
     assert train_seeds.low_after([{"success": s} for s in (0.1, 0.85)]) is None  # no judgement after it
-    for folder, bound in (("history/ppo-state-unclipped", lambda low: low < 0.1), ("ppo-state-seeds", lambda low: low > 0.99)):
+    for folder, bound in (("history/ppo-state-unclipped", lambda low: low < 0.1),
+                          ("ppo-state-seeds", lambda low: low > 0.99)):
         for run in sorted((root / folder).glob("seed-*")):
             curve = json.loads((run / "summary.json").read_text())["curve"]
             assert bound(train_seeds.row(run)["low_after"]), (run, [r["success"] for r in curve])

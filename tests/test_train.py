@@ -561,6 +561,8 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp
     after = json.loads((out / "summary.json").read_text())["curve"]
     assert after[:2] == summary["curve"] and [c["env_steps"] for c in after] == [0, 10240, 20480]
     assert (out / "checkpoints" / "policy_002.msgpack").is_file()
+    stds = [np.asarray(load_checkpoint(out / "checkpoints" / f"policy_00{i}.msgpack")[1]["in_std"]) for i in (1, 2)]
+    assert after[2]["norm_std_change"] == pytest.approx(np.abs(stds[1] / stds[0] - 1).max(), rel=1e-6)  # vs restored
     args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "20480", "2"
     r = cli(*args, "--resume")  # nothing left to do is one line, not a crash inside Brax
     assert r.returncode == 1 and "already reached 20,480 env steps" in r.stderr and len(r.stderr.strip().splitlines()) == 1

@@ -96,7 +96,8 @@ def _cmd_ppo(args, name: str, why: str) -> int:
     cfg = PPOConfig(obs_type=args.obs, envs=args.envs, timesteps=args.timesteps, evals=args.iterations,
                     hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
                     eval_envs=args.eval_envs, seed=args.seed, reset=args.reset, act=args.ppo_act,
-                    max_grad_norm=None if args.max_grad_norm == "off" else args.max_grad_norm, lr_schedule=args.lr_schedule)
+                    max_grad_norm=None if args.max_grad_norm == "off" else args.max_grad_norm,
+                    lr_schedule=args.lr_schedule)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)
     _restart(out, args)
     _check_rerun(args)

@@ -243,7 +243,8 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     judge = _judge(judge_env, cfg)
     ckpt.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter() - (curve[-1]["wall_seconds"] if curve else 0.0)
-    last = {"t": time.perf_counter(), "skip": resume, "params": None, "in_std": None}
+    last = {"t": time.perf_counter(), "skip": resume, "params": None,
+            "in_std": None if restored is None else np.asarray(restored[0].std)}  # a resumed run's normaliser
     bar = tqdm(total=cfg.evals + 1, initial=len(curve), desc="ppo", unit="eval", disable=not progress)
 
     def bad(step: int, what: str) -> TrainError:
