@@ -120,38 +120,57 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # what fits: ppo 2 seeds (~11.5 min each), dagger-state 3 (~6.5), dagger-pixels 1 (~22); aggregate the
           # holds' copied-back runs here with `python -m benchmarks.train_seeds --collect DIR... --out DIR`.
           # LATE_FITS (DAgger): --late-fits, fits an iteration once the expert's share is at most 1%.
+          # ENVS, MAX_SAMPLES (DAgger): episodes an iteration and the ring (state: 16384 and 32000000, notebook lead4;
+          # pixels: 4096 and 8000000, as change 27 measured).
           # MAX_GRAD_NORM, LR_SCHEDULE (PPO): --max-grad-norm (default 1.0; off: unclipped), --lr-schedule (adaptive-kl).
-          run=$HOME/runs/seeds-${RECIPE:?RECIPE=ppo, dagger-state or dagger-pixels}; mkdir -p "$run"
+          # GPU: the one GPU of a several-GPU machine this run takes (CUDA_VISIBLE_DEVICES), so that each GPU runs
+          # its own seeds at one GPU's speed; NAME (default RECIPE) names the run's folder, one a concurrent run.
+          run=$HOME/runs/seeds-${NAME:-${RECIPE:?RECIPE=ppo, dagger-state or dagger-pixels}}; mkdir -p "$run"
+          dagger="--hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 --beta-decay 0.7 ${LATE_FITS:+--late-fits $LATE_FITS}"
           case "$RECIPE" in
             ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes 10 \
               ${MAX_GRAD_NORM:+--max-grad-norm $MAX_GRAD_NORM} ${LR_SCHEDULE:+--lr-schedule $LR_SCHEDULE}" ;;
-            dagger-state) args="--envs 4096 --iterations 60 --minutes 5 --hidden 1024,1024,1024 --fit-steps 10000 \
-              --batch 4096 --max-samples 8000000 --beta-decay 0.7 ${LATE_FITS:+--late-fits $LATE_FITS}" ;;
-            dagger-pixels) args="--obs pixels_agent_pos --envs 4096 --iterations 300 --minutes 19.5 \
-              --hidden 1024,1024,1024 --fit-steps 10000 --image-steps 4000 --batch 4096 --image-batch 512 \
-              --max-samples 8000000 --beta-decay 0.7 ${LATE_FITS:+--late-fits $LATE_FITS}" ;;
+            dagger-state) args="$dagger --iterations 60 --minutes 5 --envs ${ENVS:-16384} --max-samples ${MAX_SAMPLES:-32000000}" ;;
+            dagger-pixels) args="$dagger --obs pixels_agent_pos --iterations 300 --minutes 19.5 --image-steps 4000 \
+              --image-batch 512 --envs ${ENVS:-4096} --max-samples ${MAX_SAMPLES:-8000000}" ;;
             *) echo "unknown RECIPE $RECIPE" >&2; exit 2 ;;
           esac
           # shellcheck disable=SC2086  # $args is a list of flags
-          setsid nohup python3 -m benchmarks.train_seeds --seeds "${SEEDS:?SEEDS=0,1,...}" --out "$run" --goal "${GOAL:-0.9}" \
-            -- --backend mjx-warp --reset task $args --keep best --no-progress --no-rerun --record 0 \
-            > "$run.log" 2>&1 < /dev/null &
-          echo $! > "$run.pid"; sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
-  watch-seeds) # wait up to WAIT seconds (default 570) for train-seeds' RECIPE, then copy back every seed's results
-          run=$HOME/runs/seeds-${RECIPE:?RECIPE as given to train-seeds}; t=0
-          while kill -0 "$(cat "$run.pid")" 2>/dev/null && [ "$t" -lt "${WAIT:-570}" ]; do sleep 5; t=$((t + 5)); done
-          cp "$run.log" "$OUT/"; cp "$run"/seeds.* "$OUT/" 2>/dev/null
-          for d in "$run"/seed-*; do [ -d "$d" ] || continue; mkdir -p "$OUT/$(basename "$d")/eval"
-            for f in curve.csv curve.png summary.json policy.msgpack log.txt; do [ -f "$d/$f" ] && cp "$d/$f" "$OUT/$(basename "$d")/"; done
-            [ -f "$d/eval/summary.json" ] && cp "$d/eval/summary.json" "$OUT/$(basename "$d")/eval/"; done; true ;;
+          # run from $HOME/runs with a relative --out, so the logs copied back name no machine's path; the pid file is
+          # written from inside the new session (setsid forks where the caller leads a process group, and the pid
+          # of `$!` is then gone at once)
+          (cd "$HOME/runs" && ${GPU:+env CUDA_VISIBLE_DEVICES=$GPU} setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' \
+            "$run.pid" python3 -m benchmarks.train_seeds --seeds "${SEEDS:?SEEDS=0,1,...}" --out "$(basename "$run")" \
+            --goal "${GOAL:-0.9}" -- --backend mjx-warp --reset task $args --keep best --no-progress --no-rerun \
+            --record 0 > "$run.log" 2>&1 < /dev/null &)
+          sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
+  watch-seeds) # wait up to WAIT seconds (default 570) for train-seeds' runs NAMES (default RECIPE; space-separated),
+          # then copy back what they have: one tar a run (logs, curves, summaries) and each finished seed's policy
+          # (8.5 MB for DAgger's 1024 x 3) as NAME-seed-S.msgpack, once (a call brings back at most 8 files of 16 MB)
+          names=${NAMES:-${RECIPE:?RECIPE or NAMES as given to train-seeds}}; t=0
+          for n in $names; do run=$HOME/runs/seeds-$n
+            while kill -0 "$(cat "$run.pid")" 2>/dev/null && [ "$t" -lt "${WAIT:-570}" ]; do sleep 5; t=$((t + 5)); done
+          done
+          for n in $names; do run=$HOME/runs/seeds-$n
+            (cd "$HOME/runs" && tar czf "$OUT/$n.tgz" --exclude='*.msgpack' --exclude='*.parquet' --exclude='*.rrd' \
+              "seeds-$n.log" "seeds-$n")
+            for d in "$run"/seed-*; do [ -f "$d/eval/summary.json" ] && [ ! -f "$d/sent" ] && [ "${POLICIES:-1}" = 1 ] && \
+              cp "$d/policy.msgpack" "$OUT/$n-$(basename "$d").msgpack" && touch "$d/sent"; done
+          done; tail -n 3 "$HOME"/runs/seeds-*.log; true ;;
   train-state) # DAgger from state for MINUTES (default 5) of training, inside one call (about 6.5 minutes with
-          # compiling and the held-out eval); results and the held-out eval's table are copied back
+          # compiling and the held-out eval); results and the held-out eval's table are copied back. ENVS, MAX_SAMPLES
+          # as train-seeds' (16384 episodes an iteration and a 32 M ring; before notebook lead4: 4096 and 8 M)
           run=$HOME/runs/state-${SEED:-0}; mkdir -p "$HOME/runs"
-          (cd "$HOME/runs" && python3 -m mjx_pusht train --backend mjx-warp --reset task --envs 4096 --iterations 60 --minutes "${MINUTES:-5}" \
-            --hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 --max-samples 8000000 --beta-decay 0.7 \
+          (cd "$HOME/runs" && python3 -m mjx_pusht train --backend mjx-warp --reset task --envs "${ENVS:-16384}" --iterations 60 \
+            --minutes "${MINUTES:-5}" --hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 \
+            --max-samples "${MAX_SAMPLES:-32000000}" --beta-decay 0.7 \
             --seed "${SEED:-0}" --keep "${KEEP:-best}" --no-progress --no-rerun --record 0 --out "state-${SEED:-0}") > "$OUT/$stage.log" 2>&1
           for f in curve.csv curve.png summary.json policy.msgpack; do [ -f "$run/$f" ] && cp "$run/$f" "$OUT/"; done
           mkdir -p "$OUT/eval"; cp "$run"/eval/*.parquet "$run"/eval/summary.json "$OUT/eval/" 2>/dev/null; true ;;
+  first-fit) # DAgger's first fit alone, from the same demonstrations, for each of SEEDS (default 0-7) unclipped and
+          # clipped (benchmarks/first_fit.py; ENVS default 16384): the loss and the held-out success it lands at
+          python3 -m benchmarks.first_fit --backend mjx-warp --envs "${ENVS:-16384}" --seeds "${SEEDS:-0-7}" \
+            --clips "${CLIPS:-off,1.0}" --json "$OUT/results/$tier-first-fit.json" > "$OUT/$stage.log" 2>&1 ;;
   transfer) # a trained policy (POLICY=path) on the 4,096 held-out task seeds, on MJX-Warp and on MuJoCo C, paired
           # seed by seed; a pixel policy renders on the CPU too, so EGL must be there (.gl, see the device README)
           MUJOCO_GL=egl python3 -m mjx_pusht compare --controller "policy:${POLICY:?POLICY=path of a policy.msgpack}" \

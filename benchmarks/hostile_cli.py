@@ -215,7 +215,7 @@ def tries(root: Path) -> list[Try]:
             ("--minutes", "nan"), ("--seed", "-1"), ("--resume",), ("--eval-envs", "0"), ("--timesteps", "0"),
             ("--teacher", "bogus"), ("--keep", "bogus"), ("--reset", "bogus"), ("--fit-steps", "0"),
             ("--envs", "1000000000000"), ("--max-samples", "1000000000000"), ("--late-fits", "0"),
-            ("--max-grad-norm", "0"), ("--max-grad-norm", "nan"), ("--lr-schedule", "bogus"), ("--max-grad-norm", "1"),
+            ("--max-grad-norm", "0"), ("--max-grad-norm", "nan"), ("--lr-schedule", "bogus"), ("--lr-schedule", "adaptive-kl"),
             ("--algo", "ppo", "--backend", "mjx-jax", "--late-fits", "2"))],
         c("train", "train", "--backend", "cpu", "--no-rerun", "--no-progress", "--out", str(root / "a_file")),
         c("train", "train", "--backend", "cpu", "--envs", "8", "--iterations", "1", "--fit-steps", "5", "--hidden",

@@ -505,8 +505,6 @@ def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
     # one method's settings given to the other are refused, not ignored
     for algo, extra, why in (("ppo", ("--late-fits", "2"), "--late-fits: DAgger's setting, not PPO's"),
                              ("ppo", ("--fit-steps", "5", "--teacher", "expert"), "--fit-steps, --teacher: DAgger's"),
-                             ("dagger", ("--max-grad-norm", "1"), "--max-grad-norm: PPO's"),
-                             ("dagger", ("--max-grad-norm", "off"), "--max-grad-norm: PPO's"),
                              ("dagger", ("--lr-schedule", "adaptive-kl", "--timesteps", "9"), "--timesteps, --lr-schedule"),
                              ("dagger", ("--ppo-act", "mean"), "--ppo-act: PPO's")):
         r = cli("train", "--algo", algo, "--backend", "mjx-jax", *extra, "--out", str(tmp_path / "q"), "--no-rerun")
@@ -609,6 +607,41 @@ def test_late_fits_fit_again_once_the_experts_share_is_at_most_one_percent(run, 
     first = [load_checkpoint(out / "checkpoints" / "policy_000.msgpack")[0] for out in (run, late)]
     for a, b in zip(jax_leaves(first[0]), jax_leaves(first[1])):
         np.testing.assert_array_equal(a, b)
+
+
+def test_daggers_max_grad_norm_clips_every_fits_gradient_before_adam(run):
+    """--max-grad-norm (default 1.0, as PPO's) clips a DAgger fit's gradient before Adam: clipped to 1e-12, each of a
+    fit's 50 Adam steps moves a weight by at most lr |g| / (|g| + 1e-8) <= 1e-3 x 1e-4, so the network stays within
+    5e-6 of its start, where the same fit unclipped moves it by more than 1e-3."""
+    import dataclasses
+
+    from mjx_pusht.task.rules import CTRL_LIMIT
+    from mjx_pusht.train.dagger import DaggerConfig
+    from mjx_pusht.train.learner import Learner
+
+    assert json.loads((run / "summary.json").read_text())["config"]["max_grad_norm"] == 1.0  # the CLI's default
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(2000, feature_size("state"))).astype(np.float32)
+    y = np.concatenate([rng.uniform(-CTRL_LIMIT, CTRL_LIMIT, (2000, 2)), rng.integers(0, 4, (2000, 1))], -1)
+    base = DaggerConfig(hidden=(32, 32), fit_steps=50, batch=128, max_samples=20000)
+    moved = {}
+    for clip in (1e-12, None):
+        learner = Learner(dataclasses.replace(base, max_grad_norm=clip))
+        start = jax_leaves(learner.params)
+        learner.add(x, y.astype(np.float32), keep=True)
+        learner.fit(0)
+        moved[clip] = max(float(np.max(np.abs(a - b))) for a, b in zip(start, jax_leaves(learner.params)))
+        assert learner.loss_max >= learner.fit(1) > 0  # the largest minibatch loss of a fit bounds its late mean
+    assert moved[1e-12] < 5e-6 and moved[None] > 1e-3, moved
+
+
+def test_a_rings_resume_checkpoint_comes_as_often_as_its_copy_to_the_host_allows():
+    """The 8 M-sample ring of the GPU recipes (17 floats a sample, 0.54 GB) is written every 60 s, as before the
+    ring grew; a 32 M ring, whose copy stops training ~4 times as long, 4 times as rarely."""
+    from mjx_pusht.train.resume import resume_every_s
+
+    assert resume_every_s(8_000_000 * 17 * 4) == 60.0 and resume_every_s(20_000 * 17 * 4) == 60.0
+    assert resume_every_s(32_000_000 * 17 * 4) == pytest.approx(4 * resume_every_s(8_000_000 * 17 * 4), rel=0.02)
 
 
 def jax_leaves(tree):

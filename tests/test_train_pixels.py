@@ -217,7 +217,8 @@ def test_the_actions_and_the_reader_fitted_apart_are_the_one_scan_fit_they_repla
     from mjx_pusht.train.dagger import MEMORY_WEIGHT, RENDER_KEY
     from mjx_pusht.train.policy import LATCHES, MOVES, POSE_SCALE, pose_target
 
-    learner = _pixel_learner(env, fit_steps=12)
+    # unclipped: change 25's fit had no clip, and the split fit clips each part's gradient on its own
+    learner = _pixel_learner(env, fit_steps=12, max_grad_norm=None)
     cfg, render, k = learner.cfg, env.images(8), 8
     params0, norm = learner.params, tuple(jnp.asarray(a) for a in learner.norm)
     x, y, key = learner.x, learner.y, jax.random.fold_in(jax.random.key(cfg.seed + 1), 0)

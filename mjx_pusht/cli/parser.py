@@ -213,8 +213,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="PPO: the saved policy acts with a draw from its Gaussian keyed by seed and step, what PPO "
                         "trains (default), or with the Gaussian's mean, Brax's deterministic action")
     t.add_argument("--max-grad-norm", type=_grad_norm, default=None,
-                   help="PPO: clip the gradient's global norm to this before Adam (Brax's max_grad_norm; default 1.0, "
-                        "'off': unclipped, whose runs collapsed from 99-100%% to 0-6%% and back)")
+                   help="clip the gradient's global norm to this before Adam (default 1.0; 'off': unclipped). PPO: "
+                        "Brax's max_grad_norm (unclipped runs collapsed from 99-100%% to 0-6%% and back); DAgger: every "
+                        "fit (unclipped, 3 of 16 first fits landed where the student succeeds on 0-0.2%%)")
     t.add_argument("--lr-schedule", choices=("adaptive-kl",), default=None,
                    help="PPO: adaptive-kl, Brax's ADAPTIVE_KL (the rate follows the epochs' KL toward 0.01); "
                         "default a constant rate")

@@ -16,7 +16,8 @@ from mjx_pusht.train.summary import write_summary
 # Each method's own settings and their defaults: given to the other method, a setting is refused, not ignored.
 DAGGER_ONLY = {"fit_steps": 2000, "beta_decay": 0.7, "max_samples": 8_000_000, "teacher": "paced",
                "image_batch": None, "image_steps": None, "late_fits": None}
-PPO_ONLY = {"timesteps": 50_000_000, "ppo_act": "sample", "max_grad_norm": 1.0, "lr_schedule": None}
+PPO_ONLY = {"timesteps": 50_000_000, "ppo_act": "sample", "lr_schedule": None}
+BOTH = {"max_grad_norm": 1.0}  # the settings both methods take, and their defaults ('off' is None)
 
 
 def _method_settings(args) -> None:
@@ -26,9 +27,11 @@ def _method_settings(args) -> None:
     if given:
         method, theirs = ("PPO", "DAgger's") if args.algo == "ppo" else ("DAgger", "PPO's (--algo ppo)")
         raise TrainError(f"{', '.join(given)}: {theirs} setting{'s' if len(given) > 1 else ''}, not {method}'s")
-    for k, default in own.items():
+    for k, default in (own | BOTH).items():
         if getattr(args, k) is None:
             setattr(args, k, default)
+    if args.max_grad_norm == "off":
+        args.max_grad_norm = None
 
 
 def cmd_train(args) -> int:
@@ -47,7 +50,7 @@ def cmd_train(args) -> int:
                        beta_decay=args.beta_decay, max_samples=args.max_samples, eval_envs=args.eval_envs,
                        seed=args.seed, reset=args.reset, teacher=args.teacher,
                        image_batch=args.image_batch or min(512, args.batch or 4096), image_steps=args.image_steps,
-                       late_fits=args.late_fits)
+                       late_fits=args.late_fits, max_grad_norm=args.max_grad_norm)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
@@ -96,7 +99,7 @@ def _cmd_ppo(args, name: str, why: str) -> int:
     cfg = PPOConfig(obs_type=args.obs, envs=args.envs, timesteps=args.timesteps, evals=args.iterations,
                     hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
                     eval_envs=args.eval_envs, seed=args.seed, reset=args.reset, act=args.ppo_act,
-                    max_grad_norm=None if args.max_grad_norm == "off" else args.max_grad_norm,
+                    max_grad_norm=args.max_grad_norm,
                     lr_schedule=args.lr_schedule)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)
     _restart(out, args)

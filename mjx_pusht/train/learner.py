@@ -35,7 +35,7 @@ class Learner:
         # with a constant rate: held-out success swinging 36-78% between neighbouring iterations, notebook change 14).
         # A pixel student's two parts (the acting layers, the image reader) share no parameters and are fitted apart
         # (`_fit`), each with an Adam of its own annealed over its own steps.
-        self.opts = tuple(_adam(cfg.learning_rate, steps) for steps in
+        self.opts = tuple(_adam(cfg.learning_rate, steps, cfg.max_grad_norm) for steps in
                           ((cfg.fit_steps, cfg.reader_steps) if cfg.image else (cfg.fit_steps,)))
         self.opt_state = tuple(opt.init(part) for opt, part in zip(self.opts, _parts(self.params, cfg.image)))
         self.x = jnp.zeros((cfg.max_samples, cfg.sample_width), jnp.float32)
@@ -43,6 +43,7 @@ class Learner:
         self.filled, self.head, self.floor = 0, 0, 0  # samples held; where the next goes; kept below here
         self.norm = None  # (mean, std) of the features, fixed from the first iteration's data
         self.pose_error_mm = None  # a pixel student's last fit: its pose estimate's RMS error per number, mm
+        self.loss_max = None  # the last fit's largest minibatch loss (the actions'): a spike in the fit shows here
         self._fit = jax.jit(partial(_fit, self.model, self.opts, cfg.batch, cfg.image_batch,
                                     (cfg.fit_steps, cfg.reader_steps), render))
 
@@ -79,19 +80,22 @@ class Learner:
         key = jax.random.fold_in(jax.random.key(self.cfg.seed + 1), iteration)
         if part:  # the first fit's key as before late fits existed: a run without them is unchanged
             key = jax.random.fold_in(key, part)
-        self.params, self.opt_state, loss, pose_mse = self._fit(self.params, self.opt_state, self.x, self.y,
-                                                                jnp.int32(self.filled), norm, key)
+        self.params, self.opt_state, loss, pose_mse, loss_max = self._fit(self.params, self.opt_state, self.x, self.y,
+                                                                          jnp.int32(self.filled), norm, key)
+        self.loss_max = float(loss_max)
         if self.cfg.image:
             self.pose_error_mm = float(np.sqrt(pose_mse / 4) * POSE_SCALE * 1000)
         return float(loss)
 
 
-def _adam(learning_rate: float, steps: int):
-    """Adam whose rate anneals from `learning_rate` to 5% over each `steps` (cosine, restarted every fit)."""
+def _adam(learning_rate: float, steps: int, max_grad_norm: float | None = None):
+    """Adam whose rate anneals from `learning_rate` to 5% over each `steps` (cosine, restarted every fit), after the
+    gradient's global norm is clipped to `max_grad_norm` (None: unclipped)."""
     import optax
 
     decay = optax.cosine_decay_schedule(learning_rate, steps, alpha=0.05)
-    return optax.adam(lambda count: decay(count % steps))
+    adam = optax.adam(lambda count: decay(count % steps))
+    return adam if max_grad_norm is None else optax.chain(optax.clip_by_global_norm(max_grad_norm), adam)
 
 
 READER = ("Conv_", "Pose_")  # a pixel student's image reader: its layers' names begin so; the acting layers' Dense_
@@ -107,7 +111,8 @@ def _parts(params: dict, image: int) -> tuple[dict, ...]:
 
 def _fit(model, opts, batch, image_batch, steps, render, params, opt_state, x, y, filled, norm, key):
     """Adam steps on minibatches of `batch` samples from the ring; returns the new parameters and optimiser states,
-    the loss and (a pixel student) the pose estimate's squared error, each over the last tenth of its steps.
+    the loss and (a pixel student) the pose estimate's squared error, each over the last tenth of its steps, and the
+    actions' largest minibatch loss over all the steps.
     `steps` is (the actions' steps, the image reader's steps); a state student takes the first.
 
     A pixel student has two parts that share no parameters, fitted one after the other. Its Dense layers learn the
@@ -167,16 +172,16 @@ def _fit(model, opts, batch, image_batch, steps, render, params, opt_state, x, y
             return (optax.apply_updates(p, updates), o), loss
 
         (part, state), losses = jax.lax.scan(step, (part, state), jax.random.split(k, n))
-        return part, state, losses[-max(1, n // 10):].mean()
+        return part, state, losses[-max(1, n // 10):].mean(), losses.max()
 
     if render is None:
-        params, state, loss = descend(acting, opts[0], params, opt_state[0], {}, steps[0], key)
-        return params, (state,), loss, jnp.zeros(())
+        params, state, loss, loss_max = descend(acting, opts[0], params, opt_state[0], {}, steps[0], key)
+        return params, (state,), loss, jnp.zeros(()), loss_max
     actor, reader = _parts(params, True)
-    actor, actor_state, loss = descend(acting, opts[0], actor, opt_state[0], reader, steps[0], key)
+    actor, actor_state, loss, loss_max = descend(acting, opts[0], actor, opt_state[0], reader, steps[0], key)
     # the same key as the actions' minibatches: with equal steps each step shows the reader the first
     # `image_batch` samples of the actions' minibatch, as change 25's one scan did
-    reader, reader_state, pose_mse = descend(reading, opts[1], reader, opt_state[1], actor, steps[1], key)
+    reader, reader_state, pose_mse, _ = descend(reading, opts[1], reader, opt_state[1], actor, steps[1], key)
     # the loss reported: the actions' and the pose's (POSE_SCALE units: 2 mm off in each of the 4 numbers is 0.0016,
     # about what a 0.04 m/s action error costs), as change 25's one loss was
-    return {**actor, **reader}, (actor_state, reader_state), loss + pose_mse, pose_mse
+    return {**actor, **reader}, (actor_state, reader_state), loss + pose_mse, pose_mse, loss_max

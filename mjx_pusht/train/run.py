@@ -20,7 +20,7 @@ import numpy as np
 
 from mjx_pusht.study.stats import wilson
 from mjx_pusht.train.curve import kept as kept_fit
-from mjx_pusht.train.resume import RESUME_EVERY_S, TrainError, checkpoint, config_dict, restore
+from mjx_pusht.train.resume import TrainError, checkpoint, config_dict, restore, resume_every_s
 from mjx_pusht.train.summary import write_summary
 
 
@@ -41,10 +41,6 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     import jax
     from tqdm import tqdm
 
-    from mjx_pusht.backends.base import has_gpu
-    from mjx_pusht.backends.cpu import default_threads
-    from mjx_pusht.envs.functional import PushTEnv
-    from mjx_pusht.task.episode import Episode
     from mjx_pusht.train.dagger import Rollouts
     from mjx_pusht.train.learner import Learner
     from mjx_pusht.train.policy import save
@@ -52,12 +48,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     out = Path(out)
     ckpt = out / "checkpoints"
     ckpt.mkdir(parents=True, exist_ok=True)
-    # A rollout is one long jitted scan, where MJX's default CUDA-graph mode ("WARP": graphs keyed on buffer
-    # addresses, which stay put inside the scan) replays its captures; the env's own default, staged, is for
-    # stepping once a call. Measured on an H100: 491k against 287k control steps/s at 4,096 (notebook change 16).
-    graph_mode = "WARP" if backend == "mjx-warp" and has_gpu() else None
-    env = PushTEnv(backend=backend, reset_kind=cfg.reset, episode=Episode(max_steps=cfg.max_steps),
-                   threads=default_threads(), keep_states=False, pixels=cfg.image, graph_mode=graph_mode)
+    env = dagger_env(cfg, backend)
     rollouts, learner = Rollouts(env, cfg), Learner(cfg, env.images(cfg.image_batch) if cfg.image else None)
     curve, start, env_steps, wall0 = [], 0, 0, 0.0
     resume_path = ckpt / "resume.msgpack"
@@ -65,7 +56,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         start, env_steps, curve, wall0 = restore(resume_path, cfg, learner)
     held_out = cfg.held_out_seeds()
     t_start = time.perf_counter() - wall0
-    saved = time.perf_counter()
+    saved, every = time.perf_counter(), resume_every_s(learner.x.nbytes + learner.y.nbytes)
     bar = tqdm(desc="dagger", unit="iter", disable=not progress, initial=start, total=cfg.iterations)
     # Each fit's held-out judgement rides in the next iteration's rollout (the same policy drives both: the
     # held-out rows with beta 0, their samples never learned from), so judging costs a bigger batch, not a
@@ -86,6 +77,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
                "coverage": float(held["coverage"].mean()), "sim_seconds": sim + sim_judge, "learn_seconds": learn,
                "wall_seconds": time.perf_counter() - t_start,
                "pose_error_mm": learner.pose_error_mm,  # a pixel student's reading of the T, in its last fit
+               "loss_max": learner.loss_max,  # the fit's largest minibatch loss: a spike shows here, not in `loss`
                "validation_success": None if validation is None else float(np.mean(validation["success"])),
                "validation_beta": validation_beta}
         curve.append(row)
@@ -93,7 +85,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         save(ckpt / f"policy_{i:03d}.msgpack", learner.params, meta)
         save(out / "policy.msgpack", learner.params, meta)
         stop = minutes is not None and row["wall_seconds"] > 60 * minutes
-        if stop or i == cfg.iterations - 1 or time.perf_counter() - saved > RESUME_EVERY_S:
+        if stop or i == cfg.iterations - 1 or time.perf_counter() - saved > every:
             writer[0] = checkpoint(resume_path, cfg, learner, i, env_steps, curve, writer[0])
             saved = time.perf_counter()
         bar.set_postfix(success=f"{k / n:.1%}", loss=f"{loss:.4f}", steps=env_steps,
@@ -149,6 +141,21 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         bar.write(f"keeping iteration {kept['iteration']}'s policy: {kept['validation_success']:.1%} on its "
                   f"validation rollout (held-out {kept['success']:.1%})")
     return write_summary(cfg, backend, out, curve, rerun, kept=kept, keep=keep)
+
+
+def dagger_env(cfg, backend: str):
+    """The env DAgger's rollouts step: `cfg`'s starts, episode length and observations on `backend`."""
+    from mjx_pusht.backends.base import has_gpu
+    from mjx_pusht.backends.cpu import default_threads
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.task.episode import Episode
+
+    # A rollout is one long jitted scan, where MJX's default CUDA-graph mode ("WARP": graphs keyed on buffer
+    # addresses, which stay put inside the scan) replays its captures; the env's own default, staged, is for
+    # stepping once a call. Measured on an H100: 491k against 287k control steps/s at 4,096 (notebook change 16).
+    graph_mode = "WARP" if backend == "mjx-warp" and has_gpu() else None
+    return PushTEnv(backend=backend, reset_kind=cfg.reset, episode=Episode(max_steps=cfg.max_steps),
+                    threads=default_threads(), keep_states=False, pixels=cfg.image, graph_mode=graph_mode)
 
 
 def non_finite(outcome: dict, seeds: np.ndarray, *arrays) -> str | None:
