@@ -67,3 +67,43 @@ def test_the_dry_step_finds_every_warp_module_a_real_step_launches(mjx_warp_runs
         finally:
             wp.launch = real_launch
         assert launched and launched <= found, sorted(x.name for x in launched - found)
+
+
+@pytest.mark.slow
+@pytest.mark.warp
+def test_the_dry_step_never_swaps_warps_launches_under_a_running_mjx_warp_call():
+    """The dry step swaps wp.launch and the capture loops for recorders, process-wide. An MJX-Warp call still
+    running on XLA's thread (JAX returns before a step ends, and a step that raised is never waited for) would then
+    have its solver's launches recorded, not run, and wp.capture_while would wait forever on a counter no kernel
+    lowers: the hang once seen in CI. So the dry step waits for the lock Warp holds around every JAX FFI call."""
+    import sys
+    import threading
+    import time
+
+    import warp as wp
+    from warp._src.jax.ffi import _FFI_CALLBACK_LOCK  # moved in a Warp upgrade: this fails, not the guard silently
+
+    from mjx_pusht.backends.mjx import MjxConfig, mjx_model, simulated_scene
+    from mjx_pusht.backends.warp_kernels import scene_modules
+
+    def stack(thread):
+        names, frame = set(), sys._current_frames().get(thread.ident)
+        while frame is not None:
+            names, frame = names | {frame.f_code.co_name}, frame.f_back
+        return names
+
+    model = mjx_model(simulated_scene(Scenario(SceneSpec("none")), "warp"), MjxConfig(impl="warp"))
+    original = wp.launch, wp.capture_while
+    swapped, waiting, found = [], 0, []
+    with _FFI_CALLBACK_LOCK:  # an MJX-Warp call running
+        dry = threading.Thread(target=lambda: found.append(scene_modules(model, "cpu")))
+        dry.start()
+        deadline = time.monotonic() + 60
+        while dry.is_alive() and time.monotonic() < deadline and waiting < 200:
+            swapped.append((wp.launch, wp.capture_while) != original)
+            waiting += "_launches_recorded" in stack(dry)  # where it waits for the lock
+            time.sleep(0.001)
+        assert not any(swapped) and dry.is_alive() and waiting == 200  # it waited, nothing swapped
+    dry.join(60)
+    assert not dry.is_alive() and found and found[0]  # and it runs once the call ends
+    assert (wp.launch, wp.capture_while) == original

@@ -32,8 +32,6 @@ def _launches_recorded(need: set):
     """
     import warp as wp
 
-    saved = wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while, wp.get_suggested_block_size
-
     def record(kernel, *args, block_dim=None, **kwargs):
         need.add((kernel.module, block_dim))
 
@@ -48,12 +46,28 @@ def _launches_recorded(need: set):
     def occupancy(kernel, *args, **kwargs):
         return 256, 1  # sizes grids that are never launched; the launch that follows records the module
 
-    wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while = record, record, both_branches, body_once
-    wp.get_suggested_block_size = occupancy
+    # The patch is process-wide: an MJX-Warp call still running on XLA's thread (JAX dispatches
+    # asynchronously, and a step whose result is never read, as one that raised, runs on) would have
+    # its launches recorded instead of run. Its solver loop then never ends (wp.capture_while reads
+    # nsolving, which only the skipped kernels decrement): a silent hang. Warp runs every JAX FFI
+    # callback under one lock, so holding it here waits for a running call and holds back the next.
+    with _ffi_callbacks_held():
+        saved = wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while, wp.get_suggested_block_size
+        wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while = record, record, both_branches, body_once
+        wp.get_suggested_block_size = occupancy
+        try:
+            yield
+        finally:
+            wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while, wp.get_suggested_block_size = saved
+
+
+def _ffi_callbacks_held():
+    """Warp's lock around its JAX FFI callbacks (private: no lock, nothing held, if a Warp version moves it)."""
     try:
-        yield
-    finally:
-        wp.launch, wp.launch_tiled, wp.capture_if, wp.capture_while, wp.get_suggested_block_size = saved
+        from warp._src.jax.ffi import _FFI_CALLBACK_LOCK
+    except ImportError:
+        return contextlib.nullcontext()
+    return _FFI_CALLBACK_LOCK
 
 
 def scene_modules(model: mujoco.MjModel, device=None) -> set:
