@@ -120,13 +120,15 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # what fits: ppo 2 seeds (~11.5 min each), dagger-state 3 (~6.5), dagger-pixels 1 (~22); aggregate the
           # holds' copied-back runs here with `python -m benchmarks.train_seeds --collect DIR... --out DIR`.
           # LATE_FITS (DAgger): --late-fits, fits an iteration once the expert's share is at most 1%.
+          # FIRST_FITS (DAgger): --first-fits, initialisations of the first fit, the lowest loss kept (notebook lead5).
           # ENVS, MAX_SAMPLES (DAgger): episodes an iteration and the ring (state: 16384 and 32000000, notebook lead4;
           # pixels: 4096 and 8000000, as change 27 measured).
           # MAX_GRAD_NORM, LR_SCHEDULE (PPO): --max-grad-norm (default 1.0; off: unclipped), --lr-schedule (adaptive-kl).
           # GPU: the one GPU of a several-GPU machine this run takes (CUDA_VISIBLE_DEVICES), so that each GPU runs
           # its own seeds at one GPU's speed; NAME (default RECIPE) names the run's folder, one a concurrent run.
           run=$HOME/runs/seeds-${NAME:-${RECIPE:?RECIPE=ppo, dagger-state or dagger-pixels}}; mkdir -p "$run"
-          dagger="--hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 --beta-decay 0.7 ${LATE_FITS:+--late-fits $LATE_FITS}"
+          dagger="--hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 --beta-decay 0.7 ${LATE_FITS:+--late-fits $LATE_FITS} \
+            ${FIRST_FITS:+--first-fits $FIRST_FITS}"
           case "$RECIPE" in
             ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes 10 \
               ${MAX_GRAD_NORM:+--max-grad-norm $MAX_GRAD_NORM} ${LR_SCHEDULE:+--lr-schedule $LR_SCHEDULE}" ;;

@@ -504,6 +504,7 @@ def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
         assert not (tmp_path / "p" / "checkpoints").exists()
     # one method's settings given to the other are refused, not ignored
     for algo, extra, why in (("ppo", ("--late-fits", "2"), "--late-fits: DAgger's setting, not PPO's"),
+                             ("ppo", ("--first-fits", "4"), "--first-fits: DAgger's setting, not PPO's"),
                              ("ppo", ("--fit-steps", "5", "--teacher", "expert"), "--fit-steps, --teacher: DAgger's"),
                              ("dagger", ("--lr-schedule", "adaptive-kl", "--timesteps", "9"), "--timesteps, --lr-schedule"),
                              ("dagger", ("--ppo-act", "mean"), "--ppo-act: PPO's")):
@@ -633,6 +634,60 @@ def test_daggers_max_grad_norm_clips_every_fits_gradient_before_adam(run):
         moved[clip] = max(float(np.max(np.abs(a - b))) for a, b in zip(start, jax_leaves(learner.params)))
         assert learner.loss_max >= learner.fit(1) > 0  # the largest minibatch loss of a fit bounds its late mean
     assert moved[1e-12] < 5e-6 and moved[None] > 1e-3, moved
+
+
+@pytest.mark.slow
+def test_train_first_fits_reports_every_candidates_loss_and_judges_the_kept_one(run, tmp_path_factory):
+    """`train --first-fits 3`: out/first_fits.json holds the three first fits' losses and the kept one's number, the
+    curve's first row is that fit's, candidate 0 is the run without the setting's first fit, and the run goes on."""
+    several = train_run(tmp_path_factory, *TINY, "--first-fits", "3")
+    first = json.loads((several / "first_fits.json").read_text())
+    plain = json.loads((run / "summary.json").read_text())
+    summary = json.loads((several / "summary.json").read_text())
+    assert len(first["losses"]) == 3 and first["kept"] == int(np.argmin(first["losses"]))
+    assert first["losses"][0] == plain["curve"][0]["loss"] and summary["config"]["first_fits"] == 3
+    assert summary["curve"][0]["loss"] == min(first["losses"]) and summary["iterations_run"] == 2
+
+
+def test_first_fits_keep_the_candidate_whose_fit_ended_lowest_and_candidate_0_is_the_plain_fit():
+    """Learner.fit_first(K): K students, each from its own initialisation and minibatches, fitted on the same ring;
+    the one whose loss ended lowest is kept (its network and Adam state, to the bit), candidate 0 is the fit of a
+    learner without the setting, and a NaN loss is never kept over a number."""
+    import dataclasses
+
+    import jax
+
+    from mjx_pusht.task.rules import CTRL_LIMIT
+    from mjx_pusht.train.dagger import DaggerConfig
+    from mjx_pusht.train.learner import Learner
+
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(2000, feature_size("state"))).astype(np.float32)
+    y = np.concatenate([rng.uniform(-CTRL_LIMIT, CTRL_LIMIT, (2000, 2)), rng.integers(0, 4, (2000, 1))], -1)
+    cfg = DaggerConfig(hidden=(32, 32), fit_steps=50, batch=128, max_samples=20000, seed=3)
+
+    def learner():
+        one = Learner(cfg)
+        one.add(x, y.astype(np.float32), keep=True)
+        return one
+
+    plain, several = learner(), learner()
+    plain_loss = plain.fit(0)
+    losses, kept = several.fit_first(4)
+    assert losses[0] == plain_loss and len(set(losses)) == 4  # 0 is the plain fit; the others start elsewhere
+    assert kept == int(np.argmin(losses))
+    # the kept network is candidate `kept`'s own fit, from its own initialisation: fitted again alone, it is equal
+    alone = learner()
+    alone.params = alone._init(jax.random.fold_in(jax.random.key(cfg.seed), kept)) if kept else alone.params
+    alone.opt_state = tuple(o.init(p) for o, p in zip(alone.opts, (alone.params,)))
+    assert alone.fit(0, candidate=kept) == losses[kept]
+    for a, b in zip(jax_leaves((alone.params, alone.opt_state)), jax_leaves((several.params, several.opt_state))):
+        np.testing.assert_array_equal(a, b)
+    # a loss that went NaN loses to any number, wherever it comes
+    for fits, want in (([np.nan, 0.5, 0.7], 1), ([0.5, np.nan, 0.4], 2), ([0.5, np.nan, 0.7], 0)):
+        told = learner()
+        told.fit = lambda *_, _losses=iter(fits), **__: next(_losses)  # the fits' losses, as given
+        assert told.fit_first(3)[1] == want, fits
 
 
 def test_a_rings_resume_checkpoint_comes_as_often_as_its_copy_to_the_host_allows():

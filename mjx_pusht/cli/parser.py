@@ -204,6 +204,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--late-fits", type=_positive, default=None,
                    help="DAgger: fits of --fit-steps after each rollout once the expert's share is at most 1%% "
                         "(default 1): late in a run the student under-fits a ring that changes little")
+    t.add_argument("--first-fits", type=_positive, default=None,
+                   help="DAgger: the first fit is made from this many initialisations and the one with the lowest "
+                        "training loss kept (default 1): where a run starts, its loss holds through the run")
     t.add_argument("--keep", choices=("last", "best"), default="last",
                    help="DAgger: the run's policy is the last fit (default), or the fit whose next rollout succeeded "
                         "most on that iteration's fresh training seeds once the expert's share there is at most 1%%; "

@@ -15,7 +15,7 @@ from mjx_pusht.train.summary import write_summary
 
 # Each method's own settings and their defaults: given to the other method, a setting is refused, not ignored.
 DAGGER_ONLY = {"fit_steps": 2000, "beta_decay": 0.7, "max_samples": 8_000_000, "teacher": "paced",
-               "image_batch": None, "image_steps": None, "late_fits": None}
+               "image_batch": None, "image_steps": None, "late_fits": None, "first_fits": None}
 PPO_ONLY = {"timesteps": 50_000_000, "ppo_act": "sample", "lr_schedule": None}
 BOTH = {"max_grad_norm": 1.0}  # the settings both methods take, and their defaults ('off' is None)
 
@@ -50,7 +50,7 @@ def cmd_train(args) -> int:
                        beta_decay=args.beta_decay, max_samples=args.max_samples, eval_envs=args.eval_envs,
                        seed=args.seed, reset=args.reset, teacher=args.teacher,
                        image_batch=args.image_batch or min(512, args.batch or 4096), image_steps=args.image_steps,
-                       late_fits=args.late_fits, max_grad_norm=args.max_grad_norm)
+                       late_fits=args.late_fits, first_fits=args.first_fits, max_grad_norm=args.max_grad_norm)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)

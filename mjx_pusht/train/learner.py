@@ -29,7 +29,8 @@ class Learner:
         self.model = network(cfg.hidden, cfg.activation, cfg.image)
         width = feature_size(cfg.obs_type)
         image = (jnp.zeros((1, cfg.image, cfg.image, 3), jnp.uint8), jnp.zeros((1, 2))) if cfg.image else ()  # image, pusher
-        self.params = self.model.init(jax.random.key(cfg.seed), jnp.zeros((1, width)), *image)["params"]
+        self._init = lambda key: self.model.init(key, jnp.zeros((1, width)), *image)["params"]
+        self.params = self._init(jax.random.key(cfg.seed))
         # Each fit anneals the learning rate from its value to 5% (cosine, restarted every iteration): the
         # policy judged after a fit is then a settled one, not a snapshot of Adam at full step size (measured
         # with a constant rate: held-out success swinging 36-78% between neighbouring iterations, notebook change 14).
@@ -70,9 +71,9 @@ class Learner:
         else:
             self.head = self.floor + (self.head - self.floor + m) % (self.cfg.max_samples - self.floor)
 
-    def fit(self, iteration: int, part: int = 0) -> float:
-        """One fit of `fit_steps` on the ring; `part` numbers an iteration's fits (DaggerConfig.fits): each draws
-        its own minibatches."""
+    def fit(self, iteration: int, part: int = 0, candidate: int = 0) -> float:
+        """One fit of `fit_steps` on the ring; `part` numbers an iteration's fits (DaggerConfig.fits), `candidate`
+        the first fit's initialisations (`fit_first`): each draws its own minibatches."""
         import jax
         import jax.numpy as jnp
 
@@ -80,12 +81,37 @@ class Learner:
         key = jax.random.fold_in(jax.random.key(self.cfg.seed + 1), iteration)
         if part:  # the first fit's key as before late fits existed: a run without them is unchanged
             key = jax.random.fold_in(key, part)
+        if candidate:  # past any part's number: a candidate never repeats a late fit's minibatches
+            key = jax.random.fold_in(key, CANDIDATE_KEYS + candidate)
         self.params, self.opt_state, loss, pose_mse, loss_max = self._fit(self.params, self.opt_state, self.x, self.y,
                                                                           jnp.int32(self.filled), norm, key)
         self.loss_max = float(loss_max)
         if self.cfg.image:
             self.pose_error_mm = float(np.sqrt(pose_mse / 4) * POSE_SCALE * 1000)
         return float(loss)
+
+    def fit_first(self, candidates: int) -> tuple[list[float], int]:
+        """The first fit (iteration 0) of `candidates` students, each from its own initialisation and minibatches,
+        keeping the one whose fit ended at the lowest loss (DaggerConfig.first_fits); returns every candidate's
+        loss, in order, and the kept one's number. Candidate 0 is the network and minibatches of a run without the
+        setting."""
+        import jax
+
+        losses, best = [], None
+        for c in range(candidates):
+            if c:
+                self.params = self._init(jax.random.fold_in(jax.random.key(self.cfg.seed), c))
+                parts = _parts(self.params, self.cfg.image)
+                self.opt_state = tuple(opt.init(part) for opt, part in zip(self.opts, parts))
+            losses.append(loss := self.fit(0, candidate=c))
+            if best is None or (np.isfinite(loss) and not loss >= losses[best[0]]):  # never a NaN over a number
+                best = (c, self.params, self.opt_state, self.loss_max, self.pose_error_mm)
+        kept, self.params, self.opt_state, self.loss_max, self.pose_error_mm = best
+        return losses, kept
+
+
+# A first-fit candidate's minibatch key folds in this plus its number (`Learner.fit`): above any fit's part number
+CANDIDATE_KEYS = 1 << 20
 
 
 def _adam(learning_rate: float, steps: int, max_grad_norm: float | None = None):

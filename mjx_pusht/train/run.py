@@ -114,7 +114,10 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         learner.add(x, y, keep=i == 0)
         learn = 0.0
         for part in range(cfg.fits(i)):
-            loss, seconds = _timed(learner.fit, i, part)
+            if i == 0 and cfg.first_fits:  # from several initialisations, the lowest loss kept
+                loss, seconds = _timed(_first_fit, learner, cfg.first_fits, out, bar)
+            else:
+                loss, seconds = _timed(learner.fit, i, part)
             learn += seconds
             _stop_if_non_finite(None if np.isfinite(loss) else f"the loss is {loss}", f"iteration {i}'s fit", curve, out)
         pending = (i, loss, learn, sim)
@@ -185,6 +188,18 @@ def _unit(cfg):
 
     w = feature_size(cfg.obs_type)
     return np.zeros(w, np.float32), np.ones(w, np.float32)
+
+
+def _first_fit(learner, candidates: int, out: Path, bar) -> float:
+    """Iteration 0's fit from `candidates` initialisations (DaggerConfig.first_fits): every candidate's loss goes to
+    out/first_fits.json and the log, the kept one's is returned."""
+    from mjx_pusht.io.outputs import atomic_write_json
+
+    losses, kept = learner.fit_first(candidates)
+    atomic_write_json(out / "first_fits.json", {"losses": losses, "kept": kept})
+    bar.write(f"first fit from {candidates} initialisations, losses {', '.join(f'{v:.4f}' for v in losses)}: "
+              f"kept {kept}")
+    return losses[kept]
 
 
 def _timed(fn, *args):
