@@ -678,8 +678,8 @@ def test_first_fits_keep_the_candidate_whose_fit_ended_lowest_and_candidate_0_is
     assert kept == int(np.argmin(losses))
     # the kept network is candidate `kept`'s own fit, from its own initialisation: fitted again alone, it is equal
     alone = learner()
-    alone.params = alone._init(jax.random.fold_in(jax.random.key(cfg.seed), kept)) if kept else alone.params
-    alone.opt_state = tuple(o.init(p) for o, p in zip(alone.opts, (alone.params,)))
+    if kept:
+        alone.start(jax.random.fold_in(jax.random.key(cfg.seed), kept))
     assert alone.fit(0, candidate=kept) == losses[kept]
     for a, b in zip(jax_leaves((alone.params, alone.opt_state)), jax_leaves((several.params, several.opt_state))):
         np.testing.assert_array_equal(a, b)

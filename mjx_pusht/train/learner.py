@@ -30,7 +30,6 @@ class Learner:
         width = feature_size(cfg.obs_type)
         image = (jnp.zeros((1, cfg.image, cfg.image, 3), jnp.uint8), jnp.zeros((1, 2))) if cfg.image else ()  # image, pusher
         self._init = lambda key: self.model.init(key, jnp.zeros((1, width)), *image)["params"]
-        self.params = self._init(jax.random.key(cfg.seed))
         # Each fit anneals the learning rate from its value to 5% (cosine, restarted every iteration): the
         # policy judged after a fit is then a settled one, not a snapshot of Adam at full step size (measured
         # with a constant rate: held-out success swinging 36-78% between neighbouring iterations, notebook change 14).
@@ -38,7 +37,7 @@ class Learner:
         # (`_fit`), each with an Adam of its own annealed over its own steps.
         self.opts = tuple(_adam(cfg.learning_rate, steps, cfg.max_grad_norm) for steps in
                           ((cfg.fit_steps, cfg.reader_steps) if cfg.image else (cfg.fit_steps,)))
-        self.opt_state = tuple(opt.init(part) for opt, part in zip(self.opts, _parts(self.params, cfg.image)))
+        self.start(jax.random.key(cfg.seed))
         self.x = jnp.zeros((cfg.max_samples, cfg.sample_width), jnp.float32)
         self.y = jnp.zeros((cfg.max_samples, 3), jnp.float32)  # _label: action, memory
         self.filled, self.head, self.floor = 0, 0, 0  # samples held; where the next goes; kept below here
@@ -47,6 +46,11 @@ class Learner:
         self.loss_max = None  # the last fit's largest minibatch loss (the actions'): a spike in the fit shows here
         self._fit = jax.jit(partial(_fit, self.model, self.opts, cfg.batch, cfg.image_batch,
                                     (cfg.fit_steps, cfg.reader_steps), render))
+
+    def start(self, key) -> None:
+        """A fresh network from `key` and fresh optimiser states for it."""
+        self.params = self._init(key)
+        self.opt_state = tuple(opt.init(part) for opt, part in zip(self.opts, _parts(self.params, self.cfg.image)))
 
     def add(self, x, y, keep: bool = False) -> None:
         """Append samples; when the ring is full the oldest student-visited ones go, never those added with
@@ -100,9 +104,7 @@ class Learner:
         losses, best = [], None
         for c in range(candidates):
             if c:
-                self.params = self._init(jax.random.fold_in(jax.random.key(self.cfg.seed), c))
-                parts = _parts(self.params, self.cfg.image)
-                self.opt_state = tuple(opt.init(part) for opt, part in zip(self.opts, parts))
+                self.start(jax.random.fold_in(jax.random.key(self.cfg.seed), c))
             losses.append(loss := self.fit(0, candidate=c))
             if best is None or (np.isfinite(loss) and not loss >= losses[best[0]]):  # never a NaN over a number
                 best = (c, self.params, self.opt_state, self.loss_max, self.pose_error_mm)
