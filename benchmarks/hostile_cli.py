@@ -217,7 +217,7 @@ def tries(root: Path) -> list[Try]:
             ("--envs", "1000000000000"), ("--max-samples", "1000000000000"), ("--late-fits", "0"), ("--first-fits", "0"),
             ("--first-fits", "nan"), ("--algo", "ppo", "--backend", "mjx-jax", "--first-fits", "2"),
             ("--max-grad-norm", "0"), ("--max-grad-norm", "nan"), ("--lr-schedule", "bogus"), ("--lr-schedule", "adaptive-kl"),
-            ("--algo", "ppo", "--backend", "mjx-jax", "--late-fits", "2"))],
+            ("--algo", "ppo", "--backend", "mjx-jax", "--late-fits", "2"), ("--max-steps", "0"), ("--max-steps", "x"))],
         c("train", "train", "--backend", "cpu", "--no-rerun", "--no-progress", "--out", str(root / "a_file")),
         c("train", "train", "--backend", "cpu", "--envs", "8", "--iterations", "1", "--fit-steps", "5", "--hidden",
           "16", "--eval-envs", "8", "--no-rerun", "--record", "0", "--no-progress", "--out", ev, after=kept(ev)),

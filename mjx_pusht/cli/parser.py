@@ -236,6 +236,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="start distribution trained and judged on (default task)")
     t.add_argument("--eval-envs", type=_worlds, default=4096,
                    help="held-out task seeds judged after every iteration (default 4096)")
+    t.add_argument("--max-steps", type=_steps, default=300,
+                   help="control steps before an episode is truncated, in training and in every judgement (default "
+                        "300, the task's; eval --max-steps judges a policy at the same length)")
     t.add_argument("--minutes", type=_positive_float, default=None, help="stop after the iteration that passes this")
     t.add_argument("--seed", type=_nonneg, default=0, help="initialisation and sampling seed (default 0)")
     t.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")

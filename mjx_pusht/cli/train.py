@@ -50,7 +50,8 @@ def cmd_train(args) -> int:
                        beta_decay=args.beta_decay, max_samples=args.max_samples, eval_envs=args.eval_envs,
                        seed=args.seed, reset=args.reset, teacher=args.teacher,
                        image_batch=args.image_batch or min(512, args.batch or 4096), image_steps=args.image_steps,
-                       late_fits=args.late_fits, first_fits=args.first_fits, max_grad_norm=args.max_grad_norm)
+                       late_fits=args.late_fits, first_fits=args.first_fits, max_grad_norm=args.max_grad_norm,
+                       max_steps=args.max_steps)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
@@ -99,8 +100,7 @@ def _cmd_ppo(args, name: str, why: str) -> int:
     cfg = PPOConfig(obs_type=args.obs, envs=args.envs, timesteps=args.timesteps, evals=args.iterations,
                     hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
                     eval_envs=args.eval_envs, seed=args.seed, reset=args.reset, act=args.ppo_act,
-                    max_grad_norm=args.max_grad_norm,
-                    lr_schedule=args.lr_schedule)
+                    max_grad_norm=args.max_grad_norm, lr_schedule=args.lr_schedule, max_steps=args.max_steps)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)
     _restart(out, args)
     _check_rerun(args)
