@@ -120,20 +120,23 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # what fits: ppo 2 seeds (~11.5 min each), dagger-state 3 (~6.5), dagger-pixels 1 (~22); aggregate the
           # holds' copied-back runs here with `python -m benchmarks.train_seeds --collect DIR... --out DIR`.
           # LATE_FITS (DAgger): --late-fits, fits an iteration once the expert's share is at most 1%.
-          # FIRST_FITS (DAgger): --first-fits, initialisations of the first fit, the lowest loss kept (notebook lead5).
+          # FIRST_FITS (DAgger): --first-fits, initialisations of the first fit, the lowest loss kept (notebook lead5;
+          # dagger-state 4 by default since notebook lead6, 1 is the plain fit; dagger-pixels 1, not measured with more).
+          # ITERATIONS (dagger-state, default 60): a cap beside the 5 minutes, so a faster card (H200) does no more
+          # iterations than an H100 did in its 5 minutes (notebook lead6).
           # ENVS, MAX_SAMPLES (DAgger): episodes an iteration and the ring (state: 16384 and 32000000, notebook lead4;
           # pixels: 4096 and 8000000, as change 27 measured).
           # MAX_GRAD_NORM, LR_SCHEDULE (PPO): --max-grad-norm (default 1.0; off: unclipped), --lr-schedule (adaptive-kl).
           # GPU: the one GPU of a several-GPU machine this run takes (CUDA_VISIBLE_DEVICES), so that each GPU runs
           # its own seeds at one GPU's speed; NAME (default RECIPE) names the run's folder, one a concurrent run.
           run=$HOME/runs/seeds-${NAME:-${RECIPE:?RECIPE=ppo, dagger-state or dagger-pixels}}; mkdir -p "$run"
-          dagger="--hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 --beta-decay 0.7 ${LATE_FITS:+--late-fits $LATE_FITS} \
-            ${FIRST_FITS:+--first-fits $FIRST_FITS}"
+          dagger="--hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 --beta-decay 0.7 ${LATE_FITS:+--late-fits $LATE_FITS}"
           case "$RECIPE" in
             ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes 10 \
               ${MAX_GRAD_NORM:+--max-grad-norm $MAX_GRAD_NORM} ${LR_SCHEDULE:+--lr-schedule $LR_SCHEDULE}" ;;
-            dagger-state) args="$dagger --iterations 60 --minutes 5 --envs ${ENVS:-16384} --max-samples ${MAX_SAMPLES:-32000000}" ;;
-            dagger-pixels) args="$dagger --obs pixels_agent_pos --iterations 300 --minutes 19.5 --image-steps 4000 \
+            dagger-state) args="$dagger --iterations ${ITERATIONS:-60} --minutes 5 --envs ${ENVS:-16384} --max-samples ${MAX_SAMPLES:-32000000} \
+              --first-fits ${FIRST_FITS:-4}" ;;
+            dagger-pixels) args="$dagger ${FIRST_FITS:+--first-fits $FIRST_FITS} --obs pixels_agent_pos --iterations 300 --minutes 19.5 --image-steps 4000 \
               --image-batch 512 --envs ${ENVS:-4096} --max-samples ${MAX_SAMPLES:-8000000}" ;;
             *) echo "unknown RECIPE $RECIPE" >&2; exit 2 ;;
           esac
@@ -165,7 +168,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           run=$HOME/runs/state-${SEED:-0}; mkdir -p "$HOME/runs"
           (cd "$HOME/runs" && python3 -m mjx_pusht train --backend mjx-warp --reset task --envs "${ENVS:-16384}" --iterations 60 \
             --minutes "${MINUTES:-5}" --hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 \
-            --max-samples "${MAX_SAMPLES:-32000000}" --beta-decay 0.7 \
+            --max-samples "${MAX_SAMPLES:-32000000}" --beta-decay 0.7 --first-fits "${FIRST_FITS:-4}" \
             --seed "${SEED:-0}" --keep "${KEEP:-best}" --no-progress --no-rerun --record 0 --out "state-${SEED:-0}") > "$OUT/$stage.log" 2>&1
           for f in curve.csv curve.png summary.json policy.msgpack; do [ -f "$run/$f" ] && cp "$run/$f" "$OUT/"; done
           mkdir -p "$OUT/eval"; cp "$run"/eval/*.parquet "$run"/eval/summary.json "$OUT/eval/" 2>/dev/null; true ;;
