@@ -6,6 +6,10 @@ stage=$1; tier=${2:-h100}
 export PYTHONPATH=$HOME/site:$PWD PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
 export MJX_PUSHT_JAX_CACHE=$HOME/jax_cache
 mkdir -p "$OUT/results"
+# DAgger's recipe, one place for train-seeds and train-state: the network and its fits, and from state the episodes
+# an iteration, the ring (notebook lead4) and the first fit from FIRST_FITS initialisations (4; 1: plain, lead6)
+dagger_fit="--hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 --beta-decay 0.7"
+state_data="--envs ${ENVS:-16384} --max-samples ${MAX_SAMPLES:-32000000} --first-fits ${FIRST_FITS:-4}"
 case "$stage" in
   warp)   python3 -m benchmarks.harness --tier "$tier-warp" --backends cpu,mjx-warp --cpu-batches 4096,65536 \
             --batches 1024,4096,16384,65536 --repeats 2 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
@@ -130,12 +134,11 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # GPU: the one GPU of a several-GPU machine this run takes (CUDA_VISIBLE_DEVICES), so that each GPU runs
           # its own seeds at one GPU's speed; NAME (default RECIPE) names the run's folder, one a concurrent run.
           run=$HOME/runs/seeds-${NAME:-${RECIPE:?RECIPE=ppo, dagger-state or dagger-pixels}}; mkdir -p "$run"
-          dagger="--hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 --beta-decay 0.7 ${LATE_FITS:+--late-fits $LATE_FITS}"
+          dagger="$dagger_fit ${LATE_FITS:+--late-fits $LATE_FITS}"
           case "$RECIPE" in
             ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes 10 \
               ${MAX_GRAD_NORM:+--max-grad-norm $MAX_GRAD_NORM} ${LR_SCHEDULE:+--lr-schedule $LR_SCHEDULE}" ;;
-            dagger-state) args="$dagger --iterations ${ITERATIONS:-60} --minutes 5 --envs ${ENVS:-16384} --max-samples ${MAX_SAMPLES:-32000000} \
-              --first-fits ${FIRST_FITS:-4}" ;;
+            dagger-state) args="$dagger --iterations ${ITERATIONS:-60} --minutes 5 $state_data" ;;
             dagger-pixels) args="$dagger ${FIRST_FITS:+--first-fits $FIRST_FITS} --obs pixels_agent_pos --iterations 300 --minutes 19.5 --image-steps 4000 \
               --image-batch 512 --envs ${ENVS:-4096} --max-samples ${MAX_SAMPLES:-8000000}" ;;
             *) echo "unknown RECIPE $RECIPE" >&2; exit 2 ;;
@@ -166,10 +169,9 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # compiling and the held-out eval); results and the held-out eval's table are copied back. ENVS, MAX_SAMPLES
           # as train-seeds' (16384 episodes an iteration and a 32 M ring; before notebook lead4: 4096 and 8 M)
           run=$HOME/runs/state-${SEED:-0}; mkdir -p "$HOME/runs"
-          (cd "$HOME/runs" && python3 -m mjx_pusht train --backend mjx-warp --reset task --envs "${ENVS:-16384}" --iterations 60 \
-            --minutes "${MINUTES:-5}" --hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 \
-            --max-samples "${MAX_SAMPLES:-32000000}" --beta-decay 0.7 --first-fits "${FIRST_FITS:-4}" \
-            --seed "${SEED:-0}" --keep "${KEEP:-best}" --no-progress --no-rerun --record 0 --out "state-${SEED:-0}") > "$OUT/$stage.log" 2>&1
+          # shellcheck disable=SC2086  # the recipe's strings are lists of flags
+          (cd "$HOME/runs" && python3 -m mjx_pusht train --backend mjx-warp --reset task --iterations "${ITERATIONS:-60}" \
+            --minutes "${MINUTES:-5}" $dagger_fit $state_data --seed "${SEED:-0}" --keep "${KEEP:-best}" --no-progress --no-rerun --record 0 --out "state-${SEED:-0}") > "$OUT/$stage.log" 2>&1
           for f in curve.csv curve.png summary.json policy.msgpack; do [ -f "$run/$f" ] && cp "$run/$f" "$OUT/"; done
           mkdir -p "$OUT/eval"; cp "$run"/eval/*.parquet "$run"/eval/summary.json "$OUT/eval/" 2>/dev/null; true ;;
   first-fit) # DAgger's first fit alone, from the same demonstrations, for each of SEEDS (default 0-7) unclipped and
