@@ -126,8 +126,8 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # LATE_FITS (DAgger): --late-fits, fits an iteration once the expert's share is at most 1%.
           # FIRST_FITS (DAgger): --first-fits, initialisations of the first fit, the lowest loss kept (notebook lead5;
           # dagger-state 4 by default since notebook lead6, 1 is the plain fit; dagger-pixels 1, not measured with more).
-          # ITERATIONS (dagger-state, default 60): a cap beside the 5 minutes, so a faster card (H200) does no more
-          # iterations than an H100 did in its 5 minutes (notebook lead6).
+          # ITERATIONS (DAgger; state 60, pixels 300 by default): a cap beside the minutes, so a faster card (H200) does
+          # no more iterations than an H100 did in its minutes (notebook lead6; pixels: 52 in 19.7 minutes, change 27).
           # ENVS, MAX_SAMPLES (DAgger): episodes an iteration and the ring (state: 16384 and 32000000, notebook lead4;
           # pixels: 4096 and 8000000, as change 27 measured).
           # MAX_GRAD_NORM, LR_SCHEDULE (PPO): --max-grad-norm (default 1.0; off: unclipped), --lr-schedule (adaptive-kl).
@@ -139,7 +139,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
             ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes 10 \
               ${MAX_GRAD_NORM:+--max-grad-norm $MAX_GRAD_NORM} ${LR_SCHEDULE:+--lr-schedule $LR_SCHEDULE}" ;;
             dagger-state) args="$dagger --iterations ${ITERATIONS:-60} --minutes 5 $state_data" ;;
-            dagger-pixels) args="$dagger ${FIRST_FITS:+--first-fits $FIRST_FITS} --obs pixels_agent_pos --iterations 300 --minutes 19.5 --image-steps 4000 \
+            dagger-pixels) args="$dagger ${FIRST_FITS:+--first-fits $FIRST_FITS} --obs pixels_agent_pos --iterations ${ITERATIONS:-300} --minutes 19.5 --image-steps 4000 \
               --image-batch 512 --envs ${ENVS:-4096} --max-samples ${MAX_SAMPLES:-8000000}" ;;
             *) echo "unknown RECIPE $RECIPE" >&2; exit 2 ;;
           esac
