@@ -31,6 +31,7 @@ memory puts it in, not to situations only the expert's memory would have produce
 from __future__ import annotations
 
 import dataclasses
+from functools import partial
 
 import numpy as np
 
@@ -192,16 +193,25 @@ class Rollouts:
 
     def __init__(self, env, cfg: DaggerConfig):
         self.env, self.cfg, self.expert = env, cfg, Expert(**TEACHERS[cfg.teacher])
-        self._compiled = {}
+        self._compiled, self._compact = {}, {}
 
     def __call__(self, params, norm, seeds, beta, rng: int, learn: int | None = None):
         """Features and expert labels of every live control step of the first `learn` episodes (all if None;
         on the device on MJX), and every episode's outcome. `norm` is (mean, std) of the features; `beta`, the
         expert's share, is one number or one per seed (0 for held-out episodes judged in the same batch)."""
+        x, y, n, outcome = self.padded(params, norm, seeds, beta, rng, learn)
+        return x[:n], y[:n], outcome
+
+    def padded(self, params, norm, seeds, beta, rng: int, learn: int | None = None):
+        """As calling it, but the samples and labels are the first `n` rows of arrays whose length does not depend
+        on how long the episodes ran (on MJX: every live control step's row could be there), returned with `n`:
+        (x, y, n, outcomes). DAgger's loop adds them to the ring as they are (`Learner.add(..., n=n)`), so its
+        programs keep one shape from iteration to iteration."""
         beta = np.broadcast_to(np.asarray(beta, np.float32), (len(seeds),))
         learn = len(seeds) if learn is None else learn
         if self.env.backend == "cpu":
-            return self._cpu(params, norm, seeds, beta, rng, learn)
+            x, y, outcome = self._cpu(params, norm, seeds, beta, rng, learn)
+            return x, y, len(x), outcome
         return self._mjx(params, norm, seeds, beta, rng, learn)
 
     def _cpu(self, params, norm, seeds, beta, rng, learn):
@@ -243,10 +253,10 @@ class Rollouts:
         s, x, y, live = self._compiled[n](params, tuple(jnp.asarray(a, jnp.float32) for a in norm), s0,
                                           jnp.asarray(beta), keys)
         env.check(s)
-        # (T, N, ...) -> the first `learn` worlds' episodes, one after another
-        x, y, live = (jnp.swapaxes(a[:, :learn], 0, 1) for a in (x, y, live))
-        keep = jnp.nonzero(live.reshape(-1))[0]  # only the control steps of running episodes
-        return (x.reshape(-1, x.shape[-1])[keep], y.reshape(-1, y.shape[-1])[keep], _outcomes(s))
+        if learn not in self._compact:
+            self._compact[learn] = jax.jit(partial(_compact, learn=learn))
+        x, y, count = self._compact[learn](x, y, live)
+        return x, y, int(count), _outcomes(s)
 
     def _episodes(self, params, norm, s, beta, keys):
         """The batch's episodes: a scan over control steps of the vmapped control step (as the env's own jitted
@@ -275,6 +285,19 @@ class Rollouts:
 
         (s, _), (x, y, live) = jax.lax.scan(body, (s, self.expert.init(s.key)), jnp.arange(cfg.max_steps))
         return s, x, y, live
+
+
+def _compact(x, y, live, learn: int):
+    """The (T, N, ...) stacks' rows of the first `learn` worlds' live control steps, episode after episode, moved to
+    the front of arrays of T * learn rows, and how many they are. The rest of the rows repeat the first (a live step:
+    every episode has one), so a check of the whole array checks the samples. A compaction to the count itself gave
+    every iteration new shapes: ~20 small programs compiled an iteration (notebook lead7)."""
+    import jax.numpy as jnp
+
+    x, y, live = (jnp.swapaxes(a[:, :learn], 0, 1) for a in (x, y, live))
+    live = live.reshape(-1)
+    keep = jnp.nonzero(live, size=live.size, fill_value=0)[0]
+    return x.reshape(-1, x.shape[-1])[keep], y.reshape(-1, y.shape[-1])[keep], live.sum()
 
 
 def _outcomes(s) -> dict:

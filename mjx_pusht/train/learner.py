@@ -44,6 +44,7 @@ class Learner:
         self.norm = None  # (mean, std) of the features, fixed from the first iteration's data
         self.pose_error_mm = None  # a pixel student's last fit: its pose estimate's RMS error per number, mm
         self.loss_max = None  # the last fit's largest minibatch loss (the actions'): a spike in the fit shows here
+        self._write = jax.jit(_ring_write, donate_argnums=(0, 1))
         self._fit = jax.jit(partial(_fit, self.model, self.opts, cfg.batch, cfg.image_batch,
                                     (cfg.fit_steps, cfg.reader_steps), render))
 
@@ -52,23 +53,24 @@ class Learner:
         self.params = self._init(key)
         self.opt_state = tuple(opt.init(part) for opt, part in zip(self.opts, _parts(self.params, self.cfg.image)))
 
-    def add(self, x, y, keep: bool = False) -> None:
-        """Append samples; when the ring is full the oldest student-visited ones go, never those added with
-        `keep` (the expert's own demonstrations, iteration 0): measured, a ring that let them go lost the
+    def add(self, x, y, keep: bool = False, n: int | None = None) -> None:
+        """Append the first `n` rows of samples `x` and labels `y` (all if None; the rest is padding, as
+        `Rollouts.padded` returns them); when the ring is full the oldest student-visited ones go, never those added
+        with `keep` (the expert's own demonstrations, iteration 0): measured, a ring that let them go lost the
         student what it had learned as the later, stalled episodes filled it (notebook, change 12)."""
         import jax.numpy as jnp
 
         x, y = jnp.asarray(x, jnp.float32), jnp.asarray(y, jnp.float32)
+        n = len(x) if n is None else n
         if self.norm is None:  # of the features (not of a pixel student's image keys, which come first)
-            f = x[:, RENDER_KEY:] if self.cfg.image else x
+            f = x[:n, RENDER_KEY:] if self.cfg.image else x[:n]
             self.norm = (np.asarray(f.mean(0)), np.asarray(f.std(0)) + 1e-3)
         room = self.cfg.max_samples - self.floor
         if keep:
             room = room // 2  # demonstrations take at most half the ring
-        m = min(len(x), room)
-        x, y = x[-m:], y[-m:]
-        idx = self.floor + (self.head - self.floor + jnp.arange(m)) % (self.cfg.max_samples - self.floor)
-        self.x, self.y = self.x.at[idx].set(x), self.y.at[idx].set(y)
+        m = min(n, room)  # the last m of the n samples, into the ring from its head on
+        self.x, self.y = self._write(self.x, self.y, x, y, *(np.int32(v) for v in (n - m, m, self.head - self.floor,
+                                                                                      self.floor)))
         self.filled = min(self.filled + m, self.cfg.max_samples)
         if keep:
             self.floor = self.head = self.filled
@@ -110,6 +112,18 @@ class Learner:
                 best = (c, self.params, self.opt_state, self.loss_max, self.pose_error_mm)
         kept, self.params, self.opt_state, self.loss_max, self.pose_error_mm = best
         return losses, kept
+
+
+def _ring_write(ring_x, ring_y, x, y, first, m, start, floor):
+    """Rows first .. first + m of x, y into the ring's rows floor + (start + j) % (ring - floor): one compiled
+    program whatever the counts, which are traced numbers (as eager indexing by them, it compiled ~20 small programs
+    an iteration, notebook lead7), and the ring updated in place (donated; a copy of a 32 M-sample ring is ~1.8 GB)."""
+    import jax.numpy as jnp
+
+    j = jnp.arange(x.shape[0], dtype=jnp.int32) - first
+    idx = floor + (start + j) % (ring_x.shape[0] - floor)
+    idx = jnp.where((j >= 0) & (j < m), idx, ring_x.shape[0])  # past the ring: dropped
+    return ring_x.at[idx].set(x, mode="drop"), ring_y.at[idx].set(y, mode="drop")
 
 
 # A first-fit candidate's minibatch key folds in this plus its number (`Learner.fit`): above any fit's part number

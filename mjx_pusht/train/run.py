@@ -101,7 +101,8 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         seeds, beta = cfg.train_seeds(i), np.full(cfg.envs, cfg.beta(i), np.float32)
         if pending is not None or one_shape:  # the last fit's judgement, in the same batch
             seeds, beta = np.concatenate([seeds, held_out]), np.concatenate([beta, np.zeros(len(held_out), np.float32)])
-        (x, y, outcome), sim = _timed(rollouts, learner.params, learner.norm or _unit(cfg), seeds, beta, i, cfg.envs)
+        (x, y, n, outcome), sim = _timed(rollouts.padded, learner.params, learner.norm or _unit(cfg), seeds, beta, i,
+                                         cfg.envs)
         _stop_if_non_finite(non_finite(outcome, seeds, x, y), f"iteration {i}'s rollout", curve, out)
         if pending is not None:
             stop = judged({k: v[cfg.envs:] for k, v in outcome.items()}, 0.0,
@@ -110,8 +111,8 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
             if stop:
                 curve[-1]["sim_seconds"] += sim  # spent, though the samples go unlearned: the judged policy is the run's
                 break
-        env_steps += len(x)
-        learner.add(x, y, keep=i == 0)
+        env_steps += n
+        learner.add(x, y, keep=i == 0, n=n)
         learn = 0.0
         for part in range(cfg.fits(i)):
             if i == 0 and cfg.first_fits:  # from several initialisations, the lowest loss kept
@@ -127,8 +128,8 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         seeds, n_train = held_out, 0
         if one_shape:  # the same shape again: training seeds ride along, their samples not learned
             seeds, n_train = np.concatenate([cfg.train_seeds(pending[0] + 1), held_out]), cfg.envs
-        (_, _, held), sim_judge = _timed(rollouts, learner.params, learner.norm, seeds, 0.0, cfg.iterations + pending[0],
-                                         0)
+        (_, _, _, held), sim_judge = _timed(rollouts.padded, learner.params, learner.norm, seeds, 0.0,
+                                            cfg.iterations + pending[0], 0)
         _stop_if_non_finite(non_finite(held, seeds), f"iteration {pending[0]}'s judgement", curve, out)
         judged({k: v[n_train:] for k, v in held.items()}, sim_judge,
                {k: v[:n_train] for k, v in held.items()} if n_train else None, 0.0 if n_train else None)

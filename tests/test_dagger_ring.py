@@ -1,0 +1,120 @@
+"""DAgger's dataset ring: what a rollout's samples do to it, against a plain list written from its rules, and that
+adding them compiles nothing after the first iteration, however long the episodes ran (notebook lead7: the count
+of samples was a new shape every iteration, ~20 small programs compiled each, ~1 s of an iteration on a GPU)."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+pytest.importorskip("flax")
+pytest.importorskip("optax")
+
+
+def _rows(rng, n, width, start):
+    """n samples whose first number names them (start, start + 1, ...), the rest noise; labels likewise."""
+    x = np.column_stack([np.arange(start, start + n), rng.normal(size=(n, width - 1))]).astype(np.float32)
+    y = np.column_stack([np.arange(start, start + n), rng.normal(size=(n, 2))]).astype(np.float32)
+    return x, y
+
+
+class _ListRing:
+    """The ring's rules, written as a list: iteration 0's samples (the expert's demonstrations) are kept for good
+    and take at most half the ring (the newest of them if more came); later samples fill the rest, and once it is
+    full each newcomer replaces the oldest student sample."""
+
+    def __init__(self, size):
+        self.size, self.kept, self.student = size, [], []
+
+    def add(self, names, keep):
+        if keep:
+            self.kept = list(names[len(names) - min(len(names), self.size // 2):])
+        else:
+            self.student = (self.student + list(names))[-(self.size - len(self.kept)):]
+
+    def names(self):
+        return set(self.kept) | set(self.student)
+
+
+def test_the_ring_keeps_the_demonstrations_and_replaces_the_oldest_student_samples_first():
+    from mjx_pusht.train.dagger import DaggerConfig
+    from mjx_pusht.train.learner import Learner
+
+    rng = np.random.default_rng(0)
+    cfg = DaggerConfig(hidden=(8,), max_samples=1000)
+    learner, ring, start = Learner(cfg), _ListRing(1000), 0
+    # the demonstrations overflow half the ring; then student batches that wrap the ring several times, one
+    # smaller than the padding it comes with (n of the rows), one larger than the ring's free part
+    for i, (n, pad) in enumerate([(700, 0), (120, 0), (333, 200), (90, 500), (811, 0), (5, 0), (640, 17)]):
+        x, y = _rows(rng, n + pad, cfg.sample_width, start)
+        learner.add(x, y, keep=i == 0, n=n)
+        ring.add(range(start, start + n), keep=i == 0)
+        start += n + pad
+        held = np.asarray(learner.x[:learner.filled, 0]).astype(int)
+        assert learner.filled == min(sum(len(v) for v in (ring.kept, ring.student)), 1000)
+        assert set(held) == ring.names(), i
+        # each row's label is its own sample's, and the demonstrations sit below the floor
+        assert np.array_equal(np.asarray(learner.y[:learner.filled, 0]).astype(int), held)
+        assert set(held[:learner.floor]) == set(ring.kept)
+
+
+def test_a_rollouts_samples_are_compacted_episode_after_episode_with_padding_that_repeats_the_first():
+    """`_compact` (Rollouts on MJX): the first `learn` worlds' live control steps, episode after episode, as numpy
+    would pick them, their count, and padding rows that repeat the first sample (so a finiteness check of the whole
+    array checks exactly the samples)."""
+    import jax
+
+    from mjx_pusht.train.dagger import _compact
+
+    rng = np.random.default_rng(1)
+    steps, worlds, learn = 12, 9, 6
+    x = rng.normal(size=(steps, worlds, 4)).astype(np.float32)
+    y = rng.normal(size=(steps, worlds, 3)).astype(np.float32)
+    ends = rng.integers(1, steps + 1, worlds)
+    live = np.arange(steps)[:, None] < ends[None, :]
+    got_x, got_y, n = jax.jit(lambda *a: _compact(*a, learn=learn))(x, y, live)
+    want_x = np.concatenate([x[: ends[w], w] for w in range(learn)])
+    want_y = np.concatenate([y[: ends[w], w] for w in range(learn)])
+    assert int(n) == int(ends[:learn].sum()) and got_x.shape == (steps * learn, 4)
+    assert np.array_equal(np.asarray(got_x)[: int(n)], want_x) and np.array_equal(np.asarray(got_y)[: int(n)], want_y)
+    assert (np.asarray(got_x)[int(n):] == x[0, 0]).all()
+
+
+def test_adding_a_rollouts_samples_compiles_nothing_after_the_first_iteration():
+    """Rollouts on MJX and the ring: batches of different counts (as episodes end at different steps) go through
+    the same compiled programs; only the first iteration compiles (its normalisation and the ring's write)."""
+    import jax
+
+    from mjx_pusht.train.dagger import DaggerConfig, _compact
+    from mjx_pusht.train.learner import Learner
+
+    compiled = []
+
+    class Seen(logging.Handler):
+        def emit(self, record):
+            if record.getMessage().startswith("Finished XLA compilation"):
+                compiled.append(record.getMessage())
+
+    cfg = DaggerConfig(hidden=(8,), max_samples=5000)
+    learner, compact = Learner(cfg), jax.jit(lambda *a: _compact(*a, learn=64))
+    rng = np.random.default_rng(2)
+    seen, log = Seen(), logging.getLogger("jax._src.dispatch")
+    log.addHandler(seen)
+    counts, sizes = [], []
+    try:
+        with jax.log_compiles(True):
+            for i in range(4):
+                ends = rng.integers(1, 40, 96)
+                live = np.arange(40)[:, None] < ends[None, :]
+                x, y, n = compact(rng.normal(size=(40, 96, cfg.sample_width)).astype(np.float32),
+                                  np.zeros((40, 96, 3), np.float32), live)
+                learner.add(x, y, keep=i == 0, n=int(n))
+                sizes.append(int(n))
+                jax.block_until_ready(learner.x)
+                counts.append(len(compiled))
+    finally:
+        log.removeHandler(seen)
+    assert len(set(sizes)) == 4  # four counts of samples, four shapes before
+    assert counts[1] == counts[2] == counts[3] == counts[0], counts  # nothing compiled after iteration 0
