@@ -118,3 +118,54 @@ def test_adding_a_rollouts_samples_compiles_nothing_after_the_first_iteration():
         log.removeHandler(seen)
     assert len(set(sizes)) == 4  # four counts of samples, four shapes before
     assert counts[1] == counts[2] == counts[3] == counts[0], counts  # nothing compiled after iteration 0
+
+
+def test_the_resume_checkpoint_writes_the_ring_beside_it_and_restores_it_to_the_bit(tmp_path):
+    """`checkpoint` writes the ring's float32 bytes to a file of its own, named by the msgpack (the GIL let go while
+    they go out), keeps only the newest such file, and `restore` gives back the same ring, network and optimiser;
+    a ring cut short is one line, and a checkpoint from before (the ring inside the msgpack) still restores."""
+    import jax
+    from flax import serialization
+
+    from mjx_pusht.train.dagger import DaggerConfig
+    from mjx_pusht.train.learner import Learner
+    from mjx_pusht.train.resume import TrainError, checkpoint, restore
+
+    rng = np.random.default_rng(3)
+    cfg = DaggerConfig(hidden=(8,), max_samples=300, fit_steps=5, batch=16)
+    learner = Learner(cfg)
+    for i, n in enumerate([100, 90, 250]):
+        learner.add(*_rows(rng, n, cfg.sample_width, 1000 * i), keep=i == 0)
+    learner.fit(0)
+    path = tmp_path / "resume.msgpack"
+    for iteration in (3, 4):
+        checkpoint(path, cfg, learner, iteration, 12345, [{"wall_seconds": 1.5}]).join()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["resume-ring-000004.f32", "resume.msgpack"]
+
+    def same(a, b):
+        return all(np.array_equal(np.asarray(u), np.asarray(v)) for u, v in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
+
+    back = Learner(cfg)
+    assert restore(path, cfg, back) == (5, 12345, [{"wall_seconds": 1.5}], 1.5)
+    assert (back.filled, back.head, back.floor) == (learner.filled, learner.head, learner.floor)
+    assert same((back.x, back.y, back.params, back.opt_state, back.norm),
+                (learner.x, learner.y, learner.params, learner.opt_state, learner.norm))
+
+    tree = serialization.msgpack_restore(path.read_bytes())  # as written before the ring had a file of its own
+    for key in ("ring", "ring_shapes"):
+        tree.pop(key)
+    tree["x"], tree["y"] = np.asarray(learner.x[:learner.filled]), np.asarray(learner.y[:learner.filled])
+    old = tmp_path / "old" / "resume.msgpack"
+    old.parent.mkdir()
+    old.write_bytes(serialization.msgpack_serialize(tree))
+    back = Learner(cfg)
+    restore(old, cfg, back)
+    assert same((back.x, back.y), (learner.x, learner.y))
+
+    ring = tmp_path / "resume-ring-000004.f32"
+    ring.write_bytes(ring.read_bytes()[:-4])
+    with pytest.raises(TrainError, match="holds .* numbers, its checkpoint names"):
+        restore(path, cfg, Learner(cfg))
+    ring.unlink()
+    with pytest.raises(TrainError, match="unreadable"):
+        restore(path, cfg, Learner(cfg))

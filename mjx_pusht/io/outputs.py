@@ -28,14 +28,17 @@ def prepare_out_dir(path: Path) -> Path:
     return path
 
 
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write to a temporary sibling, then rename over `path`: readers see the old file or the new one."""
+def atomic_write_bytes(path: Path, *data) -> None:
+    """Write `data` (bytes, or several buffers one after another, e.g. numpy arrays: written from their memory as it
+    is, with the GIL released while they go out) to a temporary sibling, then rename over `path`: readers see the old
+    file or the new one."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         os.fchmod(fd, 0o666 & ~_umask())  # mkstemp makes 0600; results should read like any file written
         with os.fdopen(fd, "wb") as f:
-            f.write(data)
+            for part in data:
+                f.write(memoryview(part).cast("B"))
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -41,22 +41,63 @@ def config_dict(cfg) -> dict:
 
 def checkpoint(path, cfg, learner, iteration, env_steps, curve, writer=None):
     """Everything --resume needs (optimiser, dataset ring, normalisation, curve), written whole. The arrays are
-    copied to the host here; encoding and writing (~4 s for 8 M samples on the H100 run of notebook change 14) go
-    on in a thread while training continues. Returns that thread: join it before the next one, and at the end."""
+    copied to the host here; writing goes on in a thread while training continues. Returns that thread: join it
+    before the next one, and at the end.
+
+    The ring goes to its own file beside `path` (`_ring_file`), its float32 bytes as they are in memory. Inside the
+    msgpack (flax's msgpack_serialize), a 32 M-sample ring took 18 s of encoding on a 2-core CPU that held the GIL,
+    and training, which needs the GIL between its device calls, all but stopped meanwhile (one step in 24 ran;
+    notebook lead7); a raw write lets go of the GIL while the bytes go out. The msgpack holds the rest and names
+    the ring's file, written first: a checkpoint on disk always names a whole ring."""
     from flax import serialization
 
     from mjx_pusht.train.policy import to_numpy
 
     if writer is not None:
         writer.join()  # one file, written in order
+    path = Path(path)
+    x, y = np.asarray(learner.x[:learner.filled]), np.asarray(learner.y[:learner.filled])
+    ring = _ring_file(path, iteration)
     tree = {"config": json.dumps(config_dict(cfg), sort_keys=True), "iteration": iteration, "env_steps": env_steps,
             "curve": json.dumps(curve), "params": to_numpy(learner.params),
             "opt_state": serialization.to_state_dict(to_numpy(learner.opt_state)),
-            "x": np.asarray(learner.x[:learner.filled]), "y": np.asarray(learner.y[:learner.filled]),
+            "ring": ring.name, "ring_shapes": [list(x.shape), list(y.shape)],
             "head": learner.head, "floor": learner.floor, "norm_mean": learner.norm[0], "norm_std": learner.norm[1]}
-    writer = _Writer(lambda: atomic_write_bytes(path, serialization.msgpack_serialize(tree)))
+
+    def write():
+        atomic_write_bytes(ring, np.ascontiguousarray(x, np.float32), np.ascontiguousarray(y, np.float32))
+        atomic_write_bytes(path, serialization.msgpack_serialize(tree))
+        for old in path.parent.glob(_ring_file(path, None).name):  # the rings no checkpoint names any more
+            if old != ring:
+                old.unlink(missing_ok=True)
+
+    writer = _Writer(write)
     writer.start()
     return writer
+
+
+def _ring_file(path: Path, iteration: int | None) -> Path:
+    """The dataset ring's file of the checkpoint at `path` written after `iteration` (None: a glob of them all)."""
+    return path.with_name(f"{path.stem}-ring-{'*' if iteration is None else f'{iteration:06d}'}.f32")
+
+
+def _ring(path: Path, tree: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The dataset ring (samples, labels) of the checkpoint `tree` read from `path`: from the file it names, or,
+    written before the ring had a file of its own, from the tree. A missing or cut file is one line."""
+    if "ring" not in tree:
+        return np.asarray(tree["x"]), np.asarray(tree["y"])
+    shapes = [tuple(int(n) for n in shape) for shape in tree["ring_shapes"]]
+    file = path.with_name(tree["ring"])
+    try:
+        raw = np.fromfile(file, np.float32)
+    except OSError as e:
+        raise TrainError(f"--resume: the dataset ring {file} is unreadable ({e.strerror or e}); start again without "
+                         "--resume") from None
+    sizes = [int(np.prod(shape)) for shape in shapes]
+    if raw.size != sum(sizes):
+        raise TrainError(f"--resume: the dataset ring {file} holds {raw.size} numbers, its checkpoint names "
+                         f"{sum(sizes)}; start again without --resume")
+    return raw[:sizes[0]].reshape(shapes[0]), raw[sizes[0]:].reshape(shapes[1])
 
 
 class _Writer(threading.Thread):
@@ -111,9 +152,10 @@ def restore(path, cfg, learner):
         raise TrainError(f"--resume: {path} holds an optimiser state this version does not use ({type(e).__name__}; "
                          "written before the fit's parts had an Adam each?); start again without --resume") from None
     learner.params = jax.tree.map(jnp.asarray, tree["params"])
-    n = len(tree["x"])
-    learner.x = learner.x.at[:n].set(jnp.asarray(tree["x"]))
-    learner.y = learner.y.at[:n].set(jnp.asarray(tree["y"]))
+    x, y = _ring(path, tree)
+    n = len(x)
+    learner.x = learner.x.at[:n].set(jnp.asarray(x))
+    learner.y = learner.y.at[:n].set(jnp.asarray(y))
     learner.filled, learner.head, learner.floor = n, int(tree["head"]), int(tree["floor"])
     learner.norm = (np.asarray(tree["norm_mean"]), np.asarray(tree["norm_std"]))
     curve = json.loads(tree["curve"])

@@ -1,7 +1,8 @@
 """`train_dagger`: a DAgger training run, its loop and everything it leaves behind (`mjx-pusht train` runs it).
 
     out/policy.msgpack          the latest policy (a controller: --controller policy:out/policy.msgpack)
-    out/checkpoints/            one policy per iteration, and resume.msgpack (optimiser, dataset, curve)
+    out/checkpoints/            one policy per iteration, and resume.msgpack (optimiser, curve) with its dataset ring
+                                (resume-ring-NNNNNN.f32, the iteration it was written after)
     out/curve.csv, curve.png    held-out success after every iteration, by env steps and by wall-clock
     out/summary.json            method, obs, env steps, wall-clock (simulation / learning), device,
                                 versions, the final held-out success with its 95% interval
