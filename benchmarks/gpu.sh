@@ -183,6 +183,10 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           MUJOCO_GL=egl python3 -m mjx_pusht compare --controller "policy:${POLICY:?POLICY=path of a policy.msgpack}" \
             --backend mjx-warp --seeds 1000000000:1000004096 --reset task --out "$OUT/transfer-mjx-warp" \
             > "$OUT/$stage.log" 2>&1 ;;
+  host-work) # DAgger's work between its device programs (benchmarks/dagger_host_work.py, notebook lead7): a rollout's
+          # samples into the ring, compiled programs and seconds an iteration, and the resume checkpoint of a 32 M ring
+          python3 -m benchmarks.dagger_host_work --envs 16384 --samples 32000000 --ring-samples 32000000 \
+            --json "$OUT/results/$tier-dagger-host-work.json" > "$OUT/$stage.log" 2>&1 ;;
   finite-check) # the MJX-Warp rollout at 65,536 seeds with the finiteness check of the actions and without it, in turns
           python3 -m benchmarks.finite_check --backend mjx-warp --batch 65536 --repeats "${REPEATS:-5}" \
             --out "$OUT/results/$tier-finite-check.json" > "$OUT/$stage.log" 2>&1 ;;
