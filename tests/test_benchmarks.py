@@ -179,3 +179,20 @@ def test_first_fit_is_the_first_fit_of_a_training_run(tmp_path):
     assert rows[1]["loss"] != rows[0]["loss"]
     assert rows[0]["held_out_success"] == curve[0]["success"]
 
+
+
+def test_dagger_host_work_measures_the_ring_and_the_checkpoint_at_tiny_sizes(tmp_path):
+    """benchmarks/dagger_host_work.py runs at tiny sizes: one row per iteration, samples of different counts and no
+    program compiled after the first iteration; the checkpoint's writer timed beside a main-thread loop."""
+    from benchmarks import dagger_host_work
+
+    out = tmp_path / "host.json"
+    assert dagger_host_work.main(["--envs", "16", "--samples", "20000", "--iterations", "3", "--ring-samples",
+                                  "10000", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert [r["compiled"] for r in result["ring"]][1:] == [0, 0] and len({r["samples"] for r in result["ring"]}) == 3
+    from mjx_pusht.train.dagger import DaggerConfig
+
+    c = result["checkpoint"]
+    assert c["ring_bytes"] == 10000 * 4 * (DaggerConfig().sample_width + 3)  # float32 samples and labels
+    assert c["writer_seconds"] > 0 and c["steps_per_s_alone"] > 0
