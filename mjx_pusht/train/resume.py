@@ -45,9 +45,9 @@ def checkpoint(path, cfg, learner, iteration, env_steps, curve, writer=None):
     before the next one, and at the end.
 
     The ring goes to its own file beside `path` (`_ring_file`), its float32 bytes as they are in memory. Inside the
-    msgpack (flax's msgpack_serialize), a 32 M-sample ring took 18 s of encoding on a 2-core CPU that held the GIL,
-    and training, which needs the GIL between its device calls, all but stopped meanwhile (one step in 24 ran;
-    notebook lead7); a raw write lets go of the GIL while the bytes go out. The msgpack holds the rest and names
+    msgpack (flax's msgpack_serialize), a 32 M-sample ring's writer ran 26 s on a 2-core CPU, and a loop on the main
+    thread, which training is between its device calls, ran at 4% of its speed meanwhile: the encoding held the GIL
+    (notebook lead7). A raw write lets go of the GIL while the bytes go out. The msgpack holds the rest and names
     the ring's file, written first: a checkpoint on disk always names a whole ring."""
     from flax import serialization
 
