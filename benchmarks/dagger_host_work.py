@@ -25,12 +25,9 @@ from pathlib import Path
 import numpy as np
 
 
-def ring(envs: int, samples: int, iterations: int, eager: bool) -> list[dict]:
+def ring(envs: int, samples: int, iterations: int, eager: bool = False) -> list[dict]:
+    """Each iteration's samples, seconds and XLA programs compiled (JAX's compile log, counted)."""
     import jax
-    import jax.numpy as jnp
-
-    from mjx_pusht.train.dagger import DaggerConfig
-    from mjx_pusht.train.learner import Learner
 
     compiled = []
 
@@ -39,9 +36,24 @@ def ring(envs: int, samples: int, iterations: int, eager: bool) -> list[dict]:
             if record.getMessage().startswith("Finished XLA compilation"):
                 compiled.append(record.getMessage())
 
-    logging.getLogger("jax._src.dispatch").addHandler(Seen())
-    jax.config.update("jax_log_compiles", True)
-    logging.getLogger("jax._src.dispatch").propagate = False  # counted, not printed
+    log, seen = logging.getLogger("jax._src.dispatch"), Seen()
+    log.addHandler(seen)
+    log.propagate = False  # counted, not printed
+    try:
+        with jax.log_compiles(True):
+            return _ring(envs, samples, iterations, eager, compiled)
+    finally:
+        log.removeHandler(seen)
+        log.propagate = True
+
+
+def _ring(envs, samples, iterations, eager, compiled) -> list[dict]:
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_pusht.train.dagger import DaggerConfig
+    from mjx_pusht.train.learner import Learner
+
     cfg = DaggerConfig(hidden=(32, 32), max_samples=samples, envs=envs)
     learner = Learner(cfg)
     if not eager:
@@ -71,7 +83,6 @@ def ring(envs: int, samples: int, iterations: int, eager: bool) -> list[dict]:
                      "compiled": len(compiled) - before})
         print(f"ring {'eager' if eager else 'one program'}: iteration {i}: {n} samples, "
               f"{rows[-1]['seconds']:.3f} s, {rows[-1]['compiled']} programs compiled", flush=True)
-    jax.config.update("jax_log_compiles", False)
     return rows
 
 
@@ -122,7 +133,9 @@ def main(argv=None) -> int:
     p.add_argument("--samples", type=int, default=2_000_000, help="the ring of the `ring` measurement")
     p.add_argument("--iterations", type=int, default=8)
     p.add_argument("--ring-samples", type=int, default=32_000_000, help="the full ring `checkpoint` writes")
-    p.add_argument("--eager", action="store_true", help="the compaction as before notebook lead7")
+    p.add_argument("--eager", action="store_true", help="the compaction as Rollouts had it before notebook lead7, and Learner.add without a count: "
+                   "what ran before when this script is run at commit c63b087 (here Learner.add compiles its ring write "
+                   "per count instead)")
     p.add_argument("--only", choices=("ring", "checkpoint"))
     p.add_argument("--json", type=Path)
     args = p.parse_args(argv)

@@ -253,6 +253,8 @@ class Rollouts:
         s, x, y, live = self._compiled[n](params, tuple(jnp.asarray(a, jnp.float32) for a in norm), s0,
                                           jnp.asarray(beta), keys)
         env.check(s)
+        if not learn:  # judged only (the last fit's judgement): no samples, and no compaction compiled for them
+            return x[0, :0], y[0, :0], 0, _outcomes(s)
         if learn not in self._compact:
             self._compact[learn] = jax.jit(partial(_compact, learn=learn))
         x, y, count = self._compact[learn](x, y, live)
