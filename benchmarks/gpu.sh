@@ -121,13 +121,14 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
   train-seeds) # RECIPE (ppo, dagger-state or dagger-pixels) on SEEDS (comma-separated) one after another, as one
           # result (benchmarks/train_seeds.py: each run, then seeds.json/.md with mean, sd, min); started in its own
           # session like train-pixels, then `watch-seeds`. A machine is held at most 30 minutes, so give each hold
-          # what fits: ppo 2 seeds (~11.5 min each), dagger-state 3 (~6.5), dagger-pixels 1 (~22); aggregate the
+          # what fits: ppo 2 seeds (~11.5 min each), dagger-state 4 (~5.7), dagger-pixels 1 (~22); aggregate the
           # holds' copied-back runs here with `python -m benchmarks.train_seeds --collect DIR... --out DIR`.
           # LATE_FITS (DAgger): --late-fits, fits an iteration once the expert's share is at most 1%.
           # FIRST_FITS (DAgger): --first-fits, initialisations of the first fit, the lowest loss kept (notebook lead5;
           # dagger-state 4 by default since notebook lead6, 1 is the plain fit; dagger-pixels 1, not measured with more).
           # ITERATIONS (DAgger; state 60, pixels 300 by default): a cap beside the minutes, so a faster card (H200) does
-          # no more iterations than an H100 did in its minutes (notebook lead6; pixels: 52 in 19.7 minutes, change 27).
+          # no more iterations than an H100 does in its minutes (state: 33-35 in 5 minutes since the host-work fixes,
+          # notebook lead8, 24-27 before them; pixels: 52 in 19.7 minutes before them, change 27).
           # ENVS, MAX_SAMPLES (DAgger): episodes an iteration and the ring (state: 16384 and 32000000, notebook lead4;
           # pixels: 4096 and 8000000, as change 27 measured).
           # MAX_GRAD_NORM, LR_SCHEDULE (PPO): --max-grad-norm (default 1.0; off: unclipped), --lr-schedule (adaptive-kl).
@@ -153,14 +154,15 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
             --record 0 > "$run.log" 2>&1 < /dev/null &)
           sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
   watch-seeds) # wait up to WAIT seconds (default 570) for train-seeds' runs NAMES (default RECIPE; space-separated),
-          # then copy back what they have: one tar a run (logs, curves, summaries) and each finished seed's policy
+          # then copy back what they have: one tar a run (logs, curves, summaries; not the resume checkpoints' dataset
+          # rings, 2.2 GB a state run, which made the tar too big to come back) and each finished seed's policy
           # (8.5 MB for DAgger's 1024 x 3) as NAME-seed-S.msgpack, once (a call brings back at most 8 files of 16 MB)
           names=${NAMES:-${RECIPE:?RECIPE or NAMES as given to train-seeds}}; t=0
           for n in $names; do run=$HOME/runs/seeds-$n
             while kill -0 "$(cat "$run.pid")" 2>/dev/null && [ "$t" -lt "${WAIT:-570}" ]; do sleep 5; t=$((t + 5)); done
           done
           for n in $names; do run=$HOME/runs/seeds-$n
-            (cd "$HOME/runs" && tar czf "$OUT/$n.tgz" --exclude='*.msgpack' --exclude='*.parquet' --exclude='*.rrd' \
+            (cd "$HOME/runs" && tar czf "$OUT/$n.tgz" --exclude='*.msgpack' --exclude='*.f32' --exclude='*.parquet' --exclude='*.rrd' \
               "seeds-$n.log" "seeds-$n")
             for d in "$run"/seed-*; do [ -f "$d/eval/summary.json" ] && [ ! -f "$d/sent" ] && [ "${POLICIES:-1}" = 1 ] && \
               cp "$d/policy.msgpack" "$OUT/$n-$(basename "$d").msgpack" && touch "$d/sent"; done
