@@ -39,6 +39,8 @@ def low_after(curve: list[dict], risen: float = RISEN) -> float | None:
 
 def row(run: Path) -> dict:
     """One finished run's line: eval's held-out rate (what to report) and the trainer's own judgement."""
+    if not (run / "summary.json").is_file():  # e.g. a run cut off with the machine: only its first fits or checkpoints
+        raise ValueError("no summary.json: the run did not finish")
     s = json.loads((run / "summary.json").read_text())
     ev = s.get("eval")
     if ev is None:

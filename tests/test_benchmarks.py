@@ -111,7 +111,7 @@ def _has(module: str) -> bool:
 def test_train_seeds_reports_every_committed_seed_run_and_their_spread(tmp_path):
     """The committed DAgger-from-state runs (seed 0; seed 1, last and best) aggregated as one result: each row is
     eval's held-out count over its episodes, the mean / sd / min are those of the three rates, and a run folder
-    without a finished eval is listed as failed (exit 1), not dropped or averaged in."""
+    without a finished eval, or without a summary at all, is listed as failed (exit 1), not dropped or averaged in."""
     import numpy as np
 
     from benchmarks import train_seeds
@@ -124,7 +124,11 @@ def test_train_seeds_reports_every_committed_seed_run_and_their_spread(tmp_path)
     s = json.loads((runs[0] / "summary.json").read_text())
     del s["eval"]
     (cut / "summary.json").write_text(json.dumps(s))
-    rc = train_seeds.main(["--collect", *map(str, runs), str(cut), "--out", str(tmp_path / "agg"), "--goal", "0.95"])
+    gone = tmp_path / "gone"  # a run cut off with its machine: its first fits written, no summary
+    gone.mkdir()
+    (gone / "first_fits.json").write_text('{"kept": 0, "losses": [0.003]}')
+    rc = train_seeds.main(["--collect", *map(str, runs), str(cut), str(gone), "--out", str(tmp_path / "agg"),
+                           "--goal", "0.95"])
     assert rc == 1
     out = json.loads((tmp_path / "agg" / "seeds.json").read_text())
     evals = [json.loads((r / "summary.json").read_text())["eval"] for r in runs]
@@ -133,7 +137,8 @@ def test_train_seeds_reports_every_committed_seed_run_and_their_spread(tmp_path)
     agg = out["aggregate"]
     assert agg["n_seeds"] == 3 and agg["mean"] == pytest.approx(rates.mean()) and agg["min"] == rates.min()
     assert agg["sd"] == pytest.approx(rates.std(ddof=1)) and agg["seeds_at_goal"] == int((rates >= 0.95).sum())
-    assert len(out["failed"]) == 1 and "cut" in out["failed"][0]
+    assert len(out["failed"]) == 2 and "cut" in out["failed"][0] and "did not finish" in out["failed"][0]
+    assert "gone" in out["failed"][1] and "no summary.json: the run did not finish" in out["failed"][1]
     table_rows = [line for line in (tmp_path / "agg" / "seeds.md").read_text().splitlines() if line[:3] in ("| 0", "| 1")]
     assert len(table_rows) == 3  # every run, the two of seed 1 included
 
