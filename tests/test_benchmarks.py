@@ -186,6 +186,7 @@ def test_first_fit_is_the_first_fit_of_a_training_run(tmp_path):
 
 
 
+@pytest.mark.slow  # the fast loop keeps the ring's own tests (test_dagger_ring.py); this times the benchmark
 def test_dagger_host_work_measures_the_ring_and_the_checkpoint_at_tiny_sizes(tmp_path):
     """benchmarks/dagger_host_work.py runs at tiny sizes: one row per iteration, samples of different counts and no
     program compiled after the first iteration; the checkpoint's writer timed beside a main-thread loop."""
