@@ -15,7 +15,7 @@ import platform
 from mjx_pusht.backends.results import Rollouts
 from mjx_pusht.errors import MjxPushtError
 
-BACKENDS = ("auto", "cpu", "mjx-jax", "mjx-warp")
+BACKENDS = ("auto", "cpu", "mjx-jax", "mjx-warp", "gym-pusht")  # gym-pusht: the peer itself, its task's episodes only
 IMPL = {"mjx-jax": "jax", "mjx-warp": "warp"}  # MJX backend name -> mjx.put_model's impl
 
 

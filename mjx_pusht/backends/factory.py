@@ -13,6 +13,10 @@ def make_backend(name: str, scenario, **kwargs) -> Backend:
         from mjx_pusht.backends.cpu import CpuBackend
 
         return CpuBackend(scenario, nthread=kwargs.get("nthread"), workers=kwargs.get("workers", 1))
+    if name == "gym-pusht":
+        from mjx_pusht.backends.gym_pusht import GymPushtBackend
+
+        return GymPushtBackend(scenario)
     from mjx_pusht.backends.mjx import MjxBackend
 
     kwargs.pop("nthread", None)

@@ -18,24 +18,27 @@ def cmd_compare(args) -> int:
     if args.evals:
         return _compare_evals(args)
     seeds = parse_seeds(args.seeds)
-    if args.backend not in ("mjx-jax", "mjx-warp"):
-        raise BackendError(f"compare takes --backend mjx-jax or mjx-warp, not {args.backend!r}")
-    controller = None
-    if args.controller:  # a controller that cannot load is a one-line error before anything is written
-        from mjx_pusht.task.controllers import load
+    from mjx_pusht.task.tasks import get as get_task
 
-        controller = load(args.controller)
-    out = claim_out_dir(args.out, "compare", {k: getattr(args, k) for k in (
-        "seeds", "backend", "controller", "reset", "max_steps", "root_cause", "tolerance", "iterations")},
-        replace=args.replace)
+    task = get_task(args.task)
+    others = ("mjx-jax", "mjx-warp", "gym-pusht") if task.name == "gym-pusht" else ("mjx-jax", "mjx-warp")
+    if args.backend not in others:
+        raise BackendError(f"compare --task {task.name} takes --backend {', '.join(others)}, not {args.backend!r}")
+    if task.name != "chapter" and not args.controller:
+        raise UsageError(f"compare --task {task.name} compares a controller's episodes: give --controller "
+                         "(expert: the task's expert)")
+    reset = task.check_reset(args.reset)
+    # a controller that cannot load is a one-line error before anything is written
+    controller = task.controller(args.controller) if args.controller else None
+    out = claim_out_dir(args.out, "compare", {**{k: getattr(args, k) for k in (
+        "seeds", "backend", "controller", "max_steps", "root_cause", "tolerance", "iterations")}, "reset": reset,
+        **({"task": task.name} if task.name != "chapter" else {})}, replace=args.replace)
     banner = Banner("compare")
     if controller is not None:
         from mjx_pusht.backends.cpu import default_threads
         from mjx_pusht.study.closed_loop import compare_episodes
-        from mjx_pusht.task.episode import Episode
-
-        r = compare_episodes(seeds, IMPL[args.backend], out, controller=controller,
-                             reset=args.reset, episode=Episode(max_steps=args.max_steps), workers=default_threads())
+        r = compare_episodes(seeds, IMPL.get(args.backend, args.backend), out, controller=controller, task=task.name,
+                             reset=reset, episode=task.episode(max_steps=args.max_steps), workers=default_threads())
         _print_episodes(r, out)
         banner.done()
         return 0

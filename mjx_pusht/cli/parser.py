@@ -112,7 +112,8 @@ REPLACE_HELP = "overwrite --out even if it holds another command's, or other see
 def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str) -> None:
     """The options every batch command shares: seeds, backend, scene, output, chunks, recording, parameters."""
     p.add_argument("--seeds", default=seeds, help=f"N (0..N-1), A:B, or a,b,c (default {seeds})")
-    p.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
+    p.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)"
+                   + ("; gym-pusht: gym-pusht 0.1.8 itself, for --task gym-pusht" if name == "eval" else ""))
     p.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
     p.add_argument("--out", type=_folder, default=Path(f"outputs/{name}"))
     p.add_argument("--chunk", type=_positive, default=None, help=f"{rows} per batch (default: by backend)")
@@ -124,6 +125,15 @@ def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str)
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
                    help="sweep a physical parameter as a grid: kv, tee_damping, tee_frictionloss, tee_mass; "
                         "VALUES is a,b,c, lo:hi:n (evenly spaced) or ~lo:hi:n (n random draws) (repeatable)")
+
+
+def _task_args(p: argparse.ArgumentParser, reset_help: str) -> None:
+    """--task and the chapter task's --reset (task/tasks.py)."""
+    from mjx_pusht.task.tasks import TASKS
+
+    p.add_argument("--task", choices=tuple(TASKS), default="chapter",
+                   help="; ".join(f"{t.name}: {t.about}" for t in TASKS.values()) + " (default chapter)")
+    p.add_argument("--reset", choices=("task", "chapter"), default=None, help=reset_help)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -171,7 +181,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "as package.module:function")
     e.add_argument("--action", choices=("velocity", "position"), default=None,
                    help="what your controller's actions mean (default velocity; built-ins command velocities)")
-    e.add_argument("--reset", choices=("task", "chapter"), default="task", help="start distribution (default task)")
+    _task_args(e, "start distribution of the chapter task (default task; gym-pusht's task has its own)")
     e.add_argument("--max-steps", type=_steps, default=300, help="control steps before truncation (default 300)")
     e.add_argument("--frame-skip", type=_frame_skip, default=10, help="physics steps per control step (default 10)")
     e.add_argument("--video", type=Path, default=None, metavar="FILE.gif|FILE.mp4",
@@ -259,7 +269,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--controller", default=None,
                    help="compare closed-loop episodes of this controller instead (e.g. expert): success rates, "
                         "per-seed agreement, final poses")
-    c.add_argument("--reset", choices=("task", "chapter"), default="task", help="closed loop: start distribution")
+    _task_args(c, "closed loop: start distribution of the chapter task (default task)")
     c.add_argument("--max-steps", type=_steps, default=300, help="closed loop: control steps per episode")
     c.add_argument("--evals", nargs=2, type=Path, metavar=("EVAL_DIR", "EVAL_DIR"), default=None,
                    help="pair two finished eval folders of the same controller and seeds, one run on the cpu backend "

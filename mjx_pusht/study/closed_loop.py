@@ -27,22 +27,32 @@ def paired_diff(a: np.ndarray, b: np.ndarray, z: float = 1.959964) -> dict:
     return {"difference": diff, "ci95": [diff - z * se, diff + z * se], "only_mjx": only_a, "only_cpu": only_b}
 
 
-def compare_episodes(seeds: np.ndarray, impl: str, out: Path, *, controller=None, reset: str = "task",
-                     episode=None, progress=print, workers: int = 1) -> dict:
-    """The controller (default: the expert) on the same seeds on the CPU reference and on MJX:
-    success rates with intervals, per-seed agreement, and final-pose differences against the CPU's
-    own sensitivity (the same CPU run from float32-rounded starts, the rounding MJX starts from)."""
-    from mjx_pusht.task.controllers import Expert, describe
-    from mjx_pusht.task.episode import Episode
+def compare_episodes(seeds: np.ndarray, impl: str, out: Path, *, controller=None, reset: str | None = None,
+                     episode=None, progress=print, workers: int = 1, task: str = "chapter") -> dict:
+    """The controller (default: the task's expert) on the same seeds on the CPU reference and on MJX (`impl`:
+    jax or warp) or, for the gym-pusht task, gym-pusht itself (`impl` "gym-pusht"): success rates with
+    intervals, per-seed agreement, and final-pose differences against the CPU's own sensitivity (the same CPU
+    run from float32-rounded starts, the rounding MJX starts from)."""
+    from mjx_pusht.backends.factory import make_backend
+    from mjx_pusht.task.controllers import describe
     from mjx_pusht.task.reset import start_poses
+    from mjx_pusht.task.tasks import get as get_task
 
-    controller = controller or Expert()
-    episode = episode or Episode()
+    the_task = get_task(task)
+    reset = the_task.check_reset(reset)
+    controller = controller or the_task.controller("expert")
+    episode = episode or the_task.episode()
     seeds = np.asarray(seeds, np.int64)
     t0 = time.perf_counter()
-    progress(f"[compare] {describe(controller)} on {reset} starts: MJX-{impl} ...")
-    backend = MjxBackend(Scenario(reset=reset, controller=controller, episode=episode), impl)
-    mjx_r = backend.run(seeds, batch=len(seeds))
+    name = impl if impl == "gym-pusht" else f"mjx-{impl}"
+    progress(f"[compare] {describe(controller)} on {task}'s {reset} starts: {name} ...")
+    scenario = Scenario(the_task.scene(), reset=reset, controller=controller, episode=episode)
+    backend = make_backend(name, scenario) if impl == "gym-pusht" else MjxBackend(scenario, impl)
+    try:
+        # (gym-pusht checks that its own seeded starts are the ones task/reset.py draws)
+        mjx_r = backend.run(seeds, batch=len(seeds), poses=start_poses(seeds, reset=reset) if impl == "gym-pusht" else None)
+    finally:
+        backend.close()
     scene = backend.simulated_scene
     sc = Scenario(scene, reset=reset, controller=controller, episode=episode)
     from mjx_pusht.backends.cpu import FeedbackPool
@@ -57,8 +67,8 @@ def compare_episodes(seeds: np.ndarray, impl: str, out: Path, *, controller=None
     finally:
         if pool is not None:
             pool.close()
-    report = episodes_report(mjx_r, cpu_r, jit, impl=f"mjx-{impl}", device=backend.device, pusher_shape=scene.pusher,
-                             controller=describe(controller), reset=reset,
+    report = episodes_report(mjx_r, cpu_r, jit, impl=name, device=backend.device, pusher_shape=backend.pusher,
+                             controller=describe(controller), task=task, reset=reset,
                              episode={"frame_skip": episode.frame_skip, "max_steps": episode.max_steps,
                                       "success": episode.success}, versions=versions())
     report["wall_seconds"] = round(time.perf_counter() - t0, 1)
@@ -92,7 +102,7 @@ def episodes_report(mjx_r, cpu_r, jit=None, **meta) -> dict:
 
 
 # What two eval runs must share to be paired row by row: everything that makes an episode but the backend.
-_SAME = ("controller_sha256", "action", "reset", "break_it", "max_steps", "frame_skip", "params")
+_SAME = ("controller_sha256", "action", "task", "reset", "break_it", "max_steps", "frame_skip", "params")
 # What the pairing reads from each eval's summary.json (and its config block)
 _NEEDS = ("backend", "controller")
 _NEEDS_CONFIG = ("backend", "controller", "reset", "max_steps", "frame_skip")
@@ -131,7 +141,7 @@ def evals_report(first: Path, second: Path) -> dict:
             raise ConfigError(f"{table} is not an eval's table ({type(e).__name__}: {str(e).splitlines()[0]})") from None
         runs.append((folder, s, rows))
     if sorted(s["config"]["backend"] == "cpu" for _, s, _ in runs) != [False, True]:
-        raise ConfigError("--evals pairs one eval on the cpu backend with one on MJX: these ran on "
+        raise ConfigError("--evals pairs one eval on the cpu backend with one on MJX or gym-pusht: these ran on "
                           f"{runs[0][1]['config']['backend']} and {runs[1][1]['config']['backend']}")
     (cpu_dir, s_cpu, cpu_r), (mjx_dir, s_mjx, mjx_r) = sorted(runs, key=lambda r: r[1]["config"]["backend"] != "cpu")
     c_cpu, c = s_cpu["config"], s_mjx["config"]

@@ -10,13 +10,15 @@ from pathlib import Path
 import numpy as np
 
 
-def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str | None = None, reset: str = "task",
+def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str | None = None, task: str = "chapter",
+             reset: str | None = None,
              break_it: str = "none", max_steps: int = 300, frame_skip: int = 10, params=(), chunk: int | None = None,
              resume: bool = False, replace: bool = False, progress: bool = True, record: int = 4, rerun: bool = True,
              video: Path | None = None, video_episodes: int = 16, video_size: int = 128) -> dict:
     """Run `controller` (a `task.controllers.load` spec: `expert`, `policy:PATH`, ...) for an episode from each
     seed's start state (`seeds`: an array, or a spec such as "512" or "A:B") on `backend`, into `out`; returns
-    the summary (also written as summary.json). `params`: (name, values) pairs swept as a grid.
+    the summary (also written as summary.json). `task`: task/tasks.TASKS (`expert` is its expert; `reset` None:
+    its default starts). `params`: (name, values) pairs swept as a grid.
 
     Bad input (a controller that cannot load, a video name without an encoder) fails before anything is
     written. Interrupted, the finished chunks stay in `out` (finished with `resume=True`) and the
@@ -25,20 +27,21 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
     from mjx_pusht.backends.cpu import default_threads
     from mjx_pusht.io.outputs import atomic_write_json
     from mjx_pusht.io.record import record_episodes
-    from mjx_pusht.model.scene import SceneSpec
     from mjx_pusht.scenario import Scenario
     from mjx_pusht.study.batch import record as record_rows
     from mjx_pusht.study.batch import start_batch, warn_mujoco
     from mjx_pusht.study.seeds import parse_seeds
     from mjx_pusht.study.stats import summarize_episodes
     from mjx_pusht.study.sweep import finish, run_sweep
-    from mjx_pusht.task.controllers import describe, load
-    from mjx_pusht.task.episode import Episode
+    from mjx_pusht.task.controllers import describe
+    from mjx_pusht.task.tasks import get as get_task
 
     seeds = parse_seeds(seeds) if isinstance(seeds, str) else np.asarray(seeds, dtype=np.int64)
     params = tuple((n, tuple(v)) for n, v in params)
-    episode = Episode(frame_skip=frame_skip, max_steps=max_steps)
-    spec, controller = controller, load(controller, action_type=action, frame_skip=frame_skip)
+    the_task = get_task(task)
+    reset = the_task.check_reset(reset)
+    episode = the_task.episode(max_steps, frame_skip)
+    spec, controller = controller, the_task.controller(controller, action=action, frame_skip=frame_skip)
     if video is not None:
         from mjx_pusht.io.video import check_grid, check_path
 
@@ -46,14 +49,14 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
         check_grid(video_size, min(video_episodes, len(seeds)), max_steps)
     name, why = resolve(backend)
     config = {"command": "eval", "backend": name, "controller": spec, "action": controller.action_type,
-              "reset": reset, "break_it": break_it, "max_steps": max_steps,
+              "task": task, "reset": reset, "break_it": break_it, "max_steps": max_steps,
               "frame_skip": frame_skip, "params": [[n, list(v)] for n, v in params],
               "controller_sha256": policy_sha256(spec)}
-    scenario = Scenario(SceneSpec(break_it), params=params, reset=reset, controller=controller, episode=episode)
+    scenario = Scenario(the_task.scene(break_it), params=params, reset=reset, controller=controller, episode=episode)
     reads = [spec.removeprefix("policy:")] if spec.startswith("policy:") else []  # never replaced by this run
     row_seeds, combos, out, banner, clock, backend = start_batch("eval", out, seeds, name, why, config, scenario,
                                                                  replace=replace, resume=resume, reads=reads)
-    print(f"controller: {describe(controller)}; reset: {reset}; {len(seeds)} episodes of at most "
+    print(f"controller: {describe(controller)}; task: {task}; reset: {reset}; {len(seeds)} episodes of at most "
           f"{max_steps} control steps x {frame_skip} physics steps; device: {backend.device}; "
           f"pusher shape: {backend.pusher}")
     # small chunks on the CPU keep the progress bar (and --resume) fine-grained

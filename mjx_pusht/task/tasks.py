@@ -1,0 +1,115 @@
+"""The tasks: which PushT a run is on, as data the one control step reads.
+
+A task names the scene variant it runs on, its reset (seed -> start), what an action means on that
+scene, when an episode ends, and its expert. There are two:
+
+- `chapter`: this project's PushT, the chapter's scene (joint friction, velocity servos), its `task`
+  start distribution (or the chapter's own `chapter` reset), an episode over at reset if it starts covered.
+- `gym-pusht`: the task the field scores PushT on, gym-pusht 0.1.8's: the drop-in's scene (gym-pusht's
+  pymunk physics in MJCF, model/gym_pusht_scene.py), gym-pusht's seed -> start, actions as targets
+  tracked by its PD law, success at coverage 0.95, 300 control steps, and a start on the goal scored by
+  the first step (as gym-pusht does).
+
+Every backend runs either task through the same rollout; `eval --backend gym-pusht` runs the second in
+gym-pusht itself. A controller written for velocities runs on gym-pusht's scene through `as_targets`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from mjx_pusht.errors import ConfigError
+from mjx_pusht.model.gym_pusht import KP, KV
+from mjx_pusht.task.controllers import Controller
+from mjx_pusht.task.rules import SUCCESS_COVERAGE, array_namespace
+
+# s: a PD-tracked pusher (gym-pusht's law, kp 100, kv 20) moving at velocity v settles this far behind its target,
+# so a velocity command v becomes the target pusher + LEAD v
+LEAD = KV / KP
+
+
+@dataclasses.dataclass(frozen=True)
+class Task:
+    name: str
+    variant: str  # the scene variant (model/scene.VARIANTS)
+    resets: tuple[str, ...]  # the start distributions it takes (task/reset.RESETS), its default first
+    action_type: str  # what an action means on its scene (task/rules.ACTION_TYPES)
+    expert: str  # the built-in controller that solves it (task/controllers.load)
+    end_covered_start: bool  # a start already covered: over at reset (True), or scored by the first step
+    success: float = SUCCESS_COVERAGE
+    max_steps: int = 300
+    frame_skip: int = 10
+    about: str = ""
+
+    @property
+    def reset(self) -> str:
+        return self.resets[0]
+
+    def check_reset(self, reset: str | None) -> str:
+        """The reset a run uses: `reset`, or the task's own when None; one the task does not take is an error."""
+        if reset is None:
+            return self.reset
+        if reset not in self.resets:
+            raise ConfigError(f"the {self.name} task starts from {' or '.join(self.resets)}, not reset {reset!r}")
+        return reset
+
+    def scene(self, break_it: str = "none"):
+        from mjx_pusht.model.scene import SceneSpec
+
+        return SceneSpec(break_it, variant=self.variant)
+
+    def episode(self, max_steps: int | None = None, frame_skip: int | None = None):
+        from mjx_pusht.task.episode import Episode
+
+        return Episode(frame_skip=self.frame_skip if frame_skip is None else frame_skip,
+                       max_steps=self.max_steps if max_steps is None else max_steps, success=self.success,
+                       end_covered_start=self.end_covered_start)
+
+    def controller(self, spec: str, *, action: str | None = None, frame_skip: int = 10) -> Controller:
+        """The controller `spec` names (`expert`: this task's expert), commanding what this task's scene takes."""
+        from mjx_pusht.task.controllers import load
+
+        ctrl = load(self.expert if spec == "expert" else spec, action_type=action, frame_skip=frame_skip)
+        return as_targets(ctrl) if self.action_type == "target" and ctrl.action_type != "target" else ctrl
+
+
+TASKS = {
+    "chapter": Task("chapter", "chapter", ("task", "chapter"), "velocity", "expert", end_covered_start=True,
+                    about="this project's PushT: the chapter's scene and its task starts"),
+    "gym-pusht": Task("gym-pusht", "gym-pusht", ("gym-pusht",), "target", "expert-gym-pusht", end_covered_start=False,
+                      about="gym-pusht 0.1.8's PushT: its physics, starts, PD-tracked targets and success rule"),
+}
+
+
+def get(name: str) -> Task:
+    if name not in TASKS:
+        raise ConfigError(f"unknown task {name!r}; choose from {', '.join(TASKS)}")
+    return TASKS[name]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class AsTargets(Controller):
+    """A velocity (or position) controller on a scene whose pusher takes targets: a velocity v becomes the target
+    pusher + LEAD v that gym-pusht's PD law settles to moving at v; a position is the target itself."""
+
+    inner: Controller | None = None
+    action_type: str = "target"
+
+    @property
+    def pixels(self) -> int:
+        return self.inner.pixels
+
+    def init(self, key):
+        return self.inner.init(key)
+
+    def act(self, carry, obs, t, key):
+        action, carry = self.inner.act(carry, obs, t, key)
+        if self.inner.action_type == "position":
+            return action, carry
+        xp = array_namespace(obs["state"])
+        pusher = obs["state"][..., 0:2]
+        return pusher + LEAD * xp.astype(xp.asarray(action), pusher.dtype), carry
+
+
+def as_targets(ctrl: Controller) -> Controller:
+    return AsTargets(name=ctrl.name, inner=ctrl)

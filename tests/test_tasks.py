@@ -1,0 +1,119 @@
+"""The tasks (task/tasks.py) and gym-pusht itself as a backend (backends/gym_pusht.py).
+
+The gym-pusht backend is checked against gym-pusht's own env driven by a plain loop written here, the way a
+gym-pusht user writes it: its observations in, its pixel targets out, its `info` read back."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mjx_pusht import make_backend
+from mjx_pusht.errors import MjxPushtError
+from mjx_pusht.model import gym_pusht as frame
+from mjx_pusht.scenario import Scenario
+from mjx_pusht.study.evaluate import evaluate
+from mjx_pusht.task.reset import start_poses
+from mjx_pusht.task.tasks import LEAD, TASKS, get
+
+gym_pusht = pytest.importorskip("gym_pusht")  # a test extra: pip install 'mjx-pusht[test]'
+
+SEEDS = np.array([3, 11, 12, 40])
+STEPS = 40
+
+
+def sweep_targets(obs, t):
+    """A user's controller in the world frame (metres): circle the goal at 12 cm, half a turn in 40 steps, so the
+    pusher sweeps through the arena's middle, meeting the T on some seeds. An open loop in t: both runs get the same
+    targets to the bit, whatever their states."""
+    a = math.pi * t / STEPS
+    return np.broadcast_to(np.array([0.12 * math.cos(a), 0.12 * math.sin(a)]), obs["state"].shape[:-1] + (2,))
+
+
+def plain_gym_pusht_loop(seed: int, steps: int) -> dict:
+    """gym-pusht's own env, as its users drive it: targets in pixels, success and coverage from its info."""
+    from gym_pusht.envs.pusht import PushTEnv
+
+    env = PushTEnv(obs_type="state")
+    env.reset(seed=seed)
+    out = {"success": False, "steps_to_success": -1, "length": 0, "best": 0.0}
+    for t in range(steps):
+        target = frame.to_px(sweep_targets({"state": np.zeros((1, 5))}, t))[0]
+        obs, _, terminated, _, info = env.step(np.clip(target, 0, 512))
+        out["length"], out["coverage"], out["best"] = t + 1, info["coverage"], max(out["best"], info["coverage"])
+        if info["is_success"] and not out["success"]:
+            out["success"], out["steps_to_success"] = True, t + 1
+        if terminated:
+            break
+    out["block"] = obs[2:5]
+    return out
+
+
+def test_the_two_tasks_are_data_the_one_control_step_reads():
+    chapter, gym = TASKS["chapter"], TASKS["gym-pusht"]
+    assert (chapter.variant, chapter.reset, chapter.action_type) == ("chapter", "task", "velocity")
+    assert (gym.variant, gym.reset, gym.action_type) == ("gym-pusht", "gym-pusht", "target")
+    assert chapter.episode().end_covered_start and not gym.episode().end_covered_start
+    assert gym.episode().success == 0.95 and gym.episode().max_steps == 300  # gym-pusht's rule and its TimeLimit
+    with pytest.raises(MjxPushtError, match="unknown task"):
+        get("pusht-v9")
+    with pytest.raises(MjxPushtError, match="starts from gym-pusht"):
+        gym.check_reset("chapter")
+
+
+def test_a_velocity_controller_commands_the_target_gym_pushts_pd_law_settles_to_at_that_velocity():
+    from mjx_pusht.task.controllers import Random
+
+    ctrl = TASKS["gym-pusht"].controller("random")
+    assert ctrl.action_type == "target"
+    obs = {"state": np.array([[0.1, -0.2, 0.0, 0.0, 0.3]])}
+    key = np.zeros((1, 2), np.uint32)
+    target, _ = ctrl.act(ctrl.init(key), obs, 5, key)
+    velocity, _ = Random().act(None, obs, 5, key)
+    np.testing.assert_allclose(target, obs["state"][:, 0:2] + 0.2 * velocity)  # kv / kp = 20 / 100 s
+    assert LEAD == 0.2
+
+
+def test_the_gym_pusht_backend_is_gym_pushts_own_env_under_the_same_targets():
+    task = get("gym-pusht")
+    from mjx_pusht.task.controllers import FromFunction
+
+    sc = Scenario(task.scene(), reset=task.reset, episode=task.episode(max_steps=STEPS),
+                  controller=FromFunction(name="sweep", action_type="target", fn=sweep_targets))
+    backend = make_backend("gym-pusht", sc)
+    r = backend.run(SEEDS, poses=start_poses(SEEDS, reset="gym-pusht"))
+    backend.close()
+    moved = 0
+    for i, seed in enumerate(SEEDS):
+        ref = plain_gym_pusht_loop(int(seed), STEPS)
+        assert bool(r.episode["success"][i]) == ref["success"]
+        assert r.episode["steps_to_success"][i] == ref["steps_to_success"]
+        assert r.episode["length"][i] == ref["length"]
+        assert r.episode["coverage"][i] == ref["coverage"] and r.episode["best_coverage"][i] == ref["best"]
+        origin, angle = frame.pose_to_px(r.final[i : i + 1])
+        np.testing.assert_allclose(origin[0], ref["block"][:2], atol=1e-9)
+        assert abs((angle[0] - ref["block"][2] + math.pi) % (2 * math.pi) - math.pi) < 1e-9
+        moved += not np.allclose(r.final[i], r.start[i])
+    assert moved >= 1  # the sweep met the T: the comparison covered contact, not only a pusher in free space
+
+
+def test_eval_runs_gym_pushts_task_on_the_drop_in_and_on_gym_pusht_from_the_same_starts(tmp_path):
+    runs = {b: evaluate("zero", SEEDS, tmp_path / b, backend=b, task="gym-pusht", max_steps=3, rerun=False,
+                        progress=False) for b in ("cpu", "gym-pusht")}
+    for b, s in runs.items():
+        assert s["config"]["task"] == "gym-pusht" and s["config"]["reset"] == "gym-pusht" and s["backend"] == b
+    from mjx_pusht.io.outputs import read_table
+
+    cpu, gym = (read_table(tmp_path / b / "per_episode.parquet") for b in ("cpu", "gym-pusht"))
+    for col in ("start_x", "start_y", "start_yaw", "pusher_start_x", "pusher_start_y"):
+        np.testing.assert_allclose(cpu[col], gym[col], atol=1e-12)
+    # a pusher that holds still leaves the T where it started in both
+    np.testing.assert_allclose(gym["tee_final_x"], gym["start_x"], atol=1e-12)
+
+
+def test_the_gym_pusht_backend_runs_gym_pushts_task_only():
+    with pytest.raises(MjxPushtError, match="gym-pusht's task only"):
+        make_backend("gym-pusht", Scenario(TASKS["chapter"].scene(), reset="task",
+                                           controller=TASKS["chapter"].controller("zero")))
