@@ -117,3 +117,19 @@ def test_the_gym_pusht_backend_runs_gym_pushts_task_only():
     with pytest.raises(MjxPushtError, match="gym-pusht's task only"):
         make_backend("gym-pusht", Scenario(TASKS["chapter"].scene(), reset="task",
                                            controller=TASKS["chapter"].controller("zero")))
+
+
+def test_the_functional_env_of_gym_pushts_task_starts_and_ends_episodes_as_gym_pusht_does():
+    from gym_pusht.envs.pusht import PushTEnv as Theirs
+
+    from mjx_pusht.envs.functional import PushTEnv
+
+    env = PushTEnv.for_task("gym-pusht")
+    assert (env.reset_kind, env.action_type, env.episode.max_steps) == ("gym-pusht", "target", 300)
+    s = env.reset(SEEDS)
+    for i, seed in enumerate(SEEDS):
+        theirs = Theirs(obs_type="state")
+        obs, _ = theirs.reset(seed=int(seed))
+        np.testing.assert_allclose(frame.to_px(s.obs["state"][i : i + 1, 0:2])[0], obs[0:2], atol=1e-9)
+        origin, _ = frame.pose_to_px(s.obs["state"][i : i + 1, 2:5])
+        np.testing.assert_allclose(origin[0], obs[2:4], atol=1e-9)

@@ -1,6 +1,6 @@
 """PushT as a functional environment, in the style of gymnax and MuJoCo Playground.
 
-    env = PushTEnv(backend="mjx-jax")          # or "cpu", "mjx-warp"
+    env = PushTEnv(backend="mjx-jax")          # or "cpu", "mjx-warp"; PushTEnv.for_task("gym-pusht", ...)
     state = env.reset(np.arange(1024))         # one episode per seed
     state = env.step(state, actions)           # actions (N, 2); every field of state is (N, ...)
 
@@ -171,6 +171,14 @@ class PushTEnv:
             self._renderers, self._jitted, self._templates = {}, {}, {}
             self.step = self._step_mjx
         self.layout = QposLayout.of(self.model)
+
+    @classmethod
+    def for_task(cls, task: str, backend: str = "cpu", max_steps: int | None = None, **kwargs) -> "PushTEnv":
+        """A task's env (task/tasks.TASKS): its scene, starts, actions and episodes, e.g. gym-pusht's on the batch."""
+        from mjx_pusht.task.tasks import get
+
+        t = get(task)
+        return cls(backend, t.reset, t.action_type, t.episode(max_steps), t.scene(), **kwargs)
 
     @property
     def renderer(self):
