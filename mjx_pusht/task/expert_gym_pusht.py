@@ -182,6 +182,10 @@ class ExpertGymPusht(Controller):
         view_k = chosen(xp.astype(in_view, dt)) > 0.5
         turn = xp.where(chosen(xp.astype(go_ccw, dt)) > 0.5, 1.0, -1.0) * xp.minimum(chosen(arc), self.orbit_step)
         free = xp.clip((distance_to_tee(s[..., 0:2], s[..., 2:5]) / frame.PX - AGENT_R - 1.0) / (self.margin - 1.0), 0.0, 1.0)
+        # (but where the walls cut the ring at the agent's own bearing, straight out is into a wall: go along)
+        r_q = ring(phi_q[..., None])[..., 0]
+        ring_q = xp.stack([cog_x + r_q * xp.cos(phi_q), cog_y + r_q * xp.sin(phi_q)], -1)
+        free = xp.where(xp.any((ring_q < LO) | (ring_q > HI), axis=-1), 1.0, free)
         ahead = phi_q + turn * free
         r_ahead = ring(ahead[..., None])[..., 0]
         way = xp.stack([cog_x + r_ahead * xp.cos(ahead), cog_y + r_ahead * xp.sin(ahead)], -1)
