@@ -17,13 +17,12 @@ import dataclasses
 import importlib
 import math
 from collections.abc import Callable
-from typing import ClassVar
 
 import numpy as np
 
-from mjx_pusht.errors import MjxPushtError
+from mjx_pusht.task.controller_base import Controller, ControllerError
+from mjx_pusht.task.expert_gym_pusht import ExpertGymPusht
 from mjx_pusht.task.rules import (
-    ACTION_TYPES,
     CTRL_LIMIT,
     T_REACH,
     array_namespace,
@@ -32,12 +31,7 @@ from mjx_pusht.task.rules import (
 )
 from mjx_pusht.task.schedule import Schedule
 
-BUILTIN = ("zero", "nudge", "random", "expert")
-
-
-class ControllerError(MjxPushtError, ValueError):
-    """A controller cannot be found, loaded or used; the message says why."""
-
+BUILTIN = ("zero", "nudge", "random", "expert", "expert-gym-pusht")
 
 
 def seed_key(seeds) -> np.ndarray:
@@ -63,33 +57,6 @@ def uniform_hash(key, t, lane: int):
     with np.errstate(over="ignore"):  # wrap-around is the point (uint32 arithmetic mod 2**32)
         h = _mix32(key[..., 0] ^ _mix32(key[..., 1] ^ _mix32(t * xp.asarray(2, dtype=xp.uint32) + salt, xp), xp), xp)
     return xp.astype(h >> 8, xp.float32) * (1.0 / (1 << 24))
-
-
-@dataclasses.dataclass(frozen=True)
-class Controller:
-    """The base: stateless, zero action. Subclasses override `act` (and `init` to keep state)."""
-
-    name: str = "zero"
-    action_type: str = "velocity"
-    # The side of the top-camera image the controller looks at, in obs["pixels"] (each backend renders it for
-    # every control step; render/pixels.py); 0: it reads the state alone, and nothing is rendered.
-    pixels: ClassVar[int] = 0
-
-    def __post_init__(self) -> None:
-        if self.action_type not in ACTION_TYPES:
-            raise ControllerError(f"unknown action type {self.action_type!r}; choose from {', '.join(ACTION_TYPES)}")
-
-    def init(self, key):
-        xp = array_namespace(key)
-        return xp.zeros(key.shape[:-1], dtype=xp.int32)
-
-    def act(self, carry, obs, t, key):
-        xp = array_namespace(obs["state"])
-        return xp.zeros(obs["state"].shape[:-1] + (2,), dtype=obs["state"].dtype), carry
-
-    def open_loop(self, steps: int, frame_skip: int) -> np.ndarray | None:
-        """(steps, 2) velocity commands when the action ignores the observation; None for feedback."""
-        return None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -324,11 +291,14 @@ def load(spec: str, *, action_type: str | None = None, schedule: Schedule = Sche
     """A built-in controller by name, a registered `PREFIX:ARGUMENT` (a trained policy as `policy:PATH`), or a
     user's function as `package.module:function`."""
     if spec in BUILTIN:
-        if action_type not in (None, "velocity"):
-            raise ControllerError(f"the built-in controller {spec!r} commands velocities; --action position is for "
-                                  "your own controllers")
-        return {"zero": lambda: Zero(), "nudge": lambda: Nudge(schedule=schedule, frame_skip=frame_skip),
-                "random": lambda: Random(), "expert": lambda: Expert()}[spec]()
+        ctrl = {"zero": lambda: Zero(), "nudge": lambda: Nudge(schedule=schedule, frame_skip=frame_skip),
+                "random": lambda: Random(), "expert": lambda: Expert(),
+                "expert-gym-pusht": lambda: ExpertGymPusht()}[spec]()
+        if action_type not in (None, ctrl.action_type):
+            commands = {"velocity": "velocities", "position": "positions", "target": "targets"}[ctrl.action_type]
+            raise ControllerError(f"the built-in controller {spec!r} commands {commands}; --action {action_type} is "
+                                  "for your own controllers")
+        return ctrl
     prefix = spec.partition(":")[0]
     if ":" in spec and prefix in _LOADERS:  # e.g. policy:PATH, a checkpoint written by `mjx-pusht train`
         return _LOADERS[prefix](spec, action_type=action_type)
