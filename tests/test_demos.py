@@ -97,3 +97,25 @@ def test_an_existing_dataset_is_kept_without_replace_and_bad_input_is_one_line(d
     assert {p: p.read_bytes() for p in demos.rglob("*.parquet")} == before
     assert main(["demos", "--controller", "nope", "--out", str(demos.parent / "other")]) == 1
     assert not (demos.parent / "other").exists()
+
+
+def test_successful_only_keeps_the_episodes_that_succeeded_and_counts_them_all(tmp_path):
+    from mjx_pusht.io.demos import write_demos
+
+    s = write_demos("expert", np.arange(8), tmp_path / "ds", backend="cpu", max_steps=90, successful_only=True,
+                    progress=False)
+    failed = set(s["failed_seeds"])
+    assert 0 < len(failed) < 8  # at 90 steps the expert has finished some episodes and not others: both kinds ran
+    eps = episodes(tmp_path / "ds")
+    assert s["written"] == len(eps) == 8 - len(failed) and s["success_rate"] == len(eps) / 8
+    assert all(e["next.success"][-1] and e["next.done"][-1] for e in eps)
+    # the image statistics count the kept episodes' frames alone (every 10th)
+    stats = json.loads((tmp_path / "ds" / "meta/stats.json").read_text())
+    assert stats["observation.image"]["count"] == [sum(len(e["index"][::10]) for e in eps)]
+
+
+def test_the_default_expert_solves_gym_pushts_task(tmp_path):
+    from mjx_pusht.io.demos import write_demos
+
+    s = write_demos("expert", np.arange(16), tmp_path / "ds", backend="cpu", progress=False)
+    assert s["controller"].startswith("expert-gym-pusht") and s["success_rate"] >= 15 / 16, s["failed_seeds"]

@@ -12,8 +12,10 @@ def add_parser(sub, *, positive, replace_help: str) -> None:
     d.add_argument("--seeds", default="100", help="N (0..N-1), A:B, or a,b,c: one episode per seed, episode i from "
                                                   "the i-th seed's gym-pusht start (default 100)")
     d.add_argument("--controller", default="expert",
-                   help="expert (default), zero, random, a trained policy as policy:PATH, or your own as "
-                        "package.module:function (its velocities become gym-pusht targets, pusher + 0.2 s x v)")
+                   help="expert (default: gym-pusht's task's expert), zero, random, a trained policy as policy:PATH, or "
+                        "your own as package.module:function (its velocities become gym-pusht targets, pusher + 0.2 s x v)")
+    d.add_argument("--successful-only", action="store_true",
+                   help="write only the episodes that succeeded (the run still reports every episode's outcome)")
     d.add_argument("--action", choices=("velocity", "position"), default=None,
                    help="what your controller's actions mean (default velocity; position: the target in metres)")
     d.add_argument("--backend", default="auto", help="auto, cpu or mjx-warp (default auto: the GPU batch if any)")
@@ -30,9 +32,14 @@ def cmd_demos(args) -> int:
     from mjx_pusht.study.seeds import parse_seeds
 
     s = write_demos(args.controller, parse_seeds(args.seeds), args.out, backend=args.backend, batch=args.batch,
-                    max_steps=args.max_steps, action=args.action, replace=args.replace, progress=args.progress)
-    print(f"{s['episodes']} episodes ({s['frames']} frames, success {s['success_rate']:.1%}) on {s['backend']} in "
-          f"{s['seconds']} s: LeRobot dataset in {s['root']}")
+                    max_steps=args.max_steps, action=args.action, replace=args.replace, progress=args.progress,
+                    successful_only=args.successful_only)
+    failed = s["failed_seeds"]
+    print(f"{s['controller']}: {s['episodes']} episodes on {s['backend']} in {s['seconds']} s, success "
+          f"{s['success_rate']:.1%}" + (f" (failed seeds: {', '.join(map(str, failed[:10]))}"
+                                        f"{', ...' if len(failed) > 10 else ''})" if failed else ""))
+    print(f"LeRobot dataset in {s['root']}: {s['written']} episodes, {s['frames']} frames"
+          + (" (the successful ones)" if args.successful_only else ""))
     print(f"train on it: lerobot-train --dataset.repo_id=local/mjx_pusht_demos --dataset.root={s['root']} "
           "--policy.type=diffusion --policy.push_to_hub=false")
     return 0

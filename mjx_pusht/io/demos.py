@@ -9,9 +9,11 @@ image and `agent_pos` before each action, the action in gym-pusht's units (an ab
 pixels), and the step's reward, done and success. The env is stepped with the action exactly as
 written (float32 pixels), so replaying an episode's actions in the drop-in reproduces its states.
 
-The controllers are this project's (world frame, metres): a velocity command v becomes the target
-a PD-tracked pusher settles to that velocity with, pusher + (kv / kp) v (gym-pusht's law,
-kp 100, kv 20); a position action (`--action position`) is the target itself.
+The episodes are gym-pusht's task (task/tasks.py), and `expert` is its expert. The controllers are this
+project's (world frame, metres), run as that task runs them (`Task.controller`): a target as it is, a velocity
+command v as the target a PD-tracked pusher settles to that velocity with, pusher + (kv / kp) v (gym-pusht's
+law, kp 100, kv 20), a position action (`--action position`) as the target itself. With `successful_only`
+the dataset keeps the episodes that succeeded (what LeRobot users train on); the summary counts both.
 """
 
 from __future__ import annotations
@@ -30,12 +32,12 @@ from mjx_pusht.model import gym_pusht as frame
 FPS = 10  # gym-pusht's control rate
 TASK = "Push the T-shaped block onto the T-shaped target."  # the task text of LeRobot's lerobot/pusht
 IMAGE_SIZE = 96
-LEAD = frame.KV / frame.KP  # s: a PD-tracked pusher moving at v settles this far behind its target
 SAMPLE = 10  # every 10th frame of an episode goes into the image statistics (LeRobot samples its own too)
 
 
 def targets_px(ctrl, carry, obs_px: dict, info: dict, t: int, key):
-    """The controller's actions for a batch as gym-pusht targets (float32 pixels), and its next carry."""
+    """The controller's actions (targets in metres: `Task.controller`) for a batch as gym-pusht targets (float32
+    pixels), and its next carry."""
     from mjx_pusht.task.rules import observe
 
     pusher = frame.to_world(np.asarray(info["pos_agent"], np.float64))
@@ -43,9 +45,7 @@ def targets_px(ctrl, carry, obs_px: dict, info: dict, t: int, key):
     tee = frame.pose_to_world(pose[:, 0:2], pose[:, 2])
     obs = observe(pusher, tee)
     action, carry = ctrl.act(carry, obs, t, key)
-    action = np.asarray(action, np.float64)
-    target = pusher + LEAD * action if ctrl.action_type == "velocity" else action
-    px = frame.to_px(target)
+    px = frame.to_px(np.asarray(action, np.float64))
     # a non-finite action is the controller's bug: said, never recorded as a pusher standing still
     if not np.isfinite(px).all():
         rows = np.flatnonzero(~np.isfinite(px).all(-1))
@@ -54,18 +54,19 @@ def targets_px(ctrl, carry, obs_px: dict, info: dict, t: int, key):
 
 
 def _encode(images: np.ndarray, sample: bool):
-    """PNG files of a step's images (one a live row), and their histogram if the step is in the stats' sample."""
+    """PNG files of a step's images (one a live row), and each image's histogram if the step is in the stats'
+    sample (counted per image: an episode left out of the dataset leaves its frames out of the statistics)."""
     from mjx_pusht.io.lerobot_dataset import histogram, png
 
-    return [png(img) for img in images], histogram(images) if sample else None
+    return [png(img) for img in images], [histogram(img) for img in images] if sample else None
 
 
 def rollout_batch(env, ctrl, seeds: np.ndarray, max_steps: int, encoder, writer: LeRobotDatasetWriter,
-                  keep: int) -> list[dict]:
+                  keep: int, successful_only: bool = False) -> list[dict]:
     """One batch of episodes (one per seed) on the drop-in's vector env; the first `keep` episodes' frames up to
-    their ends (the rest pad the batch to its compiled shape).
+    their ends (the rest pad the batch to its compiled shape), only those that succeeded with `successful_only`.
     Each step's images of the live rows are PNG-encoded on `encoder`'s threads while the batch steps on; every
-    SAMPLE-th frame of an episode counts into the writer's image statistics."""
+    SAMPLE-th frame of a kept episode counts into the writer's image statistics."""
     from mjx_pusht.task.controllers import seed_key
 
     n = env.num_envs
@@ -91,30 +92,35 @@ def rollout_batch(env, ctrl, seeds: np.ndarray, max_steps: int, encoder, writer:
         live &= ~done
         if not live.any():
             break
+    stacked = {k: np.stack(v, axis=1) for k, v in frames.items()}  # (n, T, ...)
+    kept = [i for i in range(keep) if not successful_only or stacked["success"][i, ends[i] - 1]]
     pngs: list[list[bytes]] = [[] for _ in range(keep)]
     for rows, future in encoded:
-        files, hist = future.result()
-        for i, f in zip(rows, files, strict=True):
+        files, hists = future.result()
+        for j, (i, f) in enumerate(zip(rows, files, strict=True)):
             pngs[i].append(f)
-        if hist is not None:
-            writer.image_histogram += hist
-            writer.image_frames += len(rows)
-    stacked = {k: np.stack(v, axis=1) for k, v in frames.items()}  # (n, T, ...)
-    return [{"png": pngs[i], **{k: v[i, : ends[i]] for k, v in stacked.items()}} for i in range(keep)]
+            if hists is not None and i in kept:
+                writer.image_histogram += hists[j]
+                writer.image_frames += 1
+    episodes = [{"png": pngs[i], **{k: v[i, : ends[i]] for k, v in stacked.items()}} for i in range(keep)]
+    return episodes, kept
 
 
 def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str = "auto", batch: int | None = None,
-                max_steps: int = 300, action: str | None = None, replace: bool = False, progress: bool = True) -> dict:
-    """Roll out `controller` from each seed's gym-pusht start on the drop-in and write the episodes to `out` as a
-    LeRobot dataset. An existing dataset in `out` is replaced only with `replace`, and only once the new one is
-    complete. Returns a summary (episodes, frames, success rate, seconds)."""
+                max_steps: int = 300, action: str | None = None, replace: bool = False, progress: bool = True,
+                successful_only: bool = False) -> dict:
+    """Roll out `controller` (`expert`: gym-pusht's task's expert) from each seed's gym-pusht start on the drop-in
+    and write the episodes (with `successful_only`, those that succeeded) to `out` as a LeRobot dataset. An
+    existing dataset in `out` is replaced only with `replace`, and only once the new one is complete. Returns a
+    summary (episodes run and written, frames, success rate, the failed seeds, seconds)."""
     import gymnasium as gym
 
     from mjx_pusht.backends.base import resolve
     from mjx_pusht.io.outputs import OutputError, claim_out_dir
-    from mjx_pusht.task.controllers import ControllerError, load
+    from mjx_pusht.task.controllers import ControllerError, describe
+    from mjx_pusht.task.tasks import get as get_task
 
-    ctrl = load(controller, action_type=action)
+    ctrl = get_task("gym-pusht").controller(controller, action=action)
     if ctrl.pixels:
         raise ControllerError(f"controller {controller!r} looks at the chapter scene's camera; the demos run "
                               "gym-pusht's scene: give a controller that reads the state")
@@ -123,7 +129,8 @@ def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str =
         raise OutputError(f"--out {out} holds a LeRobot dataset; pass --replace to overwrite it, or choose another --out")
     name, _ = resolve(backend)
     out = claim_out_dir(out, "demos", {"controller": controller, "seeds": seeds.tolist(), "backend": name,
-                                       "max_steps": max_steps, "action": action}, replace=replace)
+                                       "max_steps": max_steps, "action": action,
+                                       **({"successful_only": True} if successful_only else {})}, replace=replace)
     batch = min(len(seeds), batch or (64 if name == "cpu" else 1024))
     env = gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", num_envs=batch, vectorization_mode="vector_entry_point",
                        backend=name, obs_type="pixels_agent_pos", observation_width=IMAGE_SIZE,
@@ -132,19 +139,24 @@ def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str =
     partial = out / ".demos-partial"
     shutil.rmtree(partial, ignore_errors=True)
     t0 = time.perf_counter()
-    successes = 0
+    failed: list[int] = []
     writer = LeRobotDatasetWriter(partial, FPS, TASK, IMAGE_SIZE)
     with ThreadPoolExecutor() as encoder:
         for lo in range(0, len(seeds), batch):
             rows = seeds[lo : lo + batch]
             # the last batch is padded with the seeds after it: one batch shape, one compiled program
             pad = np.arange(rows[-1] + 1, rows[-1] + 1 + batch - len(rows), dtype=np.int64)
-            episodes = rollout_batch(env, ctrl, np.concatenate([rows, pad]), max_steps, encoder, writer, len(rows))
-            successes += sum(bool(ep["success"][-1]) for ep in episodes)
-            writer.add(episodes)
+            episodes, kept = rollout_batch(env, ctrl, np.concatenate([rows, pad]), max_steps, encoder, writer,
+                                           len(rows), successful_only)
+            failed += [int(s) for s, ep in zip(rows, episodes) if not ep["success"][-1]]
+            writer.add([episodes[i] for i in kept])
             if progress:
-                print(f"demos: {lo + len(rows)}/{len(seeds)} episodes, {writer.frames} frames, "
-                      f"{time.perf_counter() - t0:.1f} s", flush=True)
+                print(f"demos: {lo + len(rows)}/{len(seeds)} episodes, {len(writer.episodes)} written, "
+                      f"{writer.frames} frames, {time.perf_counter() - t0:.1f} s", flush=True)
+        if not writer.episodes:  # a dataset of no episode is no dataset: the partial one goes, the old one stays
+            shutil.rmtree(partial, ignore_errors=True)
+            raise ConfigError(f"none of the {len(seeds)} episodes succeeded, so none was kept (successful_only): "
+                              f"nothing written to {out}")
         writer.finish()
     env.close()
     for part in ("data", "meta"):  # the new dataset replaces the old one whole, only now that it is complete
@@ -152,5 +164,6 @@ def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str =
         (partial / part).rename(out / part)
     partial.rmdir()
     seconds = time.perf_counter() - t0
-    return {"episodes": len(seeds), "frames": writer.frames, "success_rate": successes / len(seeds),
+    return {"episodes": len(seeds), "written": len(writer.episodes), "frames": writer.frames,
+            "success_rate": 1 - len(failed) / len(seeds), "failed_seeds": failed, "controller": describe(ctrl),
             "backend": name, "batch": batch, "seconds": round(seconds, 2), "root": str(out)}
