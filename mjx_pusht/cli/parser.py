@@ -242,8 +242,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "the expert as is")
     t.add_argument("--max-samples", type=_int_at_least(1, 1 << 30, " samples"), default=None,
                    help="DAgger: dataset ring size (default 8,000,000)")
-    t.add_argument("--reset", choices=("task", "chapter"), default="task",
-                   help="start distribution trained and judged on (default task)")
+    _task_args(t, "start distribution of the chapter task trained and judged on (default task)")
     t.add_argument("--eval-envs", type=_worlds, default=4096,
                    help="held-out task seeds judged after every iteration (default 4096)")
     t.add_argument("--max-steps", type=_steps, default=300,

@@ -41,9 +41,17 @@ def cmd_train(args) -> int:
     from mjx_pusht.io.outputs import claim_out_dir
     from mjx_pusht.train.dagger import DaggerConfig
 
+    from mjx_pusht.task.tasks import get as get_task
+
+    task = get_task(args.task)
+    if args.teacher is None and task.name != "chapter":
+        args.teacher = "expert"  # the paced teacher is the chapter expert's
     _method_settings(args)
+    args.reset = task.check_reset(args.reset)
     name, why = resolve(args.backend)
     if args.algo == "ppo":
+        if task.name != "chapter":
+            raise TrainError(f"--algo ppo trains on the chapter task; --task {task.name} is DAgger's so far")
         return _cmd_ppo(args, name, why)
     cfg = DaggerConfig(obs_type=args.obs, envs=args.envs, iterations=args.iterations, hidden=tuple(args.hidden),
                        learning_rate=args.lr or 1e-3, batch=args.batch or 4096, fit_steps=args.fit_steps,
@@ -51,12 +59,13 @@ def cmd_train(args) -> int:
                        seed=args.seed, reset=args.reset, teacher=args.teacher,
                        image_batch=args.image_batch or min(512, args.batch or 4096), image_steps=args.image_steps,
                        late_fits=args.late_fits, first_fits=args.first_fits, max_grad_norm=args.max_grad_norm,
-                       max_steps=args.max_steps)
+                       max_steps=args.max_steps, task=None if task.name == "chapter" else task.name)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
     banner = Banner("train")
-    print(f"backend: {name} ({why}); DAgger from {cfg.obs_type}: {cfg.envs} {cfg.reset} episodes an iteration, "
+    print(f"backend: {name} ({why}); DAgger from {cfg.obs_type} on the {task.name} task: {cfg.envs} {cfg.reset} "
+          f"episodes an iteration, "
           f"{cfg.iterations} iterations, held-out seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
     from mjx_pusht.train.run import train_dagger
 
@@ -145,7 +154,8 @@ def _judge(args, backend: str, out: Path, summary: dict) -> dict:
     seeds = summary["held_out"]["seeds"]
     # this run's own judgement of the policy it just wrote: an earlier one (before --resume) judged another policy
     shutil.rmtree(out / "eval", ignore_errors=True)
-    evaluate(f"policy:{out / 'policy.msgpack'}", seeds, out / "eval", backend=backend, reset=summary["held_out"]["reset"],
+    evaluate(f"policy:{out / 'policy.msgpack'}", seeds, out / "eval", backend=backend,
+             task=summary["held_out"].get("task", "chapter"), reset=summary["held_out"]["reset"],
              max_steps=summary["held_out"]["max_steps"], record=args.record, progress=args.progress, rerun=args.rerun)
     s = json.loads((out / "eval" / "summary.json").read_text())
     return {k: s[k] for k in ("n_episodes", "n_success", "success_rate", "success_rate_ci95", "median_steps_to_success",

@@ -65,6 +65,12 @@ class Task:
                        max_steps=self.max_steps if max_steps is None else max_steps, success=self.success,
                        end_covered_start=self.end_covered_start)
 
+    def from_velocity(self, action, obs):
+        """A velocity command as this task's scene takes it: itself, or (targets) the target that reaches it."""
+        if self.action_type != "target":
+            return action
+        return obs["state"][..., 0:2] + LEAD * action
+
     def controller(self, spec: str, *, action: str | None = None, frame_skip: int = 10) -> Controller:
         """The controller `spec` names (`expert`: this task's expert), commanding what this task's scene takes."""
         from mjx_pusht.task.controllers import load
@@ -113,3 +119,23 @@ class AsTargets(Controller):
 
 def as_targets(ctrl: Controller) -> Controller:
     return AsTargets(name=ctrl.name, inner=ctrl)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class AsVelocities(Controller):
+    """A target controller read as velocities: the velocity (target - pusher) / LEAD that gym-pusht's PD law moves
+    the pusher at toward the target (what a velocity-valued student is taught, train/dagger.py)."""
+
+    inner: Controller | None = None
+    action_type: str = "velocity"
+
+    def init(self, key):
+        return self.inner.init(key)
+
+    def act(self, carry, obs, t, key):
+        target, carry = self.inner.act(carry, obs, t, key)
+        return (target - obs["state"][..., 0:2]) / LEAD, carry
+
+
+def as_velocities(ctrl: Controller) -> Controller:
+    return AsVelocities(name=ctrl.name, inner=ctrl)

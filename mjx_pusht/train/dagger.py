@@ -36,7 +36,7 @@ from functools import partial
 import numpy as np
 
 from mjx_pusht.errors import ConfigError
-from mjx_pusht.task.controllers import Expert
+from mjx_pusht.task.controllers import Controller, Expert
 from mjx_pusht.train.policy import (
     ACTIVATIONS,
     OBS_TYPES,
@@ -106,6 +106,10 @@ class DaggerConfig:
     # runs (H100): the six at 0.0028-0.0035 ended at 95.0-97.2% held-out, the four above at 80.0-93.3%, the loss
     # level a seed started at holding through the run (notebook lead5).
     first_fits: int | None = None
+    # The task trained and judged on (task/tasks.TASKS); None: the chapter's (a resume file from before this
+    # setting existed still matches). On gym-pusht's task the teacher is its expert, whose targets are taught as the
+    # velocities that reach them (`Task.velocity_of`): a policy acts in velocities on either task.
+    task: str | None = None
 
     def __post_init__(self) -> None:
         if self.obs_type not in OBS_TYPES:
@@ -119,12 +123,12 @@ class DaggerConfig:
         if self.envs * self.iterations >= HELD_OUT_FIRST:
             raise ConfigError(f"{self.envs} envs x {self.iterations} iterations would reach the held-out seeds "
                               f"({HELD_OUT_FIRST}+)")
-        from mjx_pusht.task.reset import RESETS
-
-        if self.reset not in RESETS[:2]:
-            raise ConfigError(f"DAgger trains on the task or chapter reset, not {self.reset!r}")
+        self.the_task.check_reset(self.reset)
         if self.teacher not in TEACHERS:
             raise ConfigError(f"unknown teacher {self.teacher!r}; choose from {', '.join(TEACHERS)}")
+        if self.the_task.name != "chapter" and self.teacher != "expert":
+            raise ConfigError(f"the {self.teacher} teacher paces the chapter's expert; on the {self.the_task.name} task "
+                              "the teacher is its expert (--teacher expert)")
         if self.image_steps is not None and not self.obs_type.startswith("pixels"):
             raise ConfigError(f"--image-steps teaches a pixel student's image reader; a {self.obs_type} student has none")
         if self.obs_type.startswith("pixels") and self.image_batch > self.batch:
@@ -134,6 +138,12 @@ class DaggerConfig:
             raise ConfigError(f"DAgger: --max-grad-norm must be above 0, got {self.max_grad_norm}")
         if not 0.0 <= self.beta_decay <= 1.0:
             raise ConfigError(f"--beta-decay must be in [0, 1], got {self.beta_decay}")
+
+    @property
+    def the_task(self):
+        from mjx_pusht.task.tasks import get
+
+        return get(self.task or "chapter")
 
     @property
     def image(self) -> int:
@@ -192,7 +202,8 @@ class Rollouts:
     """Rolls episodes out on one env with the student, the expert labelling: (features, labels) and outcomes."""
 
     def __init__(self, env, cfg: DaggerConfig):
-        self.env, self.cfg, self.expert = env, cfg, Expert(**TEACHERS[cfg.teacher])
+        self.env, self.cfg, self.expert = env, cfg, teacher(cfg)
+        self.task = cfg.the_task
         self._compiled, self._compact = {}, {}
 
     def __call__(self, params, norm, seeds, beta, rng: int, learn: int | None = None):
@@ -236,7 +247,7 @@ class Rollouts:
             action, memory = _choose(np, (label, label_memory), student, gen.random(len(seeds)) < beta)
             xs.append(_sample(np, s.obs, x, cfg.image)[live])
             ys.append(_label(np, label, label_memory)[live])
-            s = env.step(s, action)
+            s = env.step(s, self.task.from_velocity(action, s.obs))
         env.check(s)
         return np.concatenate(xs).astype(np.float32), np.concatenate(ys).astype(np.float32), _outcomes(s)
 
@@ -279,7 +290,7 @@ class Rollouts:
             take = jax.random.uniform(jax.random.fold_in(key, t)) < beta
             action, memory = _choose(jnp, (label, label_memory), apply(params, meta, x, s.obs.get("pixels")), take)
             sample = _sample(jnp, s.obs, x, cfg.image)
-            return advance(s, action), memory, (sample, _label(jnp, label, label_memory), live)
+            return advance(s, self.task.from_velocity(action, s.obs)), memory, (sample, _label(jnp, label, label_memory), live)
 
         def body(c, t):
             s, memory, out = jax.vmap(one, in_axes=(0, 0, 0, 0, None))(*c, beta, keys, t)
@@ -287,6 +298,33 @@ class Rollouts:
 
         (s, _), (x, y, live) = jax.lax.scan(body, (s, self.expert.init(s.key)), jnp.arange(cfg.max_steps))
         return s, x, y, live
+
+
+def teacher(cfg: DaggerConfig):
+    """Whom the student learns from, acting in velocities: the chapter's expert (paced, or as is), whose carry the
+    student learns to keep as its memory; or another task's expert, its targets read as the velocities that reach
+    them, acting afresh each step (`Afresh`: its carry is not in the student's memory's format)."""
+    if cfg.the_task.name == "chapter":
+        return Expert(**TEACHERS[cfg.teacher])
+    from mjx_pusht.task.tasks import as_velocities
+
+    return Afresh(name=cfg.the_task.expert, inner=as_velocities(cfg.the_task.controller("expert")))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Afresh(Controller):
+    """A teacher that decides every step from the observation alone (its own carry at reset each step), keeping
+    the student's memory at 0: a student without memory can be taught it exactly."""
+
+    inner: object = None
+
+    def init(self, key):
+        xp = key.__array_namespace__()
+        return xp.zeros(key.shape[:-1], dtype=xp.int32)
+
+    def act(self, carry, obs, t, key):
+        action, _ = self.inner.act(self.inner.init(key), obs, t, key)
+        return action, carry * 0
 
 
 def _compact(x, y, live, learn: int):

@@ -153,14 +153,15 @@ def dagger_env(cfg, backend: str):
     from mjx_pusht.backends.base import has_gpu
     from mjx_pusht.backends.cpu import default_threads
     from mjx_pusht.envs.functional import PushTEnv
-    from mjx_pusht.task.episode import Episode
 
     # A rollout is one long jitted scan, where MJX's default CUDA-graph mode ("WARP": graphs keyed on buffer
     # addresses, which stay put inside the scan) replays its captures; the env's own default, staged, is for
     # stepping once a call. Measured on an H100: 491k against 287k control steps/s at 4,096 (notebook change 16).
     graph_mode = "WARP" if backend == "mjx-warp" and has_gpu() else None
-    return PushTEnv(backend=backend, reset_kind=cfg.reset, episode=Episode(max_steps=cfg.max_steps),
-                    threads=default_threads(), keep_states=False, pixels=cfg.image, graph_mode=graph_mode)
+    task = cfg.the_task
+    return PushTEnv(backend=backend, reset_kind=cfg.reset, action_type=task.action_type, scene=task.scene(),
+                    episode=task.episode(max_steps=cfg.max_steps), threads=default_threads(), keep_states=False,
+                    pixels=cfg.image, graph_mode=graph_mode)
 
 
 def non_finite(outcome: dict, seeds: np.ndarray, *arrays) -> str | None:
