@@ -16,7 +16,6 @@ kp 100, kv 20); a position action (`--action position`) is the target itself.
 
 from __future__ import annotations
 
-import shutil
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -104,33 +103,33 @@ def rollout_batch(env, ctrl, seeds: np.ndarray, max_steps: int, encoder, writer:
 
 
 def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str = "auto", batch: int | None = None,
-                max_steps: int = 300, action: str | None = None, replace: bool = False, progress: bool = True) -> dict:
+                max_steps: int = 300, action: str | None = None, replace: bool = False, progress: bool = True,
+                share: bool = False) -> dict:
     """Roll out `controller` from each seed's gym-pusht start on the drop-in and write the episodes to `out` as a
     LeRobot dataset. An existing dataset in `out` is replaced only with `replace`, and only once the new one is
     complete. Returns a summary (episodes, frames, success rate, seconds)."""
     import gymnasium as gym
 
     from mjx_pusht.backends.base import resolve
-    from mjx_pusht.io.outputs import OutputError, claim_out_dir
+    from mjx_pusht.io.outputs import OutputError, claim_out_dir, remove_own
     from mjx_pusht.task.controllers import ControllerError, load
 
     ctrl = load(controller, action_type=action)
     if ctrl.pixels:
         raise ControllerError(f"controller {controller!r} looks at the chapter scene's camera; the demos run "
                               "gym-pusht's scene: give a controller that reads the state")
-    out = Path(out)
-    if (out / "meta" / "info.json").exists() and not replace:
-        raise OutputError(f"--out {out} holds a LeRobot dataset; pass --replace to overwrite it, or choose another --out")
     name, _ = resolve(backend)
     out = claim_out_dir(out, "demos", {"controller": controller, "seeds": seeds.tolist(), "backend": name,
-                                       "max_steps": max_steps, "action": action}, replace=replace)
+                                       "max_steps": max_steps, "action": action}, replace=replace, share=share)
+    if (out / "meta" / "info.json").exists() and not replace:
+        raise OutputError(f"--out {out} holds a LeRobot dataset; pass --replace to overwrite it, or choose another --out")
     batch = min(len(seeds), batch or (64 if name == "cpu" else 1024))
     env = gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", num_envs=batch, vectorization_mode="vector_entry_point",
                        backend=name, obs_type="pixels_agent_pos", observation_width=IMAGE_SIZE,
                        observation_height=IMAGE_SIZE, render_mode=None, max_episode_steps=max_steps,
                        autoreset_mode="disabled", array_type="numpy")
     partial = out / ".demos-partial"
-    shutil.rmtree(partial, ignore_errors=True)
+    remove_own(partial)
     t0 = time.perf_counter()
     successes = 0
     writer = LeRobotDatasetWriter(partial, FPS, TASK, IMAGE_SIZE)
@@ -148,7 +147,7 @@ def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str =
         writer.finish()
     env.close()
     for part in ("data", "meta"):  # the new dataset replaces the old one whole, only now that it is complete
-        shutil.rmtree(out / part, ignore_errors=True)
+        remove_own(out / part)
         (partial / part).rename(out / part)
     partial.rmdir()
     seconds = time.perf_counter() - t0
