@@ -25,6 +25,8 @@ def prepare_out_dir(path: Path) -> Path:
         path.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=path, prefix=".probe-"):
             pass
+    except OutputError:
+        raise
     except OSError as e:
         raise OutputError(f"--out {path} is not writable: {e.strerror or e}") from None
     return path
