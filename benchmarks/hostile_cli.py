@@ -222,4 +222,26 @@ def tries(root: Path) -> list[Try]:
         c("train", "train", "--backend", "cpu", "--envs", "8", "--iterations", "1", "--fit-steps", "5", "--hidden",
           "16", "--eval-envs", "8", "--no-rerun", "--record", "0", "--no-progress", "--out", ev, after=kept(ev)),
     ]
-    return t
+    return t + foreign_files(root, c, ev)
+
+
+def foreign_files(root: Path, c, ev: Path) -> list[Try]:
+    """Issue 57: an --out holding a user's files, at its top and in every folder a command writes its own into
+    (data/, meta/, .parts/, eval/, checkpoints/), and outputs/ itself holding other runs: every command, with and
+    without --replace, is refused in one line and every file stays (--share-out, said to write beside them, is
+    tests/test_foreign_files.py's)."""
+    proj, outputs, x = root / "proj", root / "outputs", root / "x"
+    for folder, names in ((proj, ("notes.md", "data/mine.txt", "meta/notes.md", ".parts/mine.txt", "eval/mine.txt",
+                                  "checkpoints/mine.txt")), (x, (".parts/notes.txt",))):
+        for name in names:
+            (folder / name).parent.mkdir(parents=True, exist_ok=True)
+            (folder / name).write_text(f"the user's {name}")
+    outputs.mkdir()
+    shutil.copytree(ev, outputs / "eval")  # another command's finished results in outputs/
+    runs = {"sweep": ("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--no-progress"),
+            "eval": ("eval", "--backend", "cpu", "--seeds", "2", "--max-steps", "3", "--no-rerun", "--no-progress"),
+            "scene": ("scene", "--no-rerun"), "compare": ("compare", "--backend", "mjx-warp", "--seeds", "2"),
+            "train": ("train", "--backend", "cpu", "--envs", "8", "--iterations", "1", "--no-rerun", "--no-progress"),
+            "demos": ("demos", "--backend", "cpu", "--seeds", "2", "--max-steps", "5", "--no-progress")}
+    return [c(command, *argv, "--out", str(folder), *extra, after=kept(folder)) for command, argv in runs.items()
+            for folder in (proj, outputs, x) for extra in ((), ("--replace",))]

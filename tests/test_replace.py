@@ -80,8 +80,10 @@ def test_replace_removes_the_same_commands_own_files_only(tmp_path):
     out = tmp_path / "e"
     assert cli(*EVAL, "--seeds", "2", "--out", str(out)).returncode == 0
     (out / "notes.txt").write_text("mine")
-    refused(cli(*EVAL, "--seeds", "3", "--out", str(out)), "other seeds' or settings'", "--replace")
-    r = cli(*EVAL, "--seeds", "3", "--out", str(out), "--replace")
+    for extra in ([], ["--replace"]):  # a user's file beside the results: --share-out says to leave it be
+        refused(cli(*EVAL, "--seeds", "3", "--out", str(out), *extra), "holds files eval did not write (notes.txt)")
+    refused(cli(*EVAL, "--seeds", "3", "--out", str(out), "--share-out"), "other seeds' or settings'", "--replace")
+    r = cli(*EVAL, "--seeds", "3", "--out", str(out), "--replace", "--share-out")
     assert r.returncode == 0, r.stderr[-500:]
     assert (out / "notes.txt").read_text() == "mine"
     from mjx_pusht.io.outputs import read_table

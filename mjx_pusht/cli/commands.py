@@ -3,6 +3,7 @@ status. Each command is a thin layer over the library, in a module of its own.""
 
 from __future__ import annotations
 
+import errno
 import os
 import sys
 
@@ -27,11 +28,26 @@ COMMANDS = {"scene": cmd_scene, "tree": cmd_tree, "sweep": cmd_sweep, "eval": cm
             "train": cmd_train, "demos": cmd_demos}
 
 
+# The disk's and the path's refusals: the user's to fix (room, a shorter name, a writable folder), not bugs.
+DISK_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.ENAMETOOLONG, errno.EROFS, errno.EACCES}
+
+
+def kept(args) -> str:
+    """What an interrupted or failed run of `args.command` leaves in --out, and how to go on."""
+    out = getattr(args, "out", None)
+    return {"sweep": f"the finished chunks are kept in {out}/.parts: rerun with --resume to finish",
+            "eval": f"the finished chunks are kept in {out}/.parts: rerun with --resume to finish",
+            "train": f"the checkpoints written so far are kept in {out}/checkpoints: rerun with --resume to go on",
+            "demos": f"an earlier dataset in {out} is kept as it was (the new one was not finished): rerun to write "
+                     "it"}.get(args.command, f"nothing finished in {out} was removed: rerun to write it")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command. Bad input (an `MjxPushtError`) is one line and a non-zero exit; anything else is a bug
     and keeps its traceback."""
     from mjx_pusht.io.outputs import held_folders
 
+    args = None
     try:
         args = build_parser().parse_args(argv)
         if args.verbose:
@@ -43,6 +59,16 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except MjxPushtError as e:
         print(f"mjx-pusht: error: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        if args is None:
+            raise
+        print(f"\nmjx-pusht: interrupted: {kept(args)}", file=sys.stderr)
+        return 130
+    except OSError as e:
+        if args is None or e.errno not in DISK_ERRORS:
+            raise  # not the disk or the path: a bug, with its traceback
+        print(f"mjx-pusht: error: writing {e.filename or args.out} failed ({e.strerror}); {kept(args)}", file=sys.stderr)
         return 1
 
 

@@ -32,7 +32,8 @@ def cmd_compare(args) -> int:
     controller = task.controller(args.controller) if args.controller else None
     out = claim_out_dir(args.out, "compare", {**{k: getattr(args, k) for k in (
         "seeds", "backend", "controller", "max_steps", "root_cause", "tolerance", "iterations")}, "reset": reset,
-        **({"task": task.name} if task.name != "chapter" else {})}, replace=args.replace)
+        **({"task": task.name} if task.name != "chapter" else {})}, replace=args.replace,
+        share=args.share_out)
     banner = Banner("compare")
     if controller is not None:
         from mjx_pusht.backends.cpu import default_threads
@@ -62,7 +63,7 @@ def _compare_evals(args) -> int:
 
     report = evals_report(*args.evals)  # a refused pairing leaves no --out folder behind
     out = claim_out_dir(args.out, "compare", {"evals": [str(p.resolve()) for p in args.evals]}, replace=args.replace,
-                        reads=args.evals)
+                        reads=args.evals, share=args.share_out)
     _print_episodes(write_report(out, report), out)
     return 0
 

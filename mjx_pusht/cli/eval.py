@@ -17,7 +17,7 @@ def cmd_eval(args) -> int:
                  break_it=args.break_it, max_steps=args.max_steps, frame_skip=args.frame_skip, params=params,
                  chunk=args.chunk, resume=args.resume, replace=args.replace, progress=args.progress,
                  record=args.record, rerun=args.rerun, video=args.video, video_episodes=args.video_episodes,
-                 video_size=args.video_size)
+                 video_size=args.video_size, share=args.share_out)
     except KeyboardInterrupt:  # evaluate said where the finished chunks are
         return 130
     return 0

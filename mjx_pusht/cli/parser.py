@@ -107,6 +107,8 @@ def _seed(text: str) -> int:
 
 
 REPLACE_HELP = "overwrite --out even if it holds another command's, or other seeds' or settings', finished results"
+SHARE_HELP = ("write into an --out that holds files this command did not write (they are left alone; by default such "
+              "an --out is refused)")
 
 
 def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str) -> None:
@@ -119,6 +121,7 @@ def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str)
     p.add_argument("--chunk", type=_positive, default=None, help=f"{rows} per batch (default: by backend)")
     p.add_argument("--resume", action="store_true", help=f"finish an interrupted {name} in --out")
     p.add_argument("--replace", action="store_true", help=REPLACE_HELP)
+    p.add_argument("--share-out", action="store_true", help=SHARE_HELP)
     p.add_argument("--record", type=_nonneg, default=4, help=f"{rows} to show side by side in {name}.rrd (default 4)")
     p.add_argument("--no-rerun", dest="rerun", action="store_false", help=f"skip {name}.rrd")
     p.add_argument("--no-progress", dest="progress", action="store_false")
@@ -148,6 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--smoke", action="store_true", help="fixed 120-step run; two runs match byte for byte")
     s.add_argument("--out", type=_folder, default=Path("outputs/scene"))
     s.add_argument("--replace", action="store_true", help=REPLACE_HELP)
+    s.add_argument("--share-out", action="store_true", help=SHARE_HELP)
     s.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip the .rrd recording")
     s.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
     s.add_argument("--compare-welded", action="store_true",
@@ -198,6 +202,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
     t.add_argument("--out", type=_folder, default=Path("outputs/train"))
     t.add_argument("--replace", action="store_true", help=REPLACE_HELP)
+    t.add_argument("--share-out", action="store_true", help=SHARE_HELP)
     t.add_argument("--envs", type=_worlds, default=4096, help="episodes rolled out per iteration (default 4096)")
     t.add_argument("--iterations", type=_positive, default=10,
                    help="DAgger iterations, or PPO's held-out judgements over the run (default 10)")
@@ -260,6 +265,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--backend", default="mjx-jax", help="mjx-jax or mjx-warp (default mjx-jax)")
     c.add_argument("--out", type=_folder, default=Path("outputs/compare"))
     c.add_argument("--replace", action="store_true", help=REPLACE_HELP)
+    c.add_argument("--share-out", action="store_true", help=SHARE_HELP)
     c.add_argument("--no-root-cause", dest="root_cause", action="store_false",
                    help="skip the one-change-at-a-time runs (x64, solver, contact census)")
     c.add_argument("--tolerance", type=_positive_float, default=None,
@@ -276,5 +282,5 @@ def build_parser() -> argparse.ArgumentParser:
 
     from mjx_pusht.cli.demos import add_parser as add_demos
 
-    add_demos(sub, positive=_positive, replace_help=REPLACE_HELP)
+    add_demos(sub, positive=_positive, folder=_folder, replace_help=REPLACE_HELP, share_help=SHARE_HELP)
     return p

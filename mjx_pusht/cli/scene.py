@@ -22,7 +22,7 @@ def cmd_scene(args) -> int:
     if args.compare_welded and args.break_it == "none":
         raise UsageError("--compare-welded compares a broken scene with the welded one: give --break split-tee or free-tee")
     # one seed's look: a rerun with another seed may overwrite the last; another command's results may not
-    out = claim_out_dir(args.out, "scene", {}, replace=args.replace)
+    out = claim_out_dir(args.out, "scene", {}, replace=args.replace, share=args.share_out)
     banner = Banner("scene")
     scenario = Scenario(SceneSpec(args.break_it), schedule)
     backend = CpuBackend(scenario, nthread=1)

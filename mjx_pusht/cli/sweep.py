@@ -35,7 +35,7 @@ def cmd_sweep(args) -> int:
         processes.agree({**fp.pop("config"), **fp, "out": str(Path(args.out).resolve())})
     row_seeds, combos, out, banner, clock, backend = start_batch("sweep", args.out, seeds, name, why, config, scenario,
                                                                  replace=args.replace, resume=args.resume,
-                                                                 check=processes.leader)
+                                                                 check=processes.leader, share=args.share_out)
     print(read_tree(backend.model).describe())
     print(f"pusher shape simulated: {backend.pusher}" + (" (substituted: MJX's JAX backend has no cylinder-box collision)"
                                                           if backend.pusher != scenario.scene.pusher else ""))

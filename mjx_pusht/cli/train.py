@@ -4,10 +4,9 @@ policy with `evaluate` on the held-out seeds (out/eval) and print where everythi
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
-from mjx_pusht.io.outputs import atomic_write_json
+from mjx_pusht.io.outputs import atomic_write_json, remove_own
 from mjx_pusht.train.curve import kept as kept_row
 from mjx_pusht.train.resume import TrainError
 from mjx_pusht.train.summary import write_summary
@@ -60,7 +59,7 @@ def cmd_train(args) -> int:
                        image_batch=args.image_batch or min(512, args.batch or 4096), image_steps=args.image_steps,
                        late_fits=args.late_fits, first_fits=args.first_fits, max_grad_norm=args.max_grad_norm,
                        max_steps=args.max_steps, task=None if task.name == "chapter" else task.name)
-    out = claim_out_dir(args.out, "train", {}, replace=args.replace)  # the run's settings: checked on --resume
+    out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
     banner = Banner("train")
@@ -78,7 +77,7 @@ def _restart(out: Path, args) -> None:
     """A folder holding a training run is continued (--resume) or started over (--replace), never mixed."""
     started = (out / "checkpoints" / "resume.msgpack").exists()
     if started and args.replace and not args.resume:
-        shutil.rmtree(out / "checkpoints")
+        remove_own(out / "checkpoints")
         print(f"--replace: removed the earlier training run's checkpoints in {out}")
     elif started and not args.resume:
         raise TrainError(f"--out {out} holds a training run: --resume to continue it, --replace to start over, "
@@ -110,7 +109,7 @@ def _cmd_ppo(args, name: str, why: str) -> int:
                     hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
                     eval_envs=args.eval_envs, seed=args.seed, reset=args.reset, act=args.ppo_act,
                     max_grad_norm=args.max_grad_norm, lr_schedule=args.lr_schedule, max_steps=args.max_steps)
-    out = claim_out_dir(args.out, "train", {}, replace=args.replace)
+    out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)
     _restart(out, args)
     _check_rerun(args)
     banner = Banner("train")
@@ -153,7 +152,7 @@ def _judge(args, backend: str, out: Path, summary: dict) -> dict:
 
     seeds = summary["held_out"]["seeds"]
     # this run's own judgement of the policy it just wrote: an earlier one (before --resume) judged another policy
-    shutil.rmtree(out / "eval", ignore_errors=True)
+    remove_own(out / "eval")
     evaluate(f"policy:{out / 'policy.msgpack'}", seeds, out / "eval", backend=backend,
              task=summary["held_out"].get("task", "chapter"), reset=summary["held_out"]["reset"],
              max_steps=summary["held_out"]["max_steps"], record=args.record, progress=args.progress, rerun=args.rerun)

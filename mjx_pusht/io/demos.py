@@ -18,7 +18,6 @@ the dataset keeps the episodes that succeeded (what LeRobot users train on); the
 
 from __future__ import annotations
 
-import shutil
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -108,7 +107,7 @@ def rollout_batch(env, ctrl, seeds: np.ndarray, max_steps: int, encoder, writer:
 
 def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str = "auto", batch: int | None = None,
                 max_steps: int = 300, action: str | None = None, replace: bool = False, progress: bool = True,
-                successful_only: bool = False) -> dict:
+                successful_only: bool = False, share: bool = False) -> dict:
     """Roll out `controller` (`expert`: gym-pusht's task's expert) from each seed's gym-pusht start on the drop-in
     and write the episodes (with `successful_only`, those that succeeded) to `out` as a LeRobot dataset. An
     existing dataset in `out` is replaced only with `replace`, and only once the new one is complete. Returns a
@@ -116,7 +115,7 @@ def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str =
     import gymnasium as gym
 
     from mjx_pusht.backends.base import resolve
-    from mjx_pusht.io.outputs import OutputError, claim_out_dir
+    from mjx_pusht.io.outputs import OutputError, claim_out_dir, remove_own
     from mjx_pusht.task.controllers import ControllerError, describe
     from mjx_pusht.task.tasks import get as get_task
 
@@ -124,20 +123,20 @@ def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str =
     if ctrl.pixels:
         raise ControllerError(f"controller {controller!r} looks at the chapter scene's camera; the demos run "
                               "gym-pusht's scene: give a controller that reads the state")
-    out = Path(out)
-    if (out / "meta" / "info.json").exists() and not replace:
-        raise OutputError(f"--out {out} holds a LeRobot dataset; pass --replace to overwrite it, or choose another --out")
     name, _ = resolve(backend)
     out = claim_out_dir(out, "demos", {"controller": controller, "seeds": seeds.tolist(), "backend": name,
                                        "max_steps": max_steps, "action": action,
-                                       **({"successful_only": True} if successful_only else {})}, replace=replace)
+                                       **({"successful_only": True} if successful_only else {})}, replace=replace,
+                         share=share)
+    if (out / "meta" / "info.json").exists() and not replace:
+        raise OutputError(f"--out {out} holds a LeRobot dataset; pass --replace to overwrite it, or choose another --out")
     batch = min(len(seeds), batch or (64 if name == "cpu" else 1024))
     env = gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", num_envs=batch, vectorization_mode="vector_entry_point",
                        backend=name, obs_type="pixels_agent_pos", observation_width=IMAGE_SIZE,
                        observation_height=IMAGE_SIZE, render_mode=None, max_episode_steps=max_steps,
                        autoreset_mode="disabled", array_type="numpy")
     partial = out / ".demos-partial"
-    shutil.rmtree(partial, ignore_errors=True)
+    remove_own(partial)
     t0 = time.perf_counter()
     failed: list[int] = []
     writer = LeRobotDatasetWriter(partial, FPS, TASK, IMAGE_SIZE)
@@ -154,13 +153,13 @@ def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str =
                 print(f"demos: {lo + len(rows)}/{len(seeds)} episodes, {len(writer.episodes)} written, "
                       f"{writer.frames} frames, {time.perf_counter() - t0:.1f} s", flush=True)
         if not writer.episodes:  # a dataset of no episode is no dataset: the partial one goes, the old one stays
-            shutil.rmtree(partial, ignore_errors=True)
+            remove_own(partial)
             raise ConfigError(f"none of the {len(seeds)} episodes succeeded, so none was kept (successful_only): "
                               f"nothing written to {out}")
         writer.finish()
     env.close()
     for part in ("data", "meta"):  # the new dataset replaces the old one whole, only now that it is complete
-        shutil.rmtree(out / part, ignore_errors=True)
+        remove_own(out / part)
         (partial / part).rename(out / part)
     partial.rmdir()
     seconds = time.perf_counter() - t0

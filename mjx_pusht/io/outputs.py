@@ -16,13 +16,17 @@ class OutputError(MjxPushtError, OSError):
 
 def prepare_out_dir(path: Path) -> Path:
     """Create `path` if needed and prove it is a writable folder, before any work is done."""
+    if not str(path).strip():  # Path('') is the current folder, which a run would write into
+        raise OutputError("--out is empty: give a folder, such as outputs/run")
     path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise OutputError(f"--out {path} is a file, not a folder")
     try:
+        if path.exists() and not path.is_dir():
+            raise OutputError(f"--out {path} is a file, not a folder")
         path.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=path, prefix=".probe-"):
             pass
+    except OutputError:
+        raise
     except OSError as e:
         raise OutputError(f"--out {path} is not writable: {e.strerror or e}") from None
     return path
@@ -84,27 +88,45 @@ def read_table(path: Path) -> dict:
 # file existed is known by these names).
 RESULTS = {"per_seed.parquet": "sweep", "per_episode.parquet": "eval", "metrics.json": "scene",
            "compare.json": "compare", "compare_episodes.json": "compare", "policy.msgpack": "train"}
-# Everything each command writes in its --out: what --replace may remove, and never anything else. A rerun
+RUN_FILE = ".run.json"  # which command, and which seeds and settings, the folder's results are from
+# Every name each command writes in its --out: what --replace may remove, and never anything else. A rerun
 # of the same command replaces its own results; another command's results are never touched.
 OWN = {
     "sweep": ("per_seed.parquet", "summary.json", "sweep.rrd", "audit_cpu.parquet", ".parts"),
     "eval": ("per_episode.parquet", "summary.json", "eval.rrd", ".parts"),
     "scene": ("metrics.json", "scene.rrd", "walk.rrd"),
     "compare": ("compare.json", "compare.md", "compare.png", "compare_episodes.json", "compare_episodes.md"),
-    "train": ("policy.msgpack", "summary.json", "curve.csv", "curve.png", "train.rrd", "checkpoints", "eval"),
+    "train": ("policy.msgpack", "summary.json", "first_fits.json", "curve.csv", "curve.png", "train.rrd",
+              "checkpoints", "eval"),
+    "demos": ("data", "meta", ".demos-partial"),
 }
-RUN_FILE = ".run.json"  # which command, and which seeds and settings, the folder's results are from
+BOOKKEEPING = (RUN_FILE, ".lock")  # the run file and the lock every claimed folder holds
+# Inside the folders a command writes, the files it puts there: a file matching none of these is a user's, and no
+# command removes it (a user's data/mine.txt in demos' data/ stays, and the folder is refused).
+_DATASET = ("data/chunk-*/file-*.parquet", "meta/info.json", "meta/stats.json", "meta/tasks.parquet",
+            "meta/episodes/chunk-*/file-*.parquet")
+INSIDE = {
+    ".parts": ("manifest.json", "seeds-*.parquet"),
+    "checkpoints": ("policy_*.msgpack", "resume.msgpack", "resume-ring-*.f32"),
+    "eval": (*OWN["eval"][:-1], *(f".parts/{p}" for p in ("manifest.json", "seeds-*.parquet")), *BOOKKEEPING),
+    "data": tuple(p.removeprefix("data/") for p in _DATASET if p.startswith("data/")),
+    "meta": tuple(p.removeprefix("meta/") for p in _DATASET if p.startswith("meta/")),
+    ".demos-partial": _DATASET,
+}
 _HELD: dict[Path, object] = {}  # folders this process has locked, and their open lock files
 
 
-def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool = False, reads=()) -> Path:
+def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool = False, reads=(),
+                  share: bool = False) -> Path:
     """Make `path` this run's folder: writable, locked against a second run, and holding no results of another
-    command, nor of this command with other seeds or settings unless `replace` says to drop those.
+    command, nor of this command with other seeds or settings unless `replace` says to drop those, nor files
+    no run of this command wrote unless `share` says to write beside them.
 
     One folder holds one run. Another command's results (an eval's table, a train's policy) are refused
-    whatever the flags: `--replace` removes only this command's own files (`OWN`), and never a file the run
-    reads (`reads`: the policy it evaluates, the evals it compares). A rerun of the same command with the same
-    seeds and settings may overwrite its own results."""
+    whatever the flags: `--replace` removes only this command's own files (`OWN`, `INSIDE`), and never a file the
+    run reads (`reads`: the policy it evaluates, the evals it compares). A rerun of the same command with the same
+    seeds and settings may overwrite its own results. A name this command writes (demos' data/, sweep's .parts)
+    that holds a file it did not write is refused whatever the flags: writing there would mix or remove it."""
     import hashlib
 
     path = prepare_out_dir(path)
@@ -112,16 +134,16 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
     mine = {"command": command,
             "fingerprint": hashlib.sha256(json.dumps(fingerprint, sort_keys=True, default=str).encode()).hexdigest()}
     held = _results_in(path)
+    try:
+        owner = json.loads((path / RUN_FILE).read_text())
+        if not isinstance(owner, dict):
+            raise ValueError(RUN_FILE)
+    except (OSError, ValueError):
+        # results from before the run file existed are known by their name, chunks by their manifest (whose
+        # seeds and settings the resume check compares); a lone summary.json by nobody
+        owner = {"command": next((RESULTS[n] for n in held if n in RESULTS), None) or _chunks_command(path)}
+    who = owner.get("command")
     if held:
-        try:
-            owner = json.loads((path / RUN_FILE).read_text())
-            if not isinstance(owner, dict):
-                raise ValueError(RUN_FILE)
-        except (OSError, ValueError):
-            # results from before the run file existed are known by their name, chunks by their manifest (whose
-            # seeds and settings the resume check compares); a lone summary.json by nobody
-            owner = {"command": next((RESULTS[n] for n in held if n in RESULTS), None) or _chunks_command(path)}
-        who = owner.get("command")
         foreign = held if who != command else [n for n in held if n not in OWN[command]]  # a policy in an eval's folder
         if foreign:
             what = (f"{who}'s results" if who in OWN else f"results whose {RUN_FILE} is unreadable"
@@ -129,24 +151,90 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
                 else f"files {command} does not write"
             raise OutputError(f"--out {path} holds {what} ({', '.join(foreign)}); {command} never removes or "
                               "overwrites another command's results, whatever the flags: choose another --out")
-        if owner.get("fingerprint", mine["fingerprint"]) != mine["fingerprint"]:
-            if not replace:
-                raise OutputError(f"--out {path} holds other seeds' or settings' finished results ({command}: "
-                                  f"{', '.join(held)}); pass --replace to overwrite them, or choose another --out")
-            _refuse_to_remove_inputs(path, command, reads)
-            for name in OWN[command]:
-                _remove(path / name)
-            print(f"--replace: removed the earlier {command} results in {path} ({', '.join(held)})")
+    strays = stray_files(path, command)
+    # this command's names, not written by a run of it here (no run file of its own): a user's data/, .parts, eval/
+    taken = [n for n in OWN[command] if who != command and (os.path.lexists(path / n))]
+    mixed = taken + [s for s in strays if s.split("/")[0] in OWN[command] and s.split("/")[0] not in taken]
+    if mixed:
+        raise OutputError(f"--out {path} holds {_listed(mixed)}, which {command} writes but no {command} run wrote "
+                          f"here; {command} never removes or mixes into them, whatever the flags: choose another --out")
+    if strays and not share:
+        raise OutputError(f"--out {path} holds files {command} did not write ({_listed(strays)}); {command} never "
+                          "removes them: pass --share-out to write its files beside them, or choose another --out")
+    if held and owner.get("fingerprint", mine["fingerprint"]) != mine["fingerprint"]:
+        if not replace:
+            raise OutputError(f"--out {path} holds other seeds' or settings' finished results ({command}: "
+                              f"{', '.join(held)}); pass --replace to overwrite them, or choose another --out")
+        _refuse_to_remove_inputs(path, command, reads)
+        for name in OWN[command]:
+            remove_own(path / name)
+        print(f"--replace: removed the earlier {command} results in {path} ({', '.join(held)})")
     _refuse_to_remove_inputs(path, command, reads)  # this run writes over its own files: none may be an input
     atomic_write_json(path / RUN_FILE, mine)
     return path
 
 
+def _listed(names: list[str], most: int = 6) -> str:
+    return ", ".join(names[:most]) + (f" and {len(names) - most} more" if len(names) > most else "")
+
+
+def _owns(rel: str, patterns) -> bool:
+    """Whether `rel` (a path inside a folder, with /) is one of `patterns`, or an atomic write's leftover of one."""
+    import fnmatch
+    import posixpath
+
+    for p in patterns:
+        head, base = posixpath.split(p)
+        if fnmatch.fnmatchcase(rel, p) or fnmatch.fnmatchcase(rel, posixpath.join(head, f".{base}.*.tmp")):
+            return True
+    return False
+
+
+def stray_files(path: Path, command: str) -> list[str]:
+    """What `path` holds that `command` never writes: files and folders by their path inside it (a folder that is
+    not one of the command's is named whole, with a trailing /, and not looked into)."""
+    patterns = (*BOOKKEEPING, *(n for n in OWN[command] if n not in INSIDE),
+                *(f"{n}/{p}" for n in OWN[command] if n in INSIDE for p in INSIDE[n]))
+    strays = []
+    for root, dirs, files in os.walk(path):
+        rel = Path(root).relative_to(path)
+        for d in list(dirs):
+            if os.path.islink(Path(root) / d) or (rel == Path(".") and d not in OWN[command]):
+                dirs.remove(d)
+                strays.append((rel / d).as_posix() + "/")
+        strays += [f for f in ((rel / f).as_posix() for f in files) if not _owns(f, patterns)]
+    return sorted(strays)
+
+
+def remove_own(p: Path) -> None:
+    """Remove a file a command writes, or the files of one of its folders that it writes there (`INSIDE`), and the
+    folders they leave empty; anything else in it stays."""
+    p = Path(p)
+    if p.is_symlink() or not p.is_dir():
+        p.unlink(missing_ok=True)
+        return
+    for root, dirs, files in os.walk(p, topdown=False):
+        rel = Path(root).relative_to(p)
+        for f in files:
+            if _owns((rel / f).as_posix(), INSIDE.get(p.name, ())):
+                (Path(root) / f).unlink()
+        for d in dirs:
+            try:
+                (Path(root) / d).rmdir()
+            except OSError:  # it holds something this command did not write
+                pass
+    try:
+        p.rmdir()
+    except OSError:
+        pass
+
+
 def _results_in(path: Path) -> list[str]:
     """The results a folder holds, by name: finished files, unfinished chunks, a training run's checkpoints.
-    (A train's eval/ folder is its own; an eval/ beside other results is not taken for one, as outputs/eval.)"""
+    (A train's eval/ folder is its own; an eval/ beside other results is not taken for one, as outputs/eval; a
+    dataset's data/ and meta/ are demos' only beside its run file, which write_demos checks.)"""
     held = []
-    for name in sorted({*RESULTS, *(n for own in OWN.values() for n in own)} - {"eval"}):
+    for name in sorted({*RESULTS, *(n for own in OWN.values() for n in own)} - {"eval", *OWN["demos"]}):
         p = path / name
         if name == ".parts":
             if any(p.glob("seeds-*.parquet")):
@@ -178,15 +266,6 @@ def _refuse_to_remove_inputs(path: Path, command: str, reads) -> None:
             if r == o or o in r.parents:
                 raise OutputError(f"--out {path}: this {command} reads {r}, which its own results would replace; "
                                   "choose another --out")
-
-
-def _remove(p: Path) -> None:
-    import shutil
-
-    if p.is_dir() and not p.is_symlink():
-        shutil.rmtree(p)
-    else:
-        p.unlink(missing_ok=True)
 
 
 def _lock(path: Path) -> None:

@@ -14,7 +14,7 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
              reset: str | None = None,
              break_it: str = "none", max_steps: int = 300, frame_skip: int = 10, params=(), chunk: int | None = None,
              resume: bool = False, replace: bool = False, progress: bool = True, record: int = 4, rerun: bool = True,
-             video: Path | None = None, video_episodes: int = 16, video_size: int = 128) -> dict:
+             video: Path | None = None, video_episodes: int = 16, video_size: int = 128, share: bool = False) -> dict:
     """Run `controller` (a `task.controllers.load` spec: `expert`, `policy:PATH`, ...) for an episode from each
     seed's start state (`seeds`: an array, or a spec such as "512" or "A:B") on `backend`, into `out`; returns
     the summary (also written as summary.json). `task`: task/tasks.TASKS (`expert` is its expert; `reset` None:
@@ -55,7 +55,8 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
     scenario = Scenario(the_task.scene(break_it), params=params, reset=reset, controller=controller, episode=episode)
     reads = [spec.removeprefix("policy:")] if spec.startswith("policy:") else []  # never replaced by this run
     row_seeds, combos, out, banner, clock, backend = start_batch("eval", out, seeds, name, why, config, scenario,
-                                                                 replace=replace, resume=resume, reads=reads)
+                                                                 replace=replace, resume=resume, reads=reads,
+                                                                 share=share)
     print(f"controller: {describe(controller)}; task: {task}; reset: {reset}; {len(seeds)} episodes of at most "
           f"{max_steps} control steps x {frame_skip} physics steps; device: {backend.device}; "
           f"pusher shape: {backend.pusher}")

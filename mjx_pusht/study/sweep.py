@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import shutil
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -21,7 +20,7 @@ import numpy as np
 from mjx_pusht.backends.actions import NonFiniteActionError
 from mjx_pusht.backends.results import Rollouts
 from mjx_pusht.errors import MjxPushtError
-from mjx_pusht.io.outputs import atomic_write_json, atomic_write_table, read_table
+from mjx_pusht.io.outputs import atomic_write_json, atomic_write_table, read_table, remove_own
 from mjx_pusht.study.stats import distribution, warning_summary
 
 PARTS = ".parts"
@@ -137,8 +136,8 @@ def run_sweep(
     parts = out / PARTS
     if processes.leader:  # one process clears and stamps the folder; the rest wait for it
         check_resumable(out, seeds, config, resume)
-        if not resume and parts.exists():
-            shutil.rmtree(parts)
+        if not resume:
+            remove_own(parts)
         parts.mkdir(parents=True, exist_ok=True)
         atomic_write_json(parts / "manifest.json", fingerprint(seeds, config))
     processes.barrier("parts-ready")
@@ -269,7 +268,7 @@ def finish(out: Path, run: SweepRun, *, name: str = "per_seed.parquet", episodes
     """Write the table, then drop the chunk files (the table now holds them). The chunks were scored
     as they were written, so the table is their columns, not a second scoring of every row."""
     atomic_write_table(out / name, run.table if run.table else run.rollouts.columns(episodes=episodes))
-    shutil.rmtree(out / PARTS, ignore_errors=True)
+    remove_own(out / PARTS)
 
 
 def _task_summary(rollouts: Rollouts, table: dict | None = None) -> dict:

@@ -1,0 +1,95 @@
+"""A full disk, an over-long path and Ctrl-C are one line, a non-zero exit, and what was kept (issue 57).
+
+Before: `demos`, `train` and `eval --video` ended a full disk in an `OSError: [Errno 28]` traceback, an --out
+name longer than the file system allows in `OSError: [Errno 36]`, and Ctrl-C during `demos` or `train` in a raw
+`KeyboardInterrupt` traceback.
+"""
+
+from __future__ import annotations
+
+import errno
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from helpers import ENV
+
+from mjx_pusht.cli import main
+
+DEMOS = ("demos", "--backend", "cpu", "--max-steps", "5", "--no-progress")
+
+
+def one_line(capsys, *words) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    assert all(w in err[0] for w in words), err[0]
+    return err[0]
+
+
+def test_a_full_disk_is_one_line_naming_the_file_and_the_earlier_dataset_stays(tmp_path, capsys, monkeypatch):
+    import mjx_pusht.io.lerobot_dataset as lerobot
+
+    out = tmp_path / "ds"
+    assert main([*DEMOS, "--seeds", "2", "--out", str(out)]) == 0
+    before = {p: p.read_bytes() for p in out.rglob("*.parquet")}
+    capsys.readouterr()
+
+    def full(table, path):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(lerobot, "_write_parquet", full)
+    assert main([*DEMOS, "--seeds", "3", "--out", str(out), "--replace"]) == 1
+    one_line(capsys, ".demos-partial/", "No space left on device", f"an earlier dataset in {out} is kept")
+    assert {p: p.read_bytes() for p in out.rglob("*.parquet") if ".demos-partial" not in str(p)} == before
+
+
+def test_an_out_name_longer_than_the_file_system_allows_is_one_line(tmp_path, capsys):
+    assert main([*DEMOS, "--seeds", "2", "--out", str(tmp_path / ("a" * 300))]) == 1
+    one_line(capsys, "is not writable: File name too long")
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_demos_is_one_line_and_exit_130_within_seconds(tmp_path):
+    out = tmp_path / "ds"
+    p = subprocess.Popen([sys.executable, "-m", "mjx_pusht", "demos", "--backend", "cpu", "--seeds", "2000",
+                          "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    try:
+        deadline = time.monotonic() + 60
+        while not (out / ".demos-partial").exists() and time.monotonic() < deadline:  # rolling out
+            time.sleep(0.1)
+        time.sleep(0.5)
+        assert p.poll() is None
+        p.send_signal(signal.SIGINT)
+        t0 = time.monotonic()
+        _, err = p.communicate(timeout=30)
+        waited = time.monotonic() - t0
+    finally:
+        p.kill()
+    assert p.returncode == 130, err[-2000:]
+    lines = err.strip().splitlines()
+    assert "Traceback" not in err and lines[-1].startswith("mjx-pusht: interrupted: "), err[-2000:]
+    assert waited < 10, waited
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_train_is_one_line_and_exit_130(tmp_path):
+    out = tmp_path / "run"
+    p = subprocess.Popen([sys.executable, "-m", "mjx_pusht", "train", "--backend", "cpu", "--envs", "64",
+                          "--iterations", "50", "--no-rerun", "--out", str(out)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "checkpoints").exists() and time.monotonic() < deadline:  # training
+            time.sleep(0.2)
+        time.sleep(1)
+        p.send_signal(signal.SIGINT)
+        t0 = time.monotonic()
+        _, err = p.communicate(timeout=60)
+        waited = time.monotonic() - t0
+    finally:
+        p.kill()
+    assert p.returncode == 130 and "Traceback" not in err, err[-2000:]
+    assert err.strip().splitlines()[-1].startswith("mjx-pusht: interrupted: the checkpoints"), err[-2000:]
+    assert waited < 10, waited
