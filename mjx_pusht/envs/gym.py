@@ -141,7 +141,7 @@ class PushTGymEnv(OneWorld, Pictures, gym.Env):
             "pos_agent": st[0:2].copy(),
             "weld_gap_max_dev": m["gap_max_dev"][0],
             "finite": m["finite"][0],  # every state of the episode finite and bounded
-            "contained": m["contained"][0],  # the block never left the walls (no missed contact)
+            "contained": m["contained"][0],  # the block and the pusher never left the walls (no missed contact)
         }
         if not (info["finite"] and info["contained"]):
             warn_broken(info)
