@@ -35,10 +35,10 @@ import math
 
 import numpy as np
 
-try:
+from mjx_pusht.errors import requires
+
+with requires("the gymnasium environments", "gym"):  # the extra is optional: say what to install, in one line
     import gymnasium as gym
-except ImportError as e:  # the extra is optional: say what to install, in one line
-    raise ImportError("the gymnasium environments need gymnasium: pip install 'mjx-pusht[gym]'") from e
 
 from mjx_pusht import validate
 from mjx_pusht.envs.common import (
