@@ -194,7 +194,7 @@ def main(argv=None) -> int:
         limit = int(args.memory_gb * 2**30)
         resource.setrlimit(resource.RLIMIT_DATA, (limit, resource.getrlimit(resource.RLIMIT_DATA)[1]))
 
-    from benchmarks import hostile_api, hostile_cli
+    from benchmarks import hostile_api, hostile_cli, hostile_exit
 
     try:
         from mjx_pusht.io.banner import tier
@@ -206,7 +206,7 @@ def main(argv=None) -> int:
         root = Path(d)
         os.chdir(root)  # whatever a try writes by default (outputs/..., MUJOCO_LOG.TXT) lands in the temporary folder
         tries = ([] if args.only == "api" else hostile_cli.tries(root)) + \
-                ([] if args.only == "cli" else hostile_api.tries(root))
+                ([] if args.only == "cli" else hostile_api.tries(root) + hostile_exit.tries(root))
         if args.match:
             tries = [t for t in tries if args.match in t.surface or args.match in str(t.what) + str(t.run)]
         t0 = time.perf_counter()

@@ -7,6 +7,9 @@ command is a bug and keeps its traceback. Each concern subclasses the base where
 
 from __future__ import annotations
 
+import contextlib
+import importlib
+
 
 class MjxPushtError(Exception):
     """Bad input or an unrunnable request: the message says what is wrong, in the library's terms."""
@@ -18,3 +21,50 @@ class ConfigError(MjxPushtError, ValueError):
 
 class ResetNeeded(MjxPushtError, RuntimeError):
     """An env was stepped or rendered before its first reset (a RuntimeError, as gymnasium's order check raises)."""
+
+
+# The optional extras (pyproject.toml's [project.optional-dependencies]) and the top-level modules each brings
+EXTRAS: dict[str, tuple[str, ...]] = {
+    "warp": ("warp",),
+    "gym": ("gymnasium",),
+    "video": ("imageio", "imageio_ffmpeg"),
+    "brax": ("brax",),
+    "train": ("flax", "optax", "orbax", "brax"),
+}
+
+
+class MissingExtra(MjxPushtError, ImportError):
+    """An optional dependency is not installed: the one line names the extra that brings it."""
+
+
+def missing_extra(error: ImportError, what: str, extra: str | None = None) -> MissingExtra | None:
+    """The one-line error for `error` if the module it could not import belongs to an extra (`extra` first, the
+    one the caller needs), else None: a missing module no extra brings is not the user's to fix by installing."""
+    top = (getattr(error, "name", None) or "").split(".")[0]
+    names = ([extra] if extra else []) + [e for e in EXTRAS if e != extra]
+    found = next((e for e in names if top in EXTRAS[e]), None)
+    if found is None:
+        return None
+    return MissingExtra(f"{what} needs {top}, which is not installed: pip install 'mjx-pusht[{found}]'")
+
+
+@contextlib.contextmanager
+def requires(what: str, extra: str):
+    """Around an optional import (or the work that imports lazily): a missing module of an extra becomes one line
+    naming the extra to install; any other ImportError is a bug and keeps its traceback."""
+    try:
+        yield
+    except ImportError as e:
+        if isinstance(e, MissingExtra):
+            raise
+        err = missing_extra(e, what, extra)
+        if err is None:
+            raise
+        raise err from None
+
+
+def needs(what: str, extra: str) -> None:
+    """Import every module of `extra` now, before any work: `requires`' one line if one is missing."""
+    with requires(what, extra):
+        for name in EXTRAS[extra]:
+            importlib.import_module(name)

@@ -27,8 +27,17 @@ class Scenario:
     episode: object | None = None  # an episode.Episode; None with a controller: the defaults
 
     def __post_init__(self) -> None:
+        from mjx_pusht.model.params import check_params
+        from mjx_pusht.task.episode import Episode
         from mjx_pusht.task.reset import RESETS
 
+        for name, kind in (("scene", SceneSpec), ("schedule", Schedule)):
+            if not isinstance(getattr(self, name), kind):
+                raise ConfigError(f"Scenario's {name} must be a {kind.__name__}, got {getattr(self, name)!r}")
+        # the CLI's --param goes through the same check (model.params.parse_params)
+        object.__setattr__(self, "params", check_params(self.params))
+        if self.episode is not None and not isinstance(self.episode, Episode):
+            raise ConfigError(f"Scenario's episode must be an Episode, got {self.episode!r}")
         if self.reset not in RESETS:
             raise ConfigError(f"unknown reset {self.reset!r}; choose from {', '.join(RESETS)}")
         targets = getattr(self.controller, "action_type", None) == "target"

@@ -22,6 +22,12 @@ import numpy as np
 from mjx_pusht.errors import ConfigError, ResetNeeded
 
 SEED_MAX = 2**63 - 1  # task.reset.SEED_MAX (a seed is a non-negative int64)
+# Bounds on what one run may ask for, checked before any work (the CLI's flags and the API's dataclasses alike):
+# past them a run does not finish in any time anyone waits for, or its first array does not fit in memory (a
+# 10**9-step schedule is a 16 GB control table, allocated before the first step; a hostile pass found it
+# killing the process).
+MAX_STEPS = 100_000  # control or schedule steps: 1,000 s of simulated time at 100 Hz
+MAX_FRAME_SKIP = 1_000  # physics steps a control step
 RENDER_MODES = (None, "rgb_array")
 log = logging.getLogger("mjx_pusht")
 
@@ -97,6 +103,20 @@ def fraction(name: str, value) -> float:
     return float(value)
 
 
+def steps(name: str, value, high: int = MAX_STEPS) -> int:
+    """A number of steps from 1 to `high` (MAX_STEPS: 1,000 s at 100 Hz), never a float or a bool."""
+    return positive_int(name, value, 1, high)
+
+
+def real_range(name: str, value, low: float, high: float, low_open: bool = False) -> float:
+    """A finite real number in [low, high] ((low, high] where `low_open`), never a bool, a string or NaN."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not (
+            (low < value if low_open else low <= value) and value <= high):
+        span = f"{'(' if low_open else '['}{low:g}, {high:g}]"
+        raise ConfigError(f"{name} must be a finite number in {span}, got {_show(value)}")
+    return float(value)
+
+
 def started(state, call: str = "step") -> None:
     """An env's `call` (step, render) needs its first reset to have run."""
     if state is None:
@@ -128,8 +148,12 @@ def seed_list(value, n: int) -> list:
 
 
 def seed_array(value, name: str = "seeds") -> np.ndarray:
-    """The functional env's seeds: integers from 0 to 2**63-1, as a 1-D int64 array."""
-    a = np.asarray(value)
+    """The functional env's and the backends' seeds: integers from 0 to 2**63-1, as a 1-D int64 array (floats and
+    bools are refused, never truncated: [0.5, 1.7] is not seeds 0 and 1, nor [True, False] seeds 1 and 0)."""
+    try:
+        a = np.asarray(value)
+    except ValueError:  # a ragged list
+        raise ConfigError(f"{name} must be integers (a 1-D array), got {_show(value)}") from None
     if a.dtype == object:
         a = np.asarray([seed(s, name) for s in a.reshape(-1)], np.int64)
     if a.dtype.kind not in "iu" or a.ndim > 1:

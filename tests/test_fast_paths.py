@@ -15,6 +15,8 @@ def test_folding_the_physics_steps_at_once_equals_folding_them_one_by_one():
     qpos, qvel = rng.normal(size=(s, n, nq)), rng.normal(size=(s, n, nq))
     bar, stem = rng.normal(size=(s, n, 3)), rng.normal(size=(s, n, 3))
     tee = rng.normal(scale=0.3, size=(s, n, 3))
+    push = rng.uniform(-0.39, 0.39, size=(s, n, 2))
+    push[4, 5, 1] = -0.45  # a pusher through the south wall
     qpos[3, 1, 2] = np.nan  # a world that diverges mid-step
     qvel[7, 2, 0] = 1e11  # beyond mjMAXVAL
     bar[5, 3, 1] = np.nan  # a NaN gap propagates into the peak
@@ -24,11 +26,11 @@ def test_folding_the_physics_steps_at_once_equals_folding_them_one_by_one():
         t = k[None] * s + np.arange(s)[:, None]
         one_by_one = invariants_init(n, np)
         for j in range(s):
-            one_by_one = invariants_update(one_by_one, t[j], settle, tee[j], qpos[j], qvel[j], bar[j], stem[j])
-        at_once = invariants_fold(invariants_init(n, np), t, settle, tee, qpos, qvel, bar, stem)
+            one_by_one = invariants_update(one_by_one, t[j], settle, tee[j], push[j], qpos[j], qvel[j], bar[j], stem[j])
+        at_once = invariants_fold(invariants_init(n, np), t, settle, tee, push, qpos, qvel, bar, stem)
         for key in one_by_one:
             np.testing.assert_array_equal(at_once[key], one_by_one[key], err_msg=key)
-    scalar_k = invariants_fold(invariants_init(n, np), 3 * s + np.arange(s), 35, tee, qpos, qvel, bar, stem)
+    scalar_k = invariants_fold(invariants_init(n, np), 3 * s + np.arange(s), 35, tee, push, qpos, qvel, bar, stem)
     np.testing.assert_array_equal(scalar_k["tee_settled"], tee[5])
 
 
@@ -54,7 +56,7 @@ def test_the_coverage_of_a_few_poses_is_the_array_codes_to_the_bit():
 
 def test_the_folded_finite_and_containment_verdicts_hold_for_every_kind_of_bad_value():
     """The fold's per-row maximum against the definition (every entry finite and below mjMAXVAL; every tee
-    position strictly inside the walls), step by step, over many batches with NaN, +-inf, values just either
+    and pusher position strictly inside the walls), step by step, over many batches with NaN, +-inf, values just either
     side of the bounds, and negative ones, placed at random."""
     from mjx_pusht.task.invariants import MAX_VAL, WORKSPACE
 
@@ -65,7 +67,8 @@ def test_the_folded_finite_and_containment_verdicts_hold_for_every_kind_of_bad_v
     for trial in range(300):
         qpos, qvel = rng.normal(size=(s, n, nq)), rng.normal(size=(s, n, nq))
         tee = rng.uniform(-0.39, 0.39, size=(s, n, 3))
-        for arr, values in ((qpos, bad), (qvel, bad), (tee, edge)):
+        push = rng.uniform(-0.39, 0.39, size=(s, n, 2))
+        for arr, values in ((qpos, bad), (qvel, bad), (tee, edge), (push, edge)):
             for _ in range(rng.integers(0, 4)):
                 arr[rng.integers(s), rng.integers(n), rng.integers(arr.shape[-1] if arr is not tee else 2)] = \
                     values[rng.integers(len(values))]
@@ -73,10 +76,12 @@ def test_the_folded_finite_and_containment_verdicts_hold_for_every_kind_of_bad_v
         t = np.arange(s) + 20
         one_by_one = invariants_init(n, np)
         for j in range(s):
-            one_by_one = invariants_update(one_by_one, t[j], 5, tee[j], qpos[j], qvel[j], bar[j], stem[j])
-        at_once = invariants_fold(invariants_init(n, np), t, 5, tee, qpos, qvel, bar, stem)
+            one_by_one = invariants_update(one_by_one, t[j], 5, tee[j], push[j], qpos[j], qvel[j], bar[j], stem[j])
+        at_once = invariants_fold(invariants_init(n, np), t, 5, tee, push, qpos, qvel, bar, stem)
         for key in ("finite", "contained", "gap_max_dev"):
             np.testing.assert_array_equal(at_once[key], one_by_one[key], err_msg=f"{key}, trial {trial}")
+        inside = (abs(tee[..., :2]) < WORKSPACE).all(axis=(0, -1)) & (abs(push) < WORKSPACE).all(axis=(0, -1))
+        np.testing.assert_array_equal(at_once["contained"], inside, err_msg=f"contained, trial {trial}")
 
 
 def test_an_all_live_episode_update_equals_the_per_row_selects():

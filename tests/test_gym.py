@@ -213,6 +213,26 @@ def test_the_vector_api_as_sync_vector_env_offers_it():
         gym.make_vec(ENV, num_envs=2, backend="cpu", autoreset_mode="sometimes")
 
 
+def test_call_render_gives_one_frame_per_env_as_sync_vector_env_does():
+    """gymnasium's `call` calls `name` on each sub-environment: render is one frame each. The batch env used to
+    hand its whole batch of frames to every env (3 envs: three (3, H, W, 3) arrays)."""
+    kw = dict(render_mode="rgb_array", render_size=64)
+    envs = gym.make_vec(ENV, num_envs=3, backend="cpu", **kw)
+    copies = gym.vector.SyncVectorEnv([lambda: gym.make(ENV, **kw) for _ in range(3)])
+    envs.reset(seed=[4, 5, 6])
+    copies.reset(seed=[4, 5, 6])
+    ours, theirs = envs.call("render"), copies.call("render")
+    assert isinstance(ours, tuple) and len(ours) == len(theirs) == 3
+    for a, b, c in zip(ours, theirs, envs.render()):
+        assert a.shape == b.shape == (64, 64, 3)
+        np.testing.assert_array_equal(a, c)  # env i's own frame, in env order
+    assert not np.array_equal(ours[0], ours[1])  # different seeds, different pictures
+    quiet, quiet_copies = gym.make_vec(ENV, num_envs=2, backend="cpu"), gym.vector.SyncVectorEnv([lambda: gym.make(ENV)] * 2)
+    quiet.reset(seed=0)
+    quiet_copies.reset(seed=0)
+    assert quiet.call("render") == quiet_copies.call("render") == (None, None)  # no render_mode: None per env
+
+
 @pytest.mark.slow
 @pytest.mark.warp
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])

@@ -162,44 +162,44 @@ def test_a_recording_is_written_whole_or_not_at_all(tmp_path, monkeypatch):
     assert (out / "sweep.rrd").read_bytes() == good
 
 
-def test_a_model_mujoco_calls_singular_is_flagged_never_finite_and_rigid(tmp_path):
+def test_a_model_mujoco_calls_singular_is_refused_or_flagged_never_finite_and_rigid(tmp_path):
     """Finding 7: --param tee_mass=1e-300 made MuJoCo warn "Inertia matrix ... singular"; nothing moved and
-    every row read finite and rigid. Now each row carries the warnings MuJoCo raised (its own counters,
-    mjData.warning), such a row is never counted rigid, and the summary and the console say so."""
-    import json
-
+    every row read finite and rigid. Such a mass is now refused at the parameter's bounds (model.params.BOUNDS),
+    in one line; a model MuJoCo still calls singular carries the warning on each of its rows, and such a row is
+    never counted rigid."""
     import mujoco
 
-    from mjx_pusht.io.outputs import read_table
-    from mjx_pusht.model.params import apply
+    from mjx_pusht.backends.results import Rollouts
+    from mjx_pusht.model.params import apply, model_warnings
     from mjx_pusht.model.scene import SceneSpec, build_model
 
     singular = apply(build_model(SceneSpec()), {"tee_mass": 1e-300})
     d = mujoco.MjData(singular)
     mujoco.mj_forward(singular, d)
     assert d.warning[mujoco.mjtWarning.mjWARN_INERTIA].number > 0  # MuJoCo's own verdict on this model
-
-    out = tmp_path / "s"
-    r = cli("sweep", "--backend", "cpu", "--seeds", "3", "--param", "tee_mass=1e-300,0.105", "--no-rerun",
-            "--out", str(out))
-    assert r.returncode == 0, r.stderr
-    t = read_table(out / "per_seed.parquet")
-    bad = t["param_tee_mass"] < 1e-200
     inertia = 1 << int(mujoco.mjtWarning.mjWARN_INERTIA)
-    assert np.all(t["mujoco_warnings"][bad] & inertia) and not t["tee_stayed_rigid"][bad].any()
-    assert np.all(t["mujoco_warnings"][~bad] == 0) and t["tee_stayed_rigid"][~bad].all()
-    s = json.loads((out / "summary.json").read_text())
-    assert s["n_mujoco_warnings"] == 3 and s["n_rigid"] == 3 and "mjWARN_INERTIA" in s["mujoco_warnings"]
-    assert "WARNING: MuJoCo raised mjWARN_INERTIA on 3 seeds" in r.stdout
+    assert model_warnings(singular) & inertia and model_warnings(build_model(SceneSpec())) == 0
+    rows = Rollouts(seeds=np.arange(2), start=np.zeros((2, 3)), settled=np.zeros((2, 3)), final=np.zeros((2, 3)),
+                    pusher_final=np.zeros((2, 2)), gap_settled=np.full(2, 0.06), gap_max_dev=np.zeros(2),
+                    finite=np.ones(2, bool), contained=np.ones(2, bool), warnings=np.array([inertia, 0], np.int32))
+    assert rows.rigid.tolist() == [False, True]
+
+    r = cli("sweep", "--backend", "cpu", "--seeds", "3", "--param", "tee_mass=1e-300,0.105", "--no-rerun",
+            "--out", str(tmp_path / "s"))
+    assert r.returncode != 0 and "tee_mass must be a finite number in [0.01, 1e+08]" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "s").exists()
 
 
 def test_mjx_rows_carry_the_model_check_too():
     # MJX raises no warnings of its own: its rows take MuJoCo's verdict on each parameter combination's model
-    from mjx_pusht.backends.mjx import MjxBackend
-    from mjx_pusht.scenario import Scenario
+    import jax
 
-    backend = MjxBackend(Scenario(params=(("tee_mass", (1e-300, 0.105)),)), "jax")
-    assert backend.runner.models.warnings[0] != 0 and backend.runner.models.warnings[1] == 0
+    from mjx_pusht.backends.grid import ModelGrid
+    from mjx_pusht.model.scene import SceneSpec, build_model
+
+    grid = ModelGrid(build_model(SceneSpec(pusher="capsule")), [{"tee_mass": 1e-300}, {"tee_mass": 0.105}], impl="jax",
+                     device=jax.devices()[0])
+    assert grid.warnings[0] != 0 and grid.warnings[1] == 0
 
 
 def _files(folder):

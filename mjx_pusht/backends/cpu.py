@@ -21,6 +21,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
+from mjx_pusht import validate
 from mjx_pusht.backends import actions
 from mjx_pusht.backends.base import Backend
 from mjx_pusht.backends.results import Rollouts, Trace, from_carry
@@ -367,6 +368,7 @@ class CpuBackend(Backend):
         return f"cpu ({self.nthread} threads)"
 
     def run(self, seeds, *, trace: bool = False, batch: int | None = None, combos=None, poses=None) -> Rollouts:
+        seeds = validate.seed_array(seeds)  # the API's seeds get the CLI's check: [0.5, 1.7] is not seeds 0 and 1
         controller, episode = self.scenario.driver()
         feedback = controller.open_loop(episode.max_steps, episode.frame_skip) is None
         if feedback and self.workers > 1 and not trace and len(seeds) >= 2 * self.workers:

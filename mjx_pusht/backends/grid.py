@@ -24,6 +24,10 @@ class ModelGrid:
         # MuJoCo's verdict on each combination's model (a singular one, say): MJX raises no warnings itself
         self.warnings = np.array([model_warnings(m) for m in models], np.int32)
         kw = {}
+        if impl == "warp":
+            from mjx_pusht.backends.warp import finish_before_exit
+
+            finish_before_exit(device)  # a CPU process would otherwise hang at exit on a step never read
         if graph_mode is not None:
             import warp as wp
 

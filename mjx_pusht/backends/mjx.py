@@ -20,8 +20,8 @@ from concurrent.futures import ThreadPoolExecutor
 import mujoco
 import numpy as np
 
-from mjx_pusht.backends import actions
-from mjx_pusht.backends import launch as launching
+from mjx_pusht import validate
+from mjx_pusht.backends import actions, launch as launching
 from mjx_pusht.backends.base import Backend, BackendError
 from mjx_pusht.backends.grid import ModelGrid
 from mjx_pusht.backends.jax_setup import enable_compilation_cache
@@ -268,7 +268,7 @@ class MjxRunner:
         A sweep submits chunk k + 1 before it collects chunk k, so the host's work hides behind the device's."""
         import jax.numpy as jnp
 
-        seeds = np.asarray(seeds, dtype=np.int64)
+        seeds = validate.seed_array(seeds)  # the API's seeds get the CLI's check: [0.5, 1.7] is not seeds 0 and 1
         n = len(seeds)
         batch = batch or n
         if n > batch:

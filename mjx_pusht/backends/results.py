@@ -46,7 +46,7 @@ class Rollouts:
     gap_settled: np.ndarray  # (N,)
     gap_max_dev: np.ndarray  # (N,) peak |gap - 0.06| over every step, start included
     finite: np.ndarray  # (N,) bool: qpos and qvel stayed finite and within mjMAXVAL at every step
-    contained: np.ndarray  # (N,) bool: the tee's centre stayed inside the walls at every step
+    contained: np.ndarray  # (N,) bool: the tee's and the pusher's centres stayed inside the walls at every step
     trace: Trace | None = None
     params: dict[str, np.ndarray] | None = None  # per row: the swept parameter values it ran with
     pusher_start: np.ndarray | None = None  # (N, 2) pusher x, y at reset

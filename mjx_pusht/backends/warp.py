@@ -61,6 +61,31 @@ def quiet_warp() -> None:
     warp.config.log_level = warp.LOG_INFO if verbose else warp.LOG_WARNING
 
 
+_EXIT_WAIT = []  # the atexit hook, registered once per process
+
+
+def finish_before_exit(device) -> None:
+    """On a CPU, wait at exit for the MJX-Warp work still in flight, before the interpreter finalizes.
+
+    Warp's FFI kernels are ctypes callbacks: XLA's CPU worker threads call back into Python, and need the GIL.
+    A step dispatched and never read (the README's tour: `state = env.step(...)` as the script's last line) is
+    still running when Python exits; once finalization has begun that worker waits for a GIL it never gets,
+    and JAX's CPU client destructor waits for the worker: the process never exits (6 of 6 runs). `atexit`
+    hooks run before finalization, so blocking there on every live array lets the callbacks finish. GPUs need
+    no wait (Warp launches CUDA kernels there, with no Python in the worker)."""
+    if _EXIT_WAIT or device.platform != "cpu":
+        return
+    import atexit
+
+    def wait() -> None:
+        import jax
+
+        jax.block_until_ready(device.client.live_arrays())  # the client's: every device of the process
+
+    _EXIT_WAIT.append(wait)
+    atexit.register(wait)
+
+
 def banner() -> str | None:
     """Warp's one-line identity for summary.json: version and the device it runs on."""
     try:

@@ -13,14 +13,13 @@ from mjx_pusht.cli.eval import cmd_eval
 from mjx_pusht.cli.parser import UsageError, build_parser
 from mjx_pusht.cli.scene import cmd_scene, cmd_tree
 from mjx_pusht.cli.sweep import cmd_sweep
-from mjx_pusht.errors import MjxPushtError
+from mjx_pusht.errors import MjxPushtError, missing_extra, needs
 
 
 def cmd_train(args) -> int:
-    try:
-        from mjx_pusht.cli.train import cmd_train as train
-    except ImportError as e:
-        raise UsageError(f"train needs the training extra ({e.name} is missing): pip install 'mjx-pusht[train]'") from None
+    needs("mjx-pusht train", "train")  # before any work: no folder claimed, nothing written
+    from mjx_pusht.cli.train import cmd_train as train
+
     return train(args)
 
 
@@ -69,6 +68,12 @@ def main(argv: list[str] | None = None) -> int:
         if args is None or e.errno not in DISK_ERRORS:
             raise  # not the disk or the path: a bug, with its traceback
         print(f"mjx-pusht: error: writing {e.filename or args.out} failed ({e.strerror}); {kept(args)}", file=sys.stderr)
+        return 1
+    except ImportError as e:  # an optional extra's module met where no `requires` stood: still one line
+        err = missing_extra(e, f"mjx-pusht {argv[0] if argv else sys.argv[1]}")
+        if err is None:
+            raise
+        print(f"mjx-pusht: error: {err}", file=sys.stderr)
         return 1
 
 

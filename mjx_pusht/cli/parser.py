@@ -6,6 +6,7 @@ import argparse
 import math
 from pathlib import Path
 
+from mjx_pusht import validate
 from mjx_pusht.errors import MjxPushtError
 from mjx_pusht.model.scene import BREAK_MODES
 
@@ -39,11 +40,9 @@ def _int_at_least(low: int, high: int | None = None, why: str = ""):
 
 _positive = _int_at_least(1)
 _nonneg = _int_at_least(0)
-# Bounds on what one run may ask for, checked before any work: past them a run does not finish in any time
-# anyone waits for, or its first array does not fit in memory (a 10**9-step schedule is a 16 GB control table,
-# allocated before the first step; the hostile pass found it killing the process).
-_steps = _int_at_least(1, 100_000, " (1,000 s of simulated time at 100 Hz)")
-_frame_skip = _int_at_least(1, 1_000, " physics steps a control step")
+# The API's bounds (validate.MAX_STEPS, MAX_FRAME_SKIP: why they are there), as flag types
+_steps = _int_at_least(1, validate.MAX_STEPS, " (1,000 s of simulated time at 100 Hz)")
+_frame_skip = _int_at_least(1, validate.MAX_FRAME_SKIP, " physics steps a control step")
 _worlds = _int_at_least(1, 1 << 22, " episodes at once")
 
 

@@ -101,10 +101,7 @@ def _cmd_ppo(args, name: str, why: str) -> int:
     if name == "cpu":
         raise TrainError("--algo ppo runs in Brax's jitted JAX: use --backend mjx-warp or mjx-jax "
                          "(cpu is MuJoCo C on the host)")
-    try:
-        from mjx_pusht.train.ppo import PPOConfig, train_ppo
-    except ImportError as e:
-        raise TrainError(f"--algo ppo needs Brax ({e.name} is missing): pip install 'mjx-pusht[train]'") from None
+    from mjx_pusht.train.ppo import PPOConfig, train_ppo
     cfg = PPOConfig(obs_type=args.obs, envs=args.envs, timesteps=args.timesteps, evals=args.iterations,
                     hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
                     eval_envs=args.eval_envs, seed=args.seed, reset=args.reset, act=args.ppo_act,

@@ -31,13 +31,14 @@ from __future__ import annotations
 
 import numpy as np
 
-try:
-    import jax
-    import jax.numpy as jnp
+import jax
+import jax.numpy as jnp
+
+from mjx_pusht.errors import requires
+
+with requires("the Brax adapter", "brax"):  # optional: say what to install, in one line
     from brax.envs.base import Env, State
     from brax.envs.wrappers import training as brax_training
-except ImportError as e:  # optional: say what to install
-    raise ImportError("the Brax adapter needs brax: pip install 'mjx-pusht[brax]'") from e
 
 from mjx_pusht import validate
 from mjx_pusht.backends import actions as action_check

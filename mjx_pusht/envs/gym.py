@@ -35,10 +35,10 @@ import math
 
 import numpy as np
 
-try:
+from mjx_pusht.errors import requires
+
+with requires("the gymnasium environments", "gym"):  # the extra is optional: say what to install, in one line
     import gymnasium as gym
-except ImportError as e:  # the extra is optional: say what to install, in one line
-    raise ImportError("the gymnasium environments need gymnasium: pip install 'mjx-pusht[gym]'") from e
 
 from mjx_pusht import validate
 from mjx_pusht.envs.common import (
@@ -141,7 +141,7 @@ class PushTGymEnv(OneWorld, Pictures, gym.Env):
             "pos_agent": st[0:2].copy(),
             "weld_gap_max_dev": m["gap_max_dev"][0],
             "finite": m["finite"][0],  # every state of the episode finite and bounded
-            "contained": m["contained"][0],  # the block never left the walls (no missed contact)
+            "contained": m["contained"][0],  # the block and the pusher never left the walls (no missed contact)
         }
         if not (info["finite"] and info["contained"]):
             warn_broken(info)

@@ -22,15 +22,16 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from gymnasium import spaces
 
 from mjx_pusht import validate
-from mjx_pusht.envs import gym as base
+from mjx_pusht.envs import gym as base  # first: says which extra brings gymnasium if it is missing
 from mjx_pusht.envs.common import OneWorld, Pictures, functional, warn_broken
 from mjx_pusht.envs.vector import PushTVectorEnv
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model import gym_pusht as frame
 from mjx_pusht.task.rules import SUCCESS_COVERAGE, T_RECTS
+
+spaces = base.gym.spaces
 
 ENV_ID = "mjx_pusht/PushT-gym-pusht-v0"
 OBS_TYPES = ("state", "environment_state_agent_pos", "pixels", "pixels_agent_pos")

@@ -51,7 +51,12 @@ def _nanmax(a, b):
 
 
 def _inside(layout, qs, bounded: bool) -> bool:
-    """Every physics step's tee inside the walls: `invariants_fold`'s containment of `layout.tee_pose(qs)`. With
+    """Every physics step's tee and pusher inside the walls: `invariants_fold`'s containment."""
+    return float(_peak(abs(layout.pusher_xy(qs)), axis=None)) < WORKSPACE and _tee_inside(layout, qs, bounded)
+
+
+def _tee_inside(layout, qs, bounded: bool) -> bool:
+    """Every physics step's tee inside the walls: the containment of `layout.tee_pose(qs)`. With
     the T turning about an anchor, the origin is within 2 (|ax| + |ay|) of the hinge's joints: where every
     entry of qs is finite (`bounded`) and the joints stay that far inside, the origin did, with no pose to
     compute (exact)."""

@@ -281,7 +281,7 @@ class PushTVectorEnv(Pictures, VectorEnv):
             "block_pose": s[..., 2:5], "pos_agent": s[..., 0:2],
             "weld_gap_max_dev": flat["gap_max_dev"],
             "finite": flat["finite"],  # every state of the episode finite and bounded
-            "contained": flat["contained"],  # the block never left the walls (no missed contact)
+            "contained": flat["contained"],  # the block and the pusher never left the walls (no missed contact)
         }
         if xp is np:  # the host's convention, as the single env and SyncVectorEnv give them
             info = {k: np.asarray(v, np.float64 if np.asarray(v).dtype.kind == "f" else
@@ -303,9 +303,15 @@ class PushTVectorEnv(Pictures, VectorEnv):
     def close_extras(self, **kwargs):
         self._close_renderers()
 
-    # gymnasium's vector API, as SyncVectorEnv offers it: one batch, so an attribute is the same for every env
+    # gymnasium's vector API, as SyncVectorEnv offers it: one batch, so an attribute is the same for every env,
+    # but render already answers per env (a frame each): call("render") hands those on, never the whole batch once
+    # per env (500 envs were 500 x 500 frames to a client that rendered through `call`)
     def call(self, name: str, *args, **kwargs) -> tuple:
-        """`name` called (or read, if not callable) on the env, once per sub-environment, as SyncVectorEnv does."""
+        """`name` called (or read, if not callable) on each sub-environment: one result per env, as SyncVectorEnv
+        returns."""
+        if name == "render":
+            frames = self.render(*args, **kwargs)
+            return (None,) * self.num_envs if frames is None else tuple(frames)
         attr = self._env.episode.max_steps if name == "_max_episode_steps" else getattr(self, name)
         value = attr(*args, **kwargs) if callable(attr) else attr
         return (value,) * self.num_envs

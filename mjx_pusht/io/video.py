@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pusht.errors import MjxPushtError
+from mjx_pusht.errors import MjxPushtError, needs
 from mjx_pusht.task.rules import coverage_np
 
 FORMATS = (".gif", ".mp4")
@@ -28,11 +28,7 @@ def check_path(path: Path) -> Path:
     if path.suffix.lower() not in FORMATS:
         raise VideoError(f"--video must end in .gif or .mp4, got {path.name!r}")
     if path.suffix.lower() == ".mp4":
-        try:
-            import imageio.v3  # noqa: F401
-            import imageio_ffmpeg  # noqa: F401
-        except ImportError:
-            raise VideoError("MP4 needs imageio and ffmpeg: pip install 'mjx-pusht[video]' (or write a .gif)") from None
+        needs("an MP4 video (a .gif needs nothing more)", "video")
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
         raise VideoError(f"cannot write the video: folder {parent} does not exist")

@@ -14,7 +14,8 @@ from collections.abc import Callable
 import mujoco
 import numpy as np
 
-from mjx_pusht.errors import MjxPushtError
+from mjx_pusht import validate
+from mjx_pusht.errors import ConfigError, MjxPushtError
 
 
 def _tee_dofs(m: mujoco.MjModel) -> list[int]:
@@ -49,6 +50,25 @@ PARAMS: dict[str, tuple[Callable[[mujoco.MjModel, float], None], str]] = {
     "tee_damping": (_tee_damping, "tee x/y joint damping (chapter: 4)"),
     "tee_frictionloss": (_tee_frictionloss, "tee x/y joint frictionloss (chapter: 1.2)"),
     "tee_mass": (_tee_mass, "tee total mass in kg (chapter: 0.105)"),
+}
+
+MAX_VAL = 1e10  # MuJoCo's mjMAXVAL: a number past it is, to MuJoCo, a diverged state
+# (low, high, low excluded): where each parameter means what its name says. Measured with the chapter's nudge on
+# 8 seeds of MuJoCo C (docs/notebook/h-apierr.md), where the physics stops meaning it:
+# - kv: a velocity servo's gain. 0 is a servo switched off (the pusher stays: a dull but true study); a negative
+#   gain drives the pusher away from its target (kv=-1 moved it 12 cm south against a northward nudge, every
+#   flag clean). Up to mjMAXVAL the implicit integrator keeps it stable (1e10 pushes the T as 20 does).
+# - tee_damping, tee_frictionloss: dissipation, never negative. Negative damping feeds energy in (-5 diverged);
+#   a negative frictionloss pushes the T (-5 slid it against the push). Capped at mjMAXVAL.
+# - tee_mass: MuJoCo's soft contacts are regularised by the effective mass of the bodies they touch, so a T far
+#   lighter or heavier than the 0.2 kg pusher lets the pusher through it: at 3 g and at 1e9 kg the pusher
+#   travelled as far as with no T in its way (62.6 and 30 cm against 23 cm for 1e3 to 1e8 kg, which stop it),
+#   and 1e300 kg left it outside the south wall. Between 10 g and 1e8 kg the pusher moves the T or is stopped.
+BOUNDS: dict[str, tuple[float, float, bool]] = {
+    "kv": (0.0, MAX_VAL, False),
+    "tee_damping": (0.0, MAX_VAL, False),
+    "tee_frictionloss": (0.0, MAX_VAL, False),
+    "tee_mass": (1e-2, 1e8, False),
 }
 
 
@@ -86,21 +106,45 @@ def parse_param(text: str) -> tuple[str, list[float]]:
     except ValueError:
         raise ParamError(f"--param {text!r}: values are a,b,c, lo:hi:n or ~lo:hi:n (n from 1 to "
                          f"{MAX_COMBINATIONS})") from None
-    if not out or not all(np.isfinite(out)) or min(out) < 0 or (name == "tee_mass" and min(out) <= 0):
-        raise ParamError(f"--param {text!r}: values must be finite and non-negative (mass positive)")
-    return name, out
+    return name, check_values(name, out, f"--param {text!r}")
+
+
+def check_values(name: str, values, where: str) -> list[float]:
+    """A parameter's values: a non-empty list of real numbers within its BOUNDS (the CLI's and the API's check)."""
+    if name not in PARAMS:
+        raise ParamError(f"{where}: unknown parameter {name!r}; choose from {', '.join(PARAMS)}")
+    if isinstance(values, (str, bytes)) or not hasattr(values, "__len__") or not len(values):
+        raise ParamError(f"{where}: {name}'s values must be a non-empty sequence of numbers, got {values!r}")
+    lo, hi, lo_open = BOUNDS[name]
+    try:
+        return [validate.real_range(name, v, lo, hi, lo_open) for v in values]
+    except ConfigError as e:
+        raise ParamError(f"{where}: {e}") from None
+
+
+def check_params(params, where: str = "params") -> tuple[tuple[str, tuple[float, ...]], ...]:
+    """(name, values) pairs: each a known NAME once, its values within bounds, the grid at most MAX_COMBINATIONS
+    combinations. Returned as tuples of floats."""
+    if isinstance(params, (str, bytes, dict)) or not hasattr(params, "__iter__"):
+        raise ParamError(f"{where} must be (name, values) pairs, got {params!r}")
+    out = []
+    for pair in params:
+        if isinstance(pair, (str, bytes)) or not hasattr(pair, "__len__") or len(pair) != 2:
+            raise ParamError(f"{where} must be (name, values) pairs, got {pair!r}")
+        name, values = pair
+        out.append((name, tuple(check_values(name, values, where))))
+    if len({n for n, _ in out}) != len(out):
+        raise ParamError(f"{where}: each parameter NAME may be given once")
+    combos = int(np.prod([len(v) for _, v in out]))
+    if combos > MAX_COMBINATIONS:
+        raise ParamError(f"{where}: a grid of {combos:,} combinations; at most {MAX_COMBINATIONS:,} (each is its own "
+                         "model): sweep fewer values, or split the study")
+    return tuple(out)
 
 
 def parse_params(texts) -> tuple[tuple[str, tuple[float, ...]], ...]:
     """Every `--param` of a command: each NAME once, the grid at most MAX_COMBINATIONS combinations."""
-    params = tuple((n, tuple(v)) for n, v in (parse_param(t) for t in texts))
-    if len({n for n, _ in params}) != len(params):
-        raise ParamError("each --param NAME may be given once")
-    combos = int(np.prod([len(v) for _, v in params]))
-    if combos > MAX_COMBINATIONS:
-        raise ParamError(f"--param: a grid of {combos:,} combinations; at most {MAX_COMBINATIONS:,} (each is its own "
-                         "model): sweep fewer values, or split the study")
-    return params
+    return check_params([parse_param(t) for t in texts], "--param")
 
 
 def grid(params: dict[str, list[float]]) -> list[dict[str, float]]:

@@ -88,7 +88,8 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
         print(f"WARNING: {summary['n_non_finite']} episodes went non-finite (flagged, left out of the rate): "
               f"{summary['non_finite_seeds'][:10]}")
     if summary["n_escaped"] and break_it != "free-tee":
-        print(f"WARNING: {summary['n_escaped']} episodes left the walled workspace: {summary['escaped_seeds'][:10]}")
+        print(f"WARNING: {summary['n_escaped']} episodes left the walled workspace (the T or the pusher): "
+              f"{summary['escaped_seeds'][:10]}")
     if break_it == "none" and summary["n_rigid"] + summary["n_mujoco_warnings"] != len(r):
         print(f"WARNING: the welded T came apart in {len(r) - summary['n_rigid'] - summary['n_mujoco_warnings']} episodes")
     print(f"table: {out / 'per_episode.parquet'}\nsummary: {out / 'summary.json'}")

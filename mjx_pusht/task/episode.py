@@ -8,11 +8,9 @@ which backend called them; the backends only differ in how they step MuJoCo.
 from __future__ import annotations
 
 import dataclasses
-import numbers
 
 import numpy as np
 
-from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.invariants import invariants_fold, invariants_init, invariants_update
 from mjx_pusht.task.rules import (
     SUCCESS_COVERAGE,
@@ -45,10 +43,10 @@ class Episode:
     def __post_init__(self) -> None:
         from mjx_pusht import validate
 
-        if isinstance(self.frame_skip, bool) or not isinstance(self.frame_skip, numbers.Integral) or self.frame_skip < 1:
-            raise ConfigError(f"frame_skip must be a positive number of physics steps, got {self.frame_skip!r}")
-        if isinstance(self.max_steps, bool) or not isinstance(self.max_steps, numbers.Integral) or self.max_steps < 1:
-            raise ConfigError(f"max_steps must be a positive number of control steps, got {self.max_steps!r}")
+        validate.steps("frame_skip", self.frame_skip, validate.MAX_FRAME_SKIP)
+        # an env's own episodes may run to the int32 step counters' end (envs.common.NEVER: gymnasium's TimeLimit
+        # truncates); a backend's rollout is a scan of max_steps, bounded by Scenario at validate.MAX_STEPS
+        validate.steps("max_steps", self.max_steps, 2**31 - 1)
         validate.fraction("success", self.success)  # NaN never ends an episode, 2.0 never succeeds, 0 always does
 
     @property
@@ -114,7 +112,7 @@ def control_step(sim, carry, qpos, k, action, action_type: str, physics, layout,
 
 def after_physics_step(carry, t, settle_step, layout, qpos, qvel, sensordata, xp):
     """Fold physics step t into the invariants; an episode that has ended stops changing them."""
-    acc = invariants_update(carry["inv"], t, settle_step, layout.tee_pose(qpos), qpos, qvel,
+    acc = invariants_update(carry["inv"], t, settle_step, layout.tee_pose(qpos), layout.pusher_xy(qpos), qpos, qvel,
                             sensordata[..., 0:3], sensordata[..., 3:6])
     return {**carry, "inv": _where(xp, carry["ep"]["done"], carry["inv"], acc)}
 
@@ -122,7 +120,7 @@ def after_physics_step(carry, t, settle_step, layout, qpos, qvel, sensordata, xp
 def after_physics_steps(carry, t, settle_step, layout, qpos, qvel, sensordata, xp):
     """`after_physics_step` over a leading axis of consecutive steps at once (`t` (S,) or (S, N)): the same
     values to the bit, in a few array operations (the CPU's frame_skip steps of a control step)."""
-    acc = invariants_fold(carry["inv"], t, settle_step, layout.tee_pose(qpos), qpos, qvel,
+    acc = invariants_fold(carry["inv"], t, settle_step, layout.tee_pose(qpos), layout.pusher_xy(qpos), qpos, qvel,
                           sensordata[..., 0:3], sensordata[..., 3:6])
     done = carry["ep"]["done"]
     skip = isinstance(done, np.ndarray) and not done.any()  # on the host, no ended row: nothing to keep

@@ -8,7 +8,7 @@ from mjx_pusht.task.rules import array_namespace
 
 WELD_GAP = 0.06  # bar centre to stem centre in the authored T, metres
 RIGID_TOL = 1e-4  # peak |gap - 0.06| below this over the whole run: one rigid body
-WORKSPACE = 0.40  # the walls' inner faces are at +-0.39 m: a tee centre beyond this went through a wall
+WORKSPACE = 0.40  # the walls' inner faces are at +-0.39 m: a tee or pusher centre beyond this went through a wall
 MAX_VAL = 1e10  # MuJoCo's mjMAXVAL: a state beyond it has diverged even while still finite
 
 
@@ -47,7 +47,7 @@ def sane(x):
     return xp.all(xp.isfinite(x) & (abs(x) < MAX_VAL), axis=-1)
 
 
-def invariants_update(acc, t, settle_step, tee_pose, qpos, qvel, bar_pos, stem_pos):
+def invariants_update(acc, t, settle_step, tee_pose, pusher_xy, qpos, qvel, bar_pos, stem_pos):
     """Fold one step into the running invariants; used per step by every backend.
 
     `bar_pos`/`stem_pos` are the geom positions MuJoCo computed in step t (the
@@ -65,12 +65,14 @@ def invariants_update(acc, t, settle_step, tee_pose, qpos, qvel, bar_pos, stem_p
         # maximum propagates NaN, so a diverged seed can never read as rigid
         "gap_max_dev": xp.maximum(acc["gap_max_dev"], abs(gap - WELD_GAP)),
         "finite": acc["finite"] & sane(qpos) & sane(qvel),
-        # a tee outside the walls means a contact was missed (or the state diverged)
-        "contained": acc["contained"] & xp.all(abs(tee_pose[..., :2]) < WORKSPACE, axis=-1),
+        # a tee or a pusher outside the walls means a contact was missed (or the state diverged): a 1e300 kg T
+        # once pressed the pusher through the south wall while the T stayed put
+        "contained": acc["contained"] & xp.all(abs(tee_pose[..., :2]) < WORKSPACE, axis=-1)
+        & xp.all(abs(pusher_xy) < WORKSPACE, axis=-1),
     }
 
 
-def invariants_fold(acc, t, settle_step, tee_pose, qpos, qvel, bar_pos, stem_pos):
+def invariants_fold(acc, t, settle_step, tee_pose, pusher_xy, qpos, qvel, bar_pos, stem_pos):
     """`invariants_update` over consecutive steps at once: every array has a leading axis of steps (the CPU's
     `frame_skip` physics steps of one control step; `t` (S,) or (S, N)). The same values to the bit as S
     updates in turn: maxima and conjunctions do not depend on grouping, and the settled values are picked
@@ -87,7 +89,8 @@ def invariants_fold(acc, t, settle_step, tee_pose, qpos, qvel, bar_pos, stem_pos
         # fails `< bound`, so this is `all(sane)` / `all(|xy| < WORKSPACE)` in a third of the array calls
         "finite": acc["finite"] & (xp.maximum(peak(abs(qpos), axis=(0, -1)), peak(abs(qvel), axis=(0, -1)))
                                    < MAX_VAL),
-        "contained": acc["contained"] & (peak(abs(tee_pose[..., :2]), axis=(0, -1)) < WORKSPACE),
+        "contained": acc["contained"] & (peak(abs(tee_pose[..., :2]), axis=(0, -1)) < WORKSPACE)
+        & (peak(abs(pusher_xy), axis=(0, -1)) < WORKSPACE),
     }
     at = xp.asarray(t == settle_step)
     # the settle step falls in the first control step only: in every other there is nothing to pick

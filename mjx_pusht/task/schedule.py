@@ -6,6 +6,7 @@ import dataclasses
 
 import numpy as np
 
+from mjx_pusht import validate
 from mjx_pusht.errors import ConfigError
 
 SETTLE_STEPS = 40
@@ -22,10 +23,14 @@ class Schedule:
     nudge_ctrl: tuple[float, float] = (0.0, 1.0)
 
     def __post_init__(self) -> None:
-        if self.settle_steps < 1:
-            raise ConfigError(f"settle steps must be positive, got {self.settle_steps}")
-        if self.nudge_steps < 1:
-            raise ConfigError(f"nudge steps must be positive, got {self.nudge_steps}")
+        validate.steps("settle_steps", self.settle_steps)
+        validate.steps("nudge_steps", self.nudge_steps)
+        ctrl = self.nudge_ctrl
+        if isinstance(ctrl, (str, bytes)) or not hasattr(ctrl, "__len__") or len(ctrl) != 2:
+            raise ConfigError(f"nudge_ctrl is the pusher's (x, y) velocity target, two numbers; got {ctrl!r}")
+        # the servos' ctrlrange clips a target to +-1 m/s; a NaN or inf target is no velocity at all
+        for v in ctrl:
+            validate.real_range("nudge_ctrl", v, -1e10, 1e10)
 
     @property
     def total_steps(self) -> int:

@@ -4,6 +4,7 @@ checkpoint's reader (policy.py) is imported only when a `policy:` spec is loaded
 
 from __future__ import annotations
 
+from mjx_pusht.errors import requires
 from mjx_pusht.task.controllers import Controller, ControllerError, register
 
 PREFIX = "policy"
@@ -13,12 +14,10 @@ def load_spec(spec: str, *, action_type: str | None = None) -> Controller:
     """`policy:PATH` -> the controller that runs the checkpoint at PATH (velocity actions only)."""
     if action_type not in (None, "velocity"):
         raise ControllerError("a trained policy commands velocities; --action position is for your own controllers")
-    try:
+    with requires("policy:PATH", "train"):  # the checkpoint reader is flax's
         from mjx_pusht.train.policy import load_policy
-    except ImportError as e:
-        raise ControllerError(f"policy:PATH needs the training extra ({e.name} is missing): "
-                              "pip install 'mjx-pusht[train]'") from None
-    return load_policy(spec)
+
+        return load_policy(spec)
 
 
 def register_policy() -> None:

@@ -258,33 +258,60 @@ def load_checkpoint(path) -> tuple[dict, dict]:
     return params, meta
 
 
+def _numbers(path, what: str, value, shape=None) -> np.ndarray:
+    """`value` as finite float64 numbers (of `shape`, if given): a string, a nested dict or a ragged list in a file
+    is one line naming what holds it, never NumPy's "could not convert string to float"."""
+    try:
+        a = np.asarray(value)
+        if a.dtype.kind not in "biuf":  # strings, objects, complex: not weights
+            raise TypeError
+        a = a.astype(np.float64)
+    except (TypeError, ValueError):
+        raise ControllerError(f"policy checkpoint {path}: {what} holds something other than numbers "
+                              f"({type(value).__name__})") from None
+    if shape is not None and a.shape != shape:
+        raise ControllerError(f"policy checkpoint {path}: {what} has shape {a.shape}, not {shape}")
+    if not np.isfinite(a).all():
+        raise ControllerError(f"policy checkpoint {path}: {what} holds non-finite values")
+    return a
+
+
 def _check(path, params, meta) -> None:
-    """The file's layers must chain from the obs type's features to the two heads, and be finite."""
-    if meta.get("obs_type") not in OBS_TYPES or meta.get("activation") not in ACTIVATIONS:
-        raise ControllerError(f"policy checkpoint {path}: unknown obs type {meta.get('obs_type')!r} or activation "
-                              f"{meta.get('activation')!r}")
+    """The file's layers must chain from the obs type's features to the two heads, be numbers, and be finite."""
+    if not isinstance(params, dict) or not all(isinstance(v, dict) for v in params.values()):
+        raise ControllerError(f"policy checkpoint {path}: its params are not named layers of weights")
+    obs_type, activation = meta.get("obs_type"), meta.get("activation")
+    if not (isinstance(obs_type, str) and obs_type in OBS_TYPES and isinstance(activation, str)
+            and activation in ACTIVATIONS):
+        raise ControllerError(f"policy checkpoint {path}: unknown obs type {obs_type!r} or activation {activation!r}")
     image = meta.get("image", 0)
-    pixels = meta["obs_type"].startswith("pixels")
-    if pixels != bool(image) or (pixels and not (isinstance(image, int) and image <= 2048 and conv_out(image) >= 1)):
-        raise ControllerError(f"policy checkpoint {path}: a {meta['obs_type']} policy with image size {image!r}")
+    pixels = obs_type.startswith("pixels")
+    if isinstance(image, bool) or not isinstance(image, int) or pixels != bool(image) or (
+            pixels and not (image <= 2048 and conv_out(image) >= 1)):
+        raise ControllerError(f"policy checkpoint {path}: a {obs_type} policy with image size {image!r}")
     ppo = meta.get("method") == "ppo"  # Brax's policy: raw observations in, (loc[, scale]) out, no memory
-    width = OBS_SIZE[meta["obs_type"]] if ppo else feature_size(meta["obs_type"])
-    if np.shape(meta["in_mean"]) != (width,) or np.shape(meta["in_std"]) != (width,):
-        raise ControllerError(f"policy checkpoint {path}: input normalisation is not {width}-wide")
+    width = OBS_SIZE[obs_type] if ppo else feature_size(obs_type)
+    if ppo and not (isinstance(meta.get("act", "mean"), str) and meta.get("act", "mean") in PPO_ACTS):
+        raise ControllerError(f"policy checkpoint {path}: unknown PPO action {meta.get('act')!r} (mean or sample)")
+    _numbers(path, "input normalisation in_mean", meta.get("in_mean"), (width,))
+    if (_numbers(path, "input normalisation in_std", meta.get("in_std"), (width,)) <= 0).any():
+        raise ControllerError(f"policy checkpoint {path}: input normalisation in_std must be positive (it divides)")
     if image:  # the trunk's layers chain from 3 colours to the map the pose reader reads, its pose to the Dense layers
         channels = 3
         for i in range(len(CONV_CHANNELS)):
             layer = params.get(f"Conv_{i}") or {}
             if np.shape(layer.get("kernel")) != (CONV_KERNEL, CONV_KERNEL, channels, CONV_CHANNELS[i]):
                 raise ControllerError(f"policy checkpoint {path}: layer Conv_{i} is not this version's image trunk")
+            _numbers(path, f"layer Conv_{i}'s kernel", layer["kernel"])
+            _numbers(path, f"layer Conv_{i}'s bias", layer.get("bias"), (CONV_CHANNELS[i],))
             channels = CONV_CHANNELS[i]
         pose_in = conv_out(image) ** 2 * channels
         for i, shape in enumerate(((pose_in, POSE_HIDDEN), (POSE_HIDDEN, 4))):
             layer = params.get(f"Pose_{i}") or {}
             if np.shape(layer.get("kernel")) != shape or np.shape(layer.get("bias")) != shape[1:]:
                 raise ControllerError(f"policy checkpoint {path}: layer Pose_{i} is not this version's pose reader")
-            if not (np.isfinite(layer["kernel"]).all() and np.isfinite(layer["bias"]).all()):
-                raise ControllerError(f"policy checkpoint {path}: layer Pose_{i} holds non-finite weights")
+            _numbers(path, f"layer Pose_{i}'s weights", layer["kernel"])
+            _numbers(path, f"layer Pose_{i}'s weights", layer["bias"])
         width += len(pose_features(np.zeros(4), np.zeros(2)))
     dense = [k for k in params if k.startswith("Dense_")]
     for i in range(len(dense)):
@@ -292,11 +319,9 @@ def _check(path, params, meta) -> None:
         kernel = None if layer is None else np.asarray(layer.get("kernel"))
         if kernel is None or kernel.ndim != 2 or kernel.shape[0] != width or np.shape(layer.get("bias")) != kernel.shape[1:]:
             raise ControllerError(f"policy checkpoint {path}: layer Dense_{i} does not take {width} inputs")
-        if not (np.isfinite(kernel).all() and np.isfinite(layer["bias"]).all()):
-            raise ControllerError(f"policy checkpoint {path}: layer Dense_{i} holds non-finite weights")
+        _numbers(path, f"layer Dense_{i}'s weights", kernel)
+        _numbers(path, f"layer Dense_{i}'s weights", layer["bias"])
         width = kernel.shape[1]
-    if ppo and meta.get("act", "mean") not in PPO_ACTS:
-        raise ControllerError(f"policy checkpoint {path}: unknown PPO action {meta.get('act')!r} (mean or sample)")
     if ppo and len(dense) and (width == 4 or (width == 2 and meta.get("act", "mean") == "mean")):
         return
     if not len(dense) or width != OUTPUTS:

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pusht.errors import ConfigError
+from mjx_pusht.errors import ConfigError, needs
 from mjx_pusht.io.outputs import atomic_write_bytes
 from mjx_pusht.train.dagger import held_out_seeds
 from mjx_pusht.train.policy import OBS_SIZE, PPO_ACTS
@@ -217,6 +217,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     stops the run with a TrainError naming the judgement; the files of the last good one stay."""
     import functools
 
+    needs("train_ppo", "train")  # one line naming the extra, before any work
     from brax.training.agents.ppo import networks as ppo_networks
     from brax.training.agents.ppo import train as brax_ppo
     from tqdm import tqdm

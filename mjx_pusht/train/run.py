@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mjx_pusht.errors import needs
 from mjx_pusht.study.stats import wilson
 from mjx_pusht.train.curve import kept as kept_fit
 from mjx_pusht.train.resume import TrainError, checkpoint, config_dict, restore, resume_every_s
@@ -39,6 +40,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     succeeded most on that iteration's fresh training seeds with the expert's share at most
     VALIDATION_BETA (`curve.kept`); never chosen by the held-out seeds, so its held-out rate is not a maximum
     taken over the curve's noise."""
+    needs("train_dagger", "train")  # one line naming the extra, before any work
     import jax
     from tqdm import tqdm
 
