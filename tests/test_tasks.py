@@ -133,3 +133,58 @@ def test_the_functional_env_of_gym_pushts_task_starts_and_ends_episodes_as_gym_p
         np.testing.assert_allclose(frame.to_px(s.obs["state"][i : i + 1, 0:2])[0], obs[0:2], atol=1e-9)
         origin, _ = frame.pose_to_px(s.obs["state"][i : i + 1, 2:5])
         np.testing.assert_allclose(origin[0], obs[2:4], atol=1e-9)
+
+
+def small_policy(path, obs_type: str = "state"):
+    """A small untrained student of gym-pusht's task, written as `train --task gym-pusht` writes one."""
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_pusht.train.policy import feature_size, network, save
+
+    fmt = TASKS["gym-pusht"].memory
+    width = feature_size(obs_type, fmt)
+    params = network((32,), "relu", 0, 2 + fmt.size).init(jax.random.key(3), jnp.zeros((1, width)))["params"]
+    save(path, params, {"obs_type": obs_type, "activation": "relu", "in_mean": [0.0] * width, "in_std": [0.1] * width,
+                        "method": "dagger", "config": {"task": "gym-pusht"}, "memory": fmt.meta()})
+    return path
+
+
+def test_a_trained_policy_drops_into_a_plain_gym_pusht_loop_as_eval_runs_it(tmp_path):
+    from gym_pusht.envs.pusht import PushTEnv as Theirs
+
+    from mjx_pusht.train.gym_pusht_policy import GymPushtPolicy
+
+    path = small_policy(tmp_path / "policy.msgpack")
+    s = evaluate(f"policy:{path}", SEEDS, tmp_path / "eval", backend="gym-pusht", task="gym-pusht", max_steps=25,
+                 rerun=False, progress=False)
+    from mjx_pusht.io.outputs import read_table
+
+    table = read_table(tmp_path / "eval" / "per_episode.parquet")
+    policy = GymPushtPolicy(path)
+    assert policy.obs_type == "state"
+    for i, seed in enumerate(SEEDS):  # the README's few lines, as a gym-pusht user writes them
+        env = Theirs(obs_type=policy.obs_type)
+        obs, _ = env.reset(seed=int(seed))
+        policy.reset()
+        for t in range(25):
+            obs, _, terminated, _, info = env.step(policy(obs))
+            if terminated:
+                break
+        # the same episodes to a micrometre: the loop reads gym-pusht's angle wrapped to [0, 2 pi), eval its body's
+        assert table["episode_length"][i] == t + 1 and table["final_coverage"][i] == pytest.approx(info["coverage"],
+                                                                                                   abs=1e-6)
+        assert (table["tee_final_x"][i], table["tee_final_y"][i]) == pytest.approx(
+            tuple(frame.pose_to_world(np.array([env.block.position]), np.array([env.block.angle]))[0, :2]), abs=1e-6)
+    assert s["n_episodes"] == len(SEEDS)
+
+
+def test_a_policy_of_the_chapter_task_is_refused_as_a_gym_pusht_controller(tmp_path):
+    from mjx_pusht.train.gym_pusht_policy import GymPushtPolicy
+    from mjx_pusht.train.policy import load_checkpoint, save
+
+    path = small_policy(tmp_path / "p.msgpack")
+    params, meta = load_checkpoint(path)
+    save(tmp_path / "chapter.msgpack", params, {**meta, "config": {}})
+    with pytest.raises(MjxPushtError, match="trained on the chapter task"):
+        GymPushtPolicy(tmp_path / "chapter.msgpack")

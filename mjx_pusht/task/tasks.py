@@ -21,6 +21,8 @@ import dataclasses
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model.gym_pusht import KP, KV
 from mjx_pusht.task.controllers import Controller
+from mjx_pusht.task.expert_gym_pusht import CONTACTS
+from mjx_pusht.task.memory import CHAPTER, CarryFormat
 from mjx_pusht.task.rules import SUCCESS_COVERAGE, array_namespace
 
 # s: a PD-tracked pusher (gym-pusht's law, kp 100, kv 20) moving at velocity v settles this far behind its target,
@@ -40,6 +42,7 @@ class Task:
     max_steps: int = 300
     frame_skip: int = 10
     about: str = ""
+    memory: CarryFormat = CHAPTER  # how its expert's carry reads as a DAgger student's memory
 
     @property
     def reset(self) -> str:
@@ -83,7 +86,9 @@ TASKS = {
     "chapter": Task("chapter", "chapter", ("task", "chapter"), "velocity", "expert", end_covered_start=True,
                     about="this project's PushT: the chapter's scene and its task starts"),
     "gym-pusht": Task("gym-pusht", "gym-pusht", ("gym-pusht",), "target", "expert-gym-pusht", end_covered_start=False,
-                      about="gym-pusht 0.1.8's PushT: its physics, starts, PD-tracked targets and success rule"),
+                      about="gym-pusht 0.1.8's PushT: its physics, starts, PD-tracked targets and success rule",
+                      # its expert's carry: the contact it pursues, -1 before the first
+                      memory=CarryFormat(moves=len(CONTACTS) + 1, latches=(), offset=1)),
 }
 
 

@@ -36,7 +36,7 @@ from functools import partial
 import numpy as np
 
 from mjx_pusht.errors import ConfigError
-from mjx_pusht.task.controllers import Controller, Expert
+from mjx_pusht.task.controllers import Expert
 from mjx_pusht.train.policy import (
     ACTIVATIONS,
     OBS_TYPES,
@@ -146,6 +146,11 @@ class DaggerConfig:
         return get(self.task or "chapter")
 
     @property
+    def memory(self):
+        """The format of the teacher's carry, which the student keeps as its memory (task/memory.py)."""
+        return self.the_task.memory
+
+    @property
     def image(self) -> int:
         """The side of the image the student sees (0: none)."""
         from mjx_pusht.render.pixels import IMAGE_SIZE
@@ -160,7 +165,7 @@ class DaggerConfig:
     @property
     def sample_width(self) -> int:
         """A dataset row's width: the features, after the image's key for a pixel student."""
-        return feature_size(self.obs_type) + (RENDER_KEY if self.image else 0)
+        return feature_size(self.obs_type, self.memory) + (RENDER_KEY if self.image else 0)
 
     def beta(self, iteration: int) -> float:
         return self.beta_decay ** iteration
@@ -241,7 +246,7 @@ class Rollouts:
                 break
             live = ~done
             live[learn:] = False  # judged only: their samples are not learned from
-            x = features(s.obs, cfg.obs_type, memory)
+            x = features(s.obs, cfg.obs_type, memory, cfg.memory)
             label, label_memory = self.expert.act(memory, s.obs, s.step, s.key)
             student = apply(params, meta, x, s.obs.get("pixels"))
             action, memory = _choose(np, (label, label_memory), student, gen.random(len(seeds)) < beta)
@@ -285,7 +290,7 @@ class Rollouts:
 
         def one(s, memory, beta, key, t):
             live = ~s.carry["ep"]["done"]
-            x = features(s.obs, cfg.obs_type, memory).astype(jnp.float32)
+            x = features(s.obs, cfg.obs_type, memory, cfg.memory).astype(jnp.float32)
             label, label_memory = self.expert.act(memory, s.obs, s.step, s.key)
             take = jax.random.uniform(jax.random.fold_in(key, t)) < beta
             action, memory = _choose(jnp, (label, label_memory), apply(params, meta, x, s.obs.get("pixels")), take)
@@ -301,30 +306,13 @@ class Rollouts:
 
 
 def teacher(cfg: DaggerConfig):
-    """Whom the student learns from, acting in velocities: the chapter's expert (paced, or as is), whose carry the
-    student learns to keep as its memory; or another task's expert, its targets read as the velocities that reach
-    them, acting afresh each step (`Afresh`: its carry is not in the student's memory's format)."""
+    """Whom the student learns from, acting in velocities: the chapter's expert (paced, or as is), or another task's
+    expert, its targets read as the velocities that reach them. Either way the student keeps its carry as memory."""
     if cfg.the_task.name == "chapter":
         return Expert(**TEACHERS[cfg.teacher])
     from mjx_pusht.task.tasks import as_velocities
 
-    return Afresh(name=cfg.the_task.expert, inner=as_velocities(cfg.the_task.controller("expert")))
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class Afresh(Controller):
-    """A teacher that decides every step from the observation alone (its own carry at reset each step), keeping
-    the student's memory at 0: a student without memory can be taught it exactly."""
-
-    inner: object = None
-
-    def init(self, key):
-        xp = key.__array_namespace__()
-        return xp.zeros(key.shape[:-1], dtype=xp.int32)
-
-    def act(self, carry, obs, t, key):
-        action, _ = self.inner.act(self.inner.init(key), obs, t, key)
-        return action, carry * 0
+    return as_velocities(cfg.the_task.controller("expert"))
 
 
 def _compact(x, y, live, learn: int):

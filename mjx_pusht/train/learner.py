@@ -26,8 +26,8 @@ class Learner:
         if cfg.image and render is None:
             raise ConfigError("a pixel student's Learner needs the env's renderer (PushTEnv.images)")
         self.cfg = cfg
-        self.model = network(cfg.hidden, cfg.activation, cfg.image)
-        width = feature_size(cfg.obs_type)
+        self.model = network(cfg.hidden, cfg.activation, cfg.image, 2 + cfg.memory.size)
+        width = feature_size(cfg.obs_type, cfg.memory)
         image = (jnp.zeros((1, cfg.image, cfg.image, 3), jnp.uint8), jnp.zeros((1, 2))) if cfg.image else ()  # image, pusher
         self._init = lambda key: self.model.init(key, jnp.zeros((1, width)), *image)["params"]
         # Each fit anneals the learning rate from its value to 5% (cosine, restarted every iteration): the
@@ -46,7 +46,7 @@ class Learner:
         self.loss_max = None  # the last fit's largest minibatch loss (the actions'): a spike in the fit shows here
         self._write = jax.jit(_ring_write, donate_argnums=(0, 1))
         self._fit = jax.jit(partial(_fit, self.model, self.opts, cfg.batch, cfg.image_batch,
-                                    (cfg.fit_steps, cfg.reader_steps), render))
+                                    (cfg.fit_steps, cfg.reader_steps), render, cfg.memory))
 
     def start(self, key) -> None:
         """A fresh network from `key` and fresh optimiser states for it."""
@@ -151,7 +151,7 @@ def _parts(params: dict, image: int) -> tuple[dict, ...]:
     return {k: v for k, v in params.items() if k not in reader}, reader
 
 
-def _fit(model, opts, batch, image_batch, steps, render, params, opt_state, x, y, filled, norm, key):
+def _fit(model, opts, batch, image_batch, steps, render, fmt, params, opt_state, x, y, filled, norm, key):
     """Adam steps on minibatches of `batch` samples from the ring; returns the new parameters and optimiser states,
     the loss and (a pixel student) the pose estimate's squared error, each over the last tenth of its steps, and the
     actions' largest minibatch loss over all the steps.
@@ -173,19 +173,19 @@ def _fit(model, opts, batch, image_batch, steps, render, params, opt_state, x, y
     import jax.numpy as jnp
     import optax
 
-    from mjx_pusht.task.controllers import NEAR
     from mjx_pusht.task.rules import CTRL_LIMIT
-    from mjx_pusht.train.policy import LATCHES, MOVES, pose_target
+    from mjx_pusht.train.policy import pose_target
 
     def imitation(head, yb):
         pred = jnp.tanh(head[:, :2]) * CTRL_LIMIT
         mse = jnp.mean(jnp.sum((pred - yb[:, :2]) ** 2, axis=-1))
         memory = yb[:, 2].astype(jnp.int32)
-        move = optax.softmax_cross_entropy_with_integer_labels(head[:, 2:2 + MOVES], memory & (NEAR - 1))
-        bits = jnp.stack([(memory & b) != 0 for b in LATCHES], -1).astype(jnp.float32)
-        latch = optax.sigmoid_binary_cross_entropy(head[:, 2 + MOVES:], bits).sum(-1)
+        move = optax.softmax_cross_entropy_with_integer_labels(head[:, 2:2 + fmt.moves], fmt.move(memory))
+        if fmt.latches:
+            bits = jnp.stack(fmt.bits(memory), -1).astype(jnp.float32)
+            move = move + optax.sigmoid_binary_cross_entropy(head[:, 2 + fmt.moves:], bits).sum(-1)
         # the memory terms weighted so a wrong move costs what a 0.1 m/s action error does: both matter
-        return mse + MEMORY_WEIGHT * jnp.mean(move + latch)
+        return mse + MEMORY_WEIGHT * jnp.mean(move)
 
     def minibatch(k, n):
         """The first n of `batch` samples drawn from the ring: (features normalised, labels, image state or None)."""

@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pusht.task.controllers import NEAR, REVERSE, Controller, ControllerError
+from mjx_pusht.task.controllers import Controller, ControllerError
+from mjx_pusht.task.memory import CHAPTER, CarryFormat
 from mjx_pusht.task.rules import CTRL_LIMIT, array_namespace
 from mjx_pusht.train.layers import activation as _activation
 from mjx_pusht.train.layers import mlp as _mlp
@@ -54,16 +55,17 @@ LEVER = 0.06  # the bar's half-length (rules.T_RECTS)
 POSE_SCALE = 0.1
 
 
-# The memory: the expert's carry (move in the low bits, 0 before the first act; two latch bits).
-MOVES = 4  # 0 (none yet), ROTATE, PUSH_X, PUSH_Y
-LATCHES = (NEAR, REVERSE)
-MEMORY_SIZE = MOVES + len(LATCHES)  # its one-hot / bit encoding in the features
-OUTPUTS = 2 + MOVES + len(LATCHES)  # action, move logits, latch logits
+# The memory: the teacher's carry, in its format (task/memory.py). The chapter expert's, the default and what a
+# checkpoint without a "memory" entry holds: move in the low bits (0 before the first act), two latch bits.
+MOVES = CHAPTER.moves  # 0 (none yet), ROTATE, PUSH_X, PUSH_Y
+LATCHES = CHAPTER.latches  # NEAR, REVERSE
+MEMORY_SIZE = CHAPTER.size  # its one-hot / bit encoding in the features
+OUTPUTS = 2 + CHAPTER.size  # action, move logits, latch logits
 
 
-def feature_size(obs_type: str) -> int:
+def feature_size(obs_type: str, fmt: CarryFormat = CHAPTER) -> int:
     """The width of `features` (a pixel policy's features are what it reads beside the image)."""
-    return {"state": 8, "keypoints": 18, "pixels_agent_pos": 2}[obs_type] + MEMORY_SIZE
+    return {"state": 8, "keypoints": 18, "pixels_agent_pos": 2}[obs_type] + fmt.size
 
 
 def conv_out(size: int) -> int:
@@ -73,22 +75,19 @@ def conv_out(size: int) -> int:
     return size
 
 
-def features(obs: dict, obs_type: str, memory):
+def features(obs: dict, obs_type: str, memory, fmt: CarryFormat = CHAPTER):
     """The network's input from an observation dict and the policy's memory, (..., feature_size).
 
     state: pusher (x, y), tee (x, y), cos and sin of its yaw (the yaw wraps at +-pi; its cosine and
     sine do not), and the pusher in the tee's body frame (where a push meets the T is the question
     a pusher answers, and it is a rotation away from the world frame). keypoints: the T's 8 corners
     and the pusher (x, y). pixels_agent_pos: the pusher (x, y) only (the T is in the image, read by
-    `apply`'s convolutions). All end with the memory: its move one-hot, then its two latch bits.
+    `apply`'s convolutions). All end with the memory in `fmt`: its move one-hot, then its latch bits.
     """
     xp = array_namespace(obs["state"])
     s = obs["state"]
     p = s[..., 0:2]
-    memory = xp.astype(memory, xp.int32)
-    move = memory & (NEAR - 1)
-    mem = [xp.astype(move == k, s.dtype) for k in range(MOVES)] + [xp.astype((memory & b) != 0, s.dtype) for b in LATCHES]
-    mem = xp.stack(mem, axis=-1)
+    mem = fmt.encode(memory, s.dtype)
     if obs_type == "keypoints":
         return xp.concat([obs["keypoints"], p, mem], axis=-1)
     if obs_type == "pixels_agent_pos":
@@ -100,27 +99,23 @@ def features(obs: dict, obs_type: str, memory):
     return xp.concat([p, o, xp.stack([c, sn], axis=-1), body, mem], axis=-1)
 
 
-def decode(head):
-    """The network's raw outputs (..., OUTPUTS) -> (velocity action (..., 2), next memory (...,) int32)."""
+def decode(head, fmt: CarryFormat = CHAPTER):
+    """The network's raw outputs (..., 2 + fmt.size) -> (velocity action (..., 2), next memory (...,) int32)."""
     xp = array_namespace(head)
-    action = xp.tanh(head[..., :2]) * CTRL_LIMIT
-    move = xp.astype(xp.argmax(head[..., 2:2 + MOVES], axis=-1), xp.int32)
-    for i, bit in enumerate(LATCHES):
-        move = move | xp.where(head[..., 2 + MOVES + i] > 0, bit, 0)
-    return action, xp.astype(move, xp.int32)
+    return xp.tanh(head[..., :2]) * CTRL_LIMIT, fmt.carry(head[..., 2:])
 
 
 def apply(params: dict, meta: dict, x, image=None):
     """The network on (..., feature_size) features (and, for a pixel policy, the (..., H, W, 3) uint8 image), in
     x's array namespace: (action (..., 2), memory (...,)). In NumPy a row's result does not depend on the rows
     beside it (`_rowwise`)."""
-    act = meta["activation"]
+    act, fmt = meta["activation"], CarryFormat.of(meta)
     if meta.get("image"):
         def dense(v, h):  # the reader's Dense layers and the acting layers, on features and flattened maps
-            return decode(_mlp(params, meta, act, v, pose_features(_pose_head(params, act, h), v[..., :2])))
+            return decode(_mlp(params, meta, act, v, pose_features(_pose_head(params, act, h), v[..., :2])), fmt)
 
         return _rowwise(dense, x, _trunk(params, act, image, x.dtype))
-    return _rowwise(lambda v: decode(_mlp(params, meta, act, v)), x)
+    return _rowwise(lambda v: decode(_mlp(params, meta, act, v), fmt), x)
 
 
 def pose_target(state):
@@ -194,8 +189,8 @@ def _conv_xla(h, kernel):
     return out.reshape(lead + out.shape[1:])
 
 
-def network(hidden: tuple[int, ...], activation: str = "relu", image: int = 0):
-    """The flax module training fits: Dense layers named Dense_0.. (what `apply` reads), OUTPUTS outputs. With
+def network(hidden: tuple[int, ...], activation: str = "relu", image: int = 0, outputs: int = OUTPUTS):
+    """The flax module training fits: Dense layers named Dense_0.. (what `apply` reads), `outputs` outputs. With
     `image` (its side in pixels): the convolutions Conv_0.. and the pose reader Pose_0, Pose_1 first, called as
     module(normalised features, image, pusher position in metres) -> (outputs, pose estimate); given a `pose`
     (POSE_SCALE units) instead of an image, the Dense layers act on that pose (training's true-pose part)."""
@@ -218,7 +213,7 @@ def network(hidden: tuple[int, ...], activation: str = "relu", image: int = 0):
                 x = jnp.concatenate([pose_features(pose, pusher), x], axis=-1)
             for i, width in enumerate(hidden):
                 x = act(nn.Dense(width, name=f"Dense_{i}")(x))
-            out = nn.Dense(OUTPUTS, name=f"Dense_{len(hidden)}")(x)
+            out = nn.Dense(outputs, name=f"Dense_{len(hidden)}")(x)
             return (out, pose) if image else out
 
     return MLP()
@@ -290,7 +285,8 @@ def _check(path, params, meta) -> None:
             pixels and not (image <= 2048 and conv_out(image) >= 1)):
         raise ControllerError(f"policy checkpoint {path}: a {obs_type} policy with image size {image!r}")
     ppo = meta.get("method") == "ppo"  # Brax's policy: raw observations in, (loc[, scale]) out, no memory
-    width = OBS_SIZE[obs_type] if ppo else feature_size(obs_type)
+    fmt = _memory_format(path, meta)
+    width = OBS_SIZE[obs_type] if ppo else feature_size(obs_type, fmt)
     if ppo and not (isinstance(meta.get("act", "mean"), str) and meta.get("act", "mean") in PPO_ACTS):
         raise ControllerError(f"policy checkpoint {path}: unknown PPO action {meta.get('act')!r} (mean or sample)")
     _numbers(path, "input normalisation in_mean", meta.get("in_mean"), (width,))
@@ -324,9 +320,22 @@ def _check(path, params, meta) -> None:
         width = kernel.shape[1]
     if ppo and len(dense) and (width == 4 or (width == 2 and meta.get("act", "mean") == "mean")):
         return
-    if not len(dense) or width != OUTPUTS:
-        raise ControllerError(f"policy checkpoint {path}: its layers end in {width} outputs, not {OUTPUTS} "
+    if not len(dense) or width != 2 + fmt.size:
+        raise ControllerError(f"policy checkpoint {path}: its layers end in {width} outputs, not {2 + fmt.size} "
                               "(an action and a memory)")
+
+
+def _memory_format(path, meta) -> CarryFormat:
+    """The memory's format a checkpoint names (the chapter's where it names none), checked to be one."""
+    try:
+        fmt = CarryFormat.of(meta)
+        ok = 1 <= fmt.moves <= 4096 and len(fmt.latches) <= 8 and all(b > 0 and b & (b - 1) == 0 for b in fmt.latches)
+    except (TypeError, ValueError, KeyError, AttributeError):
+        ok = False
+    if not ok:
+        raise ControllerError(f"policy checkpoint {path}: its memory format {meta.get('memory')!r} is not one "
+                              "(moves, latch bits, offset)")
+    return fmt
 
 
 def to_numpy(tree):
@@ -352,7 +361,8 @@ class PolicyController(Controller):
     def act(self, carry, obs, t, key):
         if self.meta.get("method") == "ppo":
             return apply_ppo(self.params, self.meta, obs[self.meta["obs_type"]], key, t), carry
-        action, memory = apply(self.params, self.meta, features(obs, self.meta["obs_type"], carry), obs.get("pixels"))
+        x = features(obs, self.meta["obs_type"], carry, CarryFormat.of(self.meta))
+        action, memory = apply(self.params, self.meta, x, obs.get("pixels"))
         return action, memory
 
 

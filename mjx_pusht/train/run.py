@@ -21,6 +21,7 @@ import numpy as np
 
 from mjx_pusht.errors import needs
 from mjx_pusht.study.stats import wilson
+from mjx_pusht.task.memory import CHAPTER
 from mjx_pusht.train.curve import kept as kept_fit
 from mjx_pusht.train.resume import TrainError, checkpoint, config_dict, restore, resume_every_s
 from mjx_pusht.train.summary import write_summary
@@ -29,7 +30,8 @@ from mjx_pusht.train.summary import write_summary
 def _meta(cfg, iteration: int, env_steps: int, norm) -> dict:
     return {"obs_type": cfg.obs_type, "activation": cfg.activation, "in_mean": [float(v) for v in norm[0]],
             "in_std": [float(v) for v in norm[1]], "method": "dagger", "iteration": iteration,
-            "env_steps": int(env_steps), "config": config_dict(cfg)} | ({"image": cfg.image} if cfg.image else {})
+            "env_steps": int(env_steps), "config": config_dict(cfg)} | ({"image": cfg.image} if cfg.image else {}) | (
+        {"memory": cfg.memory.meta()} if cfg.memory != CHAPTER else {})
 
 
 def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes: float | None = None,
@@ -191,7 +193,7 @@ def _stop_if_non_finite(what: str | None, where: str, curve: list[dict], out: Pa
 def _unit(cfg):
     from mjx_pusht.train.policy import feature_size
 
-    w = feature_size(cfg.obs_type)
+    w = feature_size(cfg.obs_type, cfg.memory)
     return np.zeros(w, np.float32), np.ones(w, np.float32)
 
 
