@@ -40,6 +40,12 @@ case "$stage" in
   compare-both) python3 -m mjx_pusht compare --seeds 4096 --backend mjx-warp --no-root-cause \
             --out "$OUT/compare-mjx-warp" > "$OUT/compare-warp.log" 2>&1
           python3 -m mjx_pusht compare --seeds 4096 --backend mjx-jax --out "$OUT/compare-mjx-jax" > "$OUT/compare-jax.log" 2>&1 ;;
+  expert-gym) # gym-pusht's task's expert on 4,096 held-out starts of the drop-in, MJX-Warp and MuJoCo C (this host's
+          # cores); pair them here with `mjx-pusht compare --evals`
+          for b in mjx-warp cpu; do
+            python3 -m mjx_pusht eval --task gym-pusht --seeds 1000000000:1000004096 --backend $b --no-rerun --no-progress \
+              --out "$OUT/expert-gym-$b" > "$OUT/expert-gym-$b.log" 2>&1
+          done ;;
   task-study) python3 -m mjx_pusht.study.studies kv-expert --seeds 4096 --backend mjx-warp --out "$OUT/kv-expert" \
             > "$OUT/kv-expert.log" 2>&1
           python3 -m mjx_pusht compare --controller expert --reset task --seeds 4096 --backend mjx-warp \
@@ -136,10 +142,12 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # its own seeds at one GPU's speed; NAME (default RECIPE) names the run's folder, one a concurrent run.
           run=$HOME/runs/seeds-${NAME:-${RECIPE:?RECIPE=ppo, dagger-state or dagger-pixels}}; mkdir -p "$run"
           dagger="$dagger_fit ${LATE_FITS:+--late-fits $LATE_FITS}"
+          # TASK (default chapter, from its task starts): gym-pusht trains on gym-pusht's task; MINUTES: dagger-state's
+          task="--reset task"; [ -n "${TASK:-}" ] && task="--task $TASK"
           case "$RECIPE" in
             ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes 10 \
               ${MAX_GRAD_NORM:+--max-grad-norm $MAX_GRAD_NORM} ${LR_SCHEDULE:+--lr-schedule $LR_SCHEDULE}" ;;
-            dagger-state) args="$dagger --iterations ${ITERATIONS:-60} --minutes 5 $state_data" ;;
+            dagger-state) args="$dagger --iterations ${ITERATIONS:-60} --minutes ${MINUTES:-5} $state_data" ;;
             dagger-pixels) args="$dagger ${FIRST_FITS:+--first-fits $FIRST_FITS} --obs pixels_agent_pos --iterations ${ITERATIONS:-300} --minutes 19.5 --image-steps 4000 \
               --image-batch 512 --envs ${ENVS:-4096} --max-samples ${MAX_SAMPLES:-8000000}" ;;
             *) echo "unknown RECIPE $RECIPE" >&2; exit 2 ;;
@@ -150,7 +158,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # of `$!` is then gone at once)
           (cd "$HOME/runs" && ${GPU:+env CUDA_VISIBLE_DEVICES=$GPU} setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' \
             "$run.pid" python3 -m benchmarks.train_seeds --seeds "${SEEDS:?SEEDS=0,1,...}" --out "$(basename "$run")" \
-            --goal "${GOAL:-0.9}" -- --backend mjx-warp --reset task $args --keep best --no-progress --no-rerun \
+            --goal "${GOAL:-0.9}" -- --backend mjx-warp $task $args --keep best --no-progress --no-rerun \
             --record 0 > "$run.log" 2>&1 < /dev/null &)
           sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
   watch-seeds) # wait up to WAIT seconds (default 570) for train-seeds' runs NAMES (default RECIPE; space-separated),

@@ -1,11 +1,10 @@
 """The MJX backends: `jax.vmap` over seeds of a `lax.scan` over control steps, compiled once per batch shape.
 
-`impl='jax'` is MJX's own JAX pipeline; it has no (cylinder, box) collision, so it runs the
-scene with a capsule pusher of the same radius and half-length (named in every summary).
-`impl='warp'` runs MuJoCo Warp through MJX on the scene as authored, on an NVIDIA GPU or on
-the CPU through Warp. The rollout's body is `task.episode.control_step`, the same one every
-backend and the environment run; the weld gap and its peak are reduced inside the scan, so
-there is no per-step host round trip and no trajectory unless a trace is asked for.
+`impl='jax'` is MJX's own JAX pipeline; it has no (cylinder, box) collision, so it runs the chapter's
+scene with a capsule pusher of the same radius and half-length (named in every summary). `impl='warp'` runs
+MuJoCo Warp through MJX on the scene as authored, on an NVIDIA GPU or on the CPU. The rollout's body is
+`task.episode.control_step`, the same one every backend and the environment run; the weld gap and its peak are
+reduced inside the scan, so there is no per-step host round trip and no trajectory unless a trace is asked for.
 
 Jobs live elsewhere: the parameter grid (`grid.ModelGrid`), MJX-Warp's buffers (`warp.Buffers`), laying a
 program over devices (`launch`), JAX settings (`jax_setup`), the check of the actions (`actions`).
@@ -63,8 +62,9 @@ class MjxConfig:
 
 
 def simulated_scene(scenario: Scenario, impl: str) -> SceneSpec:
-    """The scene an impl actually runs: the jax impl substitutes the capsule pusher."""
-    return dataclasses.replace(scenario.scene, pusher=PUSHER_FOR_IMPL[impl])
+    """The scene an impl runs: jax substitutes a capsule for the chapter's cylinder (gym-pusht's agent: a sphere)."""
+    keep = scenario.scene.variant != "chapter"
+    return scenario.scene if keep else dataclasses.replace(scenario.scene, pusher=PUSHER_FOR_IMPL[impl])
 
 
 def mjx_model(scene: SceneSpec, cfg: MjxConfig) -> mujoco.MjModel:
