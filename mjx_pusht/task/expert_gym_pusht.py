@@ -12,8 +12,8 @@ the inward normal). Each control step it scores each contact by how fast it woul
 (COG position and yaw, weighted): the push that best reduces the error along that contact's twist (a least-
 squares length), divided by the time it would take (travelling round the T to the contact, then pushing).
 It keeps pushing the contact it chose while that stays about as good (hysteresis), travels round the T on a
-circle that clears it (inside the walls) to reach a new one, and pushes by as much as the model says is
-left, so the pushes shrink near the goal.
+ring that clears its hull (the way round that the walls leave open) to reach a new one, and pushes by as
+much as the model says is left, so the pushes shrink near the goal.
 
 Written once for NumPy and jax.numpy (`xp`), branch-free on array values, fixed shapes: the same code runs
 on the CPU backend's batch and per world inside MJX's jitted, vmapped scan. It reasons in gym-pusht's own
