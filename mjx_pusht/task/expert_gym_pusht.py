@@ -147,14 +147,26 @@ class ExpertGymPusht(Controller):
         ring_px = xp.clip(xp.stack([cog_x[..., None] + rad * xp.cos(grid), cog_y[..., None] + rad * xp.sin(grid)], -1), LO, HI)
         # a bearing whose ring point, kept inside the walls, comes near the T: no way past the T there
         walled = distance_to_tee(frame.to_world(ring_px, xp), s[..., None, 2:5]) / frame.PX < AGENT_R + self.pass_gap  # (..., M)
-        ccw = (phi_b - phi_q[..., None]) % (2 * math.pi)  # (..., K): the counter-clockwise arc to each contact
-        rel_m = (grid - phi_q[..., None]) % (2 * math.pi)  # (..., M)
-        near_b = xp.abs(wrap_angle(grid[..., None, :] - phi_b[..., None])) < self.corridor  # (..., K, M)
-        near_q = (xp.abs(wrap_angle(grid - phi_q[..., None])) < 0.2)[..., None, :]
-        counted = walled[..., None, :] & ~near_b & ~near_q
-        on_ccw = rel_m[..., None, :] < ccw[..., None]
-        block_ccw = xp.any(counted & on_ccw, axis=-1)
-        block_cw = xp.any(counted & ~on_ccw, axis=-1)
+        # Which ring points lie on each way to each contact, leaving out those within 0.2 rad of the agent and
+        # within the corridor of the contact (the way off and onto the ring): in bearings measured
+        # counter-clockwise from the agent's, an interval each way. Counted with a prefix sum over the ring points
+        # in that order, not per contact and point (that was 0.8 s a step at 4,096 episodes here).
+        tau_ = 2 * math.pi
+        step = tau_ / RING
+        ccw = (phi_b - phi_q[..., None]) % tau_  # (..., K): the counter-clockwise arc to each contact
+        first = xp.astype(xp.ceil((phi_q % tau_) / step), xp.int32)  # the first ring point at or past the agent
+        offset = first * step - phi_q % tau_  # its bearing from the agent's, in [0, step)
+        order = (first[..., None] + xp.arange(RING)) % RING
+        count = xp.cumulative_sum(xp.astype(xp.take_along_axis(walled, order, axis=-1), xp.int32), axis=-1,
+                                  include_initial=True)  # (..., M + 1): walled points among the first j
+
+        def walled_within(lo, hi):  # walled ring points at bearings in [lo, hi) from the agent's
+            def below(x):
+                return xp.clip(xp.astype(xp.ceil((x - offset[..., None]) / step), xp.int32), 0, RING)
+            return xp.take_along_axis(count, below(hi), axis=-1) - xp.take_along_axis(count, below(lo), axis=-1) > 0
+
+        block_ccw = walled_within(xp.maximum(0.2, ccw + self.corridor - tau_), ccw - self.corridor)
+        block_cw = walled_within(xp.maximum(0.2, ccw + self.corridor), xp.minimum(tau_ - 0.2, ccw - self.corridor + tau_))
         go_ccw = ~block_ccw & (block_cw | (ccw <= math.pi))
         arc = xp.where(go_ccw, ccw, 2 * math.pi - ccw)
         in_view = xp.minimum(ccw, 2 * math.pi - ccw) < self.corridor
