@@ -2,7 +2,7 @@
 
     python -m benchmarks.env_loop --envs 4096,16384,65536,131072 [--obs state] [--steps 50] [--json out.json]
     python -m benchmarks.env_loop --envs 4096,16384 --obs pixels
-    python -m benchmarks.env_loop --envs 16384 --obs pixels --cases scan_autoreset,scan_autoreset_ends --ends 10
+    python -m benchmarks.env_loop --envs 16384 --obs pixels --cases raw,scan_autoreset --ends 10
 
 For each N (one process each, so that one size failing to fit is recorded, not fatal), on MJX-Warp:
 - `raw`: the physics alone: a jitted scan of `steps` control steps, each 10 `mjx.step`s of all N
@@ -12,7 +12,9 @@ For each N (one process each, so that one size failing to fit is recorded, not f
   and pusher at the origin) at random actions: different physics, kept to compare old figures;
 - `scan_autoreset`: the env (`wrappers.AutoReset(PushTEnv)`, same-step autoreset, start poses from
   the device pool) stepped in a jitted scan by a JAX policy (a fixed random linear layer + tanh on
-  the observation), with pixels rendered in the step for `--obs pixels`;
+  the observation), with pixels rendered in the step for `--obs pixels`, its episodes `--ends` control
+  steps long so that every row ends and resets in the timed steps (5 times in 50): the rate with resets
+  in it (with the task's 300-step episodes, as before issue 57, 30 timed steps reset nothing);
 - `gym_torch`: `gym.make_vec("mjx_pusht/PushT-v0", num_envs=N, array_type="torch",
   autoreset_mode="same_step")` stepped from Python by a torch policy on the same GPU (observations
   reach torch through DLPack); `gym_torch_next_step` the same in gymnasium's default mode, next_step
@@ -25,7 +27,7 @@ For each N (one process each, so that one size failing to fit is recorded, not f
   same_step with pixels as it ran before docs/notebook/samestep.md, rendering every world twice a step, beside the
   default (one render, the new episodes' first images from the start pool); `dropin_torch_follow`: the
   drop-in driven by small target moves from its observations, not targets anywhere in the frame.
-- `*_ends` (`scan_autoreset_ends`, `gym_torch_ends`, `gym_numpy_ends`, `dropin_numpy_ends`,
+- `*_ends` (`gym_torch_ends`, `gym_numpy_ends`, `dropin_numpy_ends`,
   `dropin_torch_ends`): the same loops with episodes of `--ends` control steps (default 10), so every
   row ends and restarts several times in the timed steps (5 times in 50): the rate with resets in it.
 Every env case reports `episodes_reset`, the episodes that ended (and so were reset) in the timed steps.
@@ -124,8 +126,8 @@ def raw_zero_pose():
     jax.block_until_ready(run(d, jax.random.PRNGKey(1)))
     t0 = time.perf_counter(); jax.block_until_ready(run(d, jax.random.PRNGKey(2))); record("raw_zero_pose", time.perf_counter() - t0)
 
-def scan_autoreset(max_steps=None):
-    e = env if max_steps is None else PushTEnv(backend="mjx-warp", pixels=pixels, episode=Episode(max_steps=max_steps))
+def scan_autoreset(max_steps):
+    e = PushTEnv(backend="mjx-warp", pixels=pixels, episode=Episode(max_steps=max_steps))
     ar = AutoReset(e, mode="same_step")
     s = ar.reset(np.arange(n))
     @jax.jit
@@ -135,13 +137,12 @@ def scan_autoreset(max_steps=None):
             return ar.step(s, a), s.reward
         return jax.lax.scan(body, s, None, steps)
     s1, _ = jax.block_until_ready(run(s))
-    if max_steps is not None:  # fresh start queues: the warm-up's resets used them up
-        s1 = jax.block_until_ready(ar.refill(s1))
+    s1 = jax.block_until_ready(ar.refill(s1))  # fresh start queues: the warm-up's resets used them up
     t0 = time.perf_counter(); s2, r = jax.block_until_ready(run(s1)); dt = time.perf_counter() - t0
     e.check(s2)
     ended = int(np.asarray(s2.info["used"]).sum()) - int(np.asarray(s1.info["used"]).sum())
     # compiles 1: the timed call reused the first call's program (change 13's timed call compiled a second one)
-    record("scan_autoreset" + ("" if max_steps is None else "_ends"), dt, {"episodes_reset": ended, "max_resets_per_row": int(np.asarray(s2.info["used"]).max()),
+    record("scan_autoreset", dt, {"episodes_reset": ended, "max_resets_per_row": int(np.asarray(s2.info["used"]).max()),
                                   "compiles": run._cache_size()})
 
 def two_renders(envs, on):
@@ -220,11 +221,10 @@ def dropin(array_type, max_steps=None, twice=False, follow=False):
     envs.close()
 
 for c in cases:
-    attempt(c, {"raw": raw, "raw_zero_pose": raw_zero_pose, "scan_autoreset": scan_autoreset,
+    attempt(c, {"raw": raw, "raw_zero_pose": raw_zero_pose, "scan_autoreset": lambda: scan_autoreset(ends),
                 "gym_torch": lambda: gym_loop("torch"), "gym_torch_next_step": lambda: gym_loop("torch", "next_step"),
                 "gym_numpy": lambda: gym_loop("numpy"), "dropin_numpy": lambda: dropin("numpy"),
-                "dropin_torch": lambda: dropin("torch"), "scan_autoreset_ends": lambda: scan_autoreset(ends),
-                "gym_torch_ends": lambda: gym_loop("torch", max_steps=ends),
+                "dropin_torch": lambda: dropin("torch"), "gym_torch_ends": lambda: gym_loop("torch", max_steps=ends),
                 "gym_numpy_ends": lambda: gym_loop("numpy", max_steps=ends),
                 "dropin_numpy_ends": lambda: dropin("numpy", ends), "dropin_torch_ends": lambda: dropin("torch", ends),
                 "gym_torch_two_renders": lambda: gym_loop("torch", twice=True),
@@ -248,7 +248,7 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=50)
     p.add_argument("--cases", default=CASES)
     p.add_argument("--ends", type=int, default=10,
-                   help="control steps an episode in the *_ends cases (default 10: 5 resets a row in 50 steps)")
+                   help="control steps an episode in scan_autoreset and the *_ends cases (default 10: 5 resets a row in 50 steps)")
     p.add_argument("--json", default=None)
     args = p.parse_args(argv)
     rows = []

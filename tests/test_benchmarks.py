@@ -54,11 +54,13 @@ def test_harness_measures_a_backend_sharded_over_two_devices_with_its_scaling(tm
 @pytest.mark.warp
 def test_env_loop_times_the_env_against_the_raw_physics_of_the_same_worlds_each_compiled_once(tmp_path):
     """benchmarks.env_loop at 8 envs on Warp's CPU device: every case runs, its timed call compiled nothing
-    (a second compile was once timed as stepping: notebook change 16), and the ratio is against `raw`."""
+    (a second compile was once timed as stepping: notebook change 16), the ratio is against `raw`, and the
+    autoreset case resets: its episodes of --ends steps end in the timed steps, each row every `ends` steps (issue
+    57: at 300-step episodes its "with autoreset" figure reset nothing)."""
     from benchmarks import env_loop
 
     out = tmp_path / "loop.json"
-    assert env_loop.main(["--envs", "8", "--steps", "2", "--cases", "raw,scan_autoreset,gym_numpy",
+    assert env_loop.main(["--envs", "8", "--steps", "2", "--ends", "1", "--cases", "raw,scan_autoreset,gym_numpy",
                           "--json", str(out)]) == 0
     row = json.loads(out.read_text())["runs"][0]["rows"][0]
     assert "error" not in row, row
@@ -66,6 +68,7 @@ def test_env_loop_times_the_env_against_the_raw_physics_of_the_same_worlds_each_
     for case in ("raw", "scan_autoreset", "gym_numpy"):
         assert row[case]["control_steps_per_s"] > 0
     r = row["scan_autoreset"]
+    assert r["episodes_reset"] == 8 * 2  # 8 rows, each ending at both timed steps
     assert r["fraction_of_raw"] == pytest.approx(r["control_steps_per_s"] / row["raw"]["control_steps_per_s"])
 
 

@@ -193,6 +193,21 @@ def test_eval_video_draws_each_episode_in_its_tile(tmp_path):
             assert (abs(tile - tee) <= 2).all(axis=-1).sum() >= 5, (r, c)  # every tile shows its block
 
 
+def test_a_tiles_label_shows_whole_even_a_held_out_seeds():
+    """Every character of `seed N  coverage C` shows on its tile, at the default 128 px and at 64: the last digit of
+    the coverage changes the tile, and no ink reaches the tile's right edge (issue 57: at 128 px a held-out seed's
+    label was cut to `seed 1000000000 cover`)."""
+    from mjx_pusht.io.video import _label
+
+    for size in (128, 64):
+        tile = np.full((size, size, 3), 255, np.uint8)
+        for seed in (7, 1_000_000_000):
+            a, b = (_label(tile, f"seed {seed}  coverage 0.9{d}", False) for d in (5, 6))
+            assert (a != b).any(), (size, seed)
+            ink = a.astype(int).sum(-1) < 500  # the dark text on the white band
+            assert ink.any() and not ink[:, -3:].any(), (size, seed)
+
+
 def test_bad_video_requests_fail_in_one_line_before_any_episode(tmp_path, capsys):
     from mjx_pusht.cli.commands import main
 

@@ -89,6 +89,9 @@ def cmd_sweep(args) -> int:
     if summary["n_escaped"] and args.break_it != "free-tee":
         print(f"WARNING: {summary['n_escaped']} seeds left the walled workspace (a missed contact or a diverged "
               f"state; flagged in per_seed.parquet): {summary['escaped_seeds'][:10]}")
+    if "success_rate" in summary["task"]:
+        print(f"task score: {summary['task']['success_rate']:.1%} of seeds at coverage >= 0.95, after "
+              f"{summary['task']['run']}")
     print(f"speed: {summary['steps_per_second']:,.0f} steps/s over {summary['run_seconds']:.2f} s "
           f"(+{summary['compile_seconds']:.2f} s compile)")
     print(f"table: {out / 'per_seed.parquet'}\nsummary: {out / 'summary.json'}")

@@ -291,6 +291,13 @@ def _task_summary(rollouts: Rollouts, table: dict | None = None) -> dict:
     }
 
 
+def nudge_run(schedule) -> str:
+    """What a sweep runs, in words: the chapter's open-loop nudge, not a controller solving the task."""
+    return (f"the chapter's nudge: {schedule.settle_steps} settle steps, then the pusher's velocity target held at "
+            f"{tuple(schedule.nudge_ctrl)} m/s open-loop for {schedule.nudge_steps} steps; nothing steers the T to the goal, so the task's score is where the nudge "
+            "left it (mjx-pusht eval scores controllers on the task)")
+
+
 def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s: float, run_s: float,
               table: dict | None = None) -> dict:
     """summary.json: what ran where, the verdicts, and the speed. Non-finite seeds are counted, never averaged in."""
@@ -316,7 +323,8 @@ def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s
         "gap_max_dev": distribution(rollouts.gap_max_dev[finite]),
         "tee_gap_settled": distribution(rollouts.gap_settled[finite]),
         "tee_final_y": distribution(rollouts.final[finite, 1]),
-        "task": _task_summary(rollouts, table),
+        # what was scored: read alone, a success rate near 0 looked like a broken task (issue 57)
+        "task": {"run": nudge_run(schedule), **_task_summary(rollouts, table)},
         "compile_seconds": round(compile_s, 3),
         "run_seconds": round(run_s, 3),
         "steps_per_second": round(n * schedule.total_steps / run_s, 1) if run_s > 0 else None,
