@@ -63,8 +63,9 @@ def requires(what: str, extra: str):
         raise err from None
 
 
-def needs(what: str, extra: str) -> None:
-    """Import every module of `extra` now, before any work: `requires`' one line if one is missing."""
+def needs(what: str, extra: str, modules: tuple[str, ...] | None = None) -> None:
+    """Import the modules of `extra` the work uses (`modules`; all of them if None) now, before any work: `requires`'
+    one line if one is missing. (DAgger uses flax and optax alone: a GPU host without Brax trains it.)"""
     with requires(what, extra):
-        for name in EXTRAS[extra]:
+        for name in EXTRAS[extra] if modules is None else modules:
             importlib.import_module(name)

@@ -16,8 +16,12 @@ from mjx_pusht.cli.sweep import cmd_sweep
 from mjx_pusht.errors import MjxPushtError, missing_extra, needs
 
 
+DAGGER_MODULES = ("flax", "optax")  # what DAgger imports of the train extra (PPO adds Brax and orbax)
+
+
 def cmd_train(args) -> int:
-    needs("mjx-pusht train", "train")  # before any work: no folder claimed, nothing written
+    # before any work: no folder claimed, nothing written
+    needs(f"mjx-pusht train --algo {args.algo}", "train", DAGGER_MODULES if args.algo == "dagger" else None)
     from mjx_pusht.cli.train import cmd_train as train
 
     return train(args)

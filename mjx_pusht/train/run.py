@@ -42,7 +42,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     succeeded most on that iteration's fresh training seeds with the expert's share at most
     VALIDATION_BETA (`curve.kept`); never chosen by the held-out seeds, so its held-out rate is not a maximum
     taken over the curve's noise."""
-    needs("train_dagger", "train")  # one line naming the extra, before any work
+    needs("train_dagger", "train", ("flax", "optax"))  # one line naming the extra, before any work
     import jax
     from tqdm import tqdm
 
