@@ -188,3 +188,33 @@ def test_a_policy_of_the_chapter_task_is_refused_as_a_gym_pusht_controller(tmp_p
     save(tmp_path / "chapter.msgpack", params, {**meta, "config": {}})
     with pytest.raises(MjxPushtError, match="trained on the chapter task"):
         GymPushtPolicy(tmp_path / "chapter.msgpack")
+
+
+def test_a_dagger_student_decodes_its_memory_in_the_format_its_features_encode():
+    from mjx_pusht.task.memory import CarryFormat
+    from mjx_pusht.train.dagger import DaggerConfig, student_meta
+
+    for cfg in (DaggerConfig(), DaggerConfig(task="gym-pusht", reset="gym-pusht", teacher="expert")):
+        assert CarryFormat.of(student_meta(cfg, (0.0, 1.0))) == cfg.memory
+    assert TASKS["gym-pusht"].memory.moves == len(__import__("mjx_pusht.task.expert_gym_pusht",
+                                                             fromlist=["CONTACTS"]).CONTACTS) + 1
+
+
+@pytest.mark.slow
+def test_daggers_judgement_of_a_gym_pusht_student_is_evals_of_its_checkpoint(tmp_path):
+    """The held-out judgement inside training and `eval` of the written policy are the same episodes (MuJoCo C,
+    float64): a student that read its memory otherwise in training than its checkpoint does (two H100 runs did)
+    is judged at one rate and evaluated at another."""
+    import json
+
+    from helpers import cli
+
+    out = tmp_path / "run"
+    r = cli("train", "--task", "gym-pusht", "--backend", "cpu", "--envs", "32", "--eval-envs", "32", "--iterations",
+            "2", "--fit-steps", "200", "--no-rerun", "--no-progress", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    last = (out / "curve.csv").read_text().splitlines()[-1].split(",")
+    header = (out / "curve.csv").read_text().splitlines()[0].split(",")
+    judged = float(last[header.index("coverage")])
+    evaluated = json.loads((out / "eval" / "summary.json").read_text())["final_coverage"]["mean"]
+    assert judged == pytest.approx(evaluated, abs=1e-9) and evaluated > 0.02  # the student moved the T

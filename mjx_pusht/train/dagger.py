@@ -234,7 +234,7 @@ class Rollouts:
         from mjx_pusht.train.policy import apply
 
         env, cfg = self.env, self.cfg
-        meta = {"in_mean": norm[0], "in_std": norm[1], "activation": cfg.activation, "image": cfg.image}
+        meta = student_meta(cfg, norm)
         params = to_numpy(params)
         gen = np.random.default_rng([cfg.seed, rng])
         s = env.reset(seeds)
@@ -285,7 +285,7 @@ class Rollouts:
         from mjx_pusht.train.policy import apply
 
         cfg = self.cfg
-        meta = {"in_mean": norm[0], "in_std": norm[1], "activation": cfg.activation, "image": cfg.image}
+        meta = student_meta(cfg, norm)
         advance = self.env.step_one if cfg.image else self.env.advance_one  # step_one renders the next image
 
         def one(s, memory, beta, key, t):
@@ -303,6 +303,14 @@ class Rollouts:
 
         (s, _), (x, y, live) = jax.lax.scan(body, (s, self.expert.init(s.key)), jnp.arange(cfg.max_steps))
         return s, x, y, live
+
+
+def student_meta(cfg: DaggerConfig, norm) -> dict:
+    """What `policy.apply` reads of the student being trained: its normalisation, activation, image size and memory
+    format, as its checkpoint will name them (a student decoding its memory in another format than its features
+    encode it is taught from memories it never keeps: two H100 runs on gym-pusht's task did, 2026-11-26)."""
+    return {"in_mean": norm[0], "in_std": norm[1], "activation": cfg.activation, "image": cfg.image,
+            "memory": cfg.memory.meta()}
 
 
 def teacher(cfg: DaggerConfig):

@@ -358,6 +358,11 @@ class PolicyController(Controller):
         """The side of the top-camera image it looks at (obs["pixels"], rendered by the backend); 0: none."""
         return int(self.meta.get("image", 0))
 
+    def init(self, key):
+        """Its memory at reset: its teacher's carry at reset, move class 0 (gym-pusht's expert's -1: no contact yet;
+        a 0 there would read as pursuing contact 0, a memory the student never had at a start)."""
+        return super().init(key) - CarryFormat.of(self.meta).offset
+
     def act(self, carry, obs, t, key):
         if self.meta.get("method") == "ppo":
             return apply_ppo(self.params, self.meta, obs[self.meta["obs_type"]], key, t), carry
