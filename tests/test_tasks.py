@@ -217,4 +217,5 @@ def test_daggers_judgement_of_a_gym_pusht_student_is_evals_of_its_checkpoint(tmp
     header = (out / "curve.csv").read_text().splitlines()[0].split(",")
     judged = float(last[header.index("coverage")])
     evaluated = json.loads((out / "eval" / "summary.json").read_text())["final_coverage"]["mean"]
-    assert judged == pytest.approx(evaluated, abs=1e-9) and evaluated > 0.02  # the student moved the T
+    # (curve.csv keeps 7 digits); the student moved the T
+    assert judged == pytest.approx(evaluated, abs=1e-6) and evaluated > 0.02
