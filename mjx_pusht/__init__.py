@@ -33,6 +33,11 @@ elif _os.environ.get("MUJOCO_GL") in ("egl", "osmesa") and _sys.platform.startsw
 # GPU up front, a 65,536-world environment step failed to allocate 2.3 GB (H100, benchmarks/env_step.py).
 # JAX then grows its pool as it needs instead; a user's own setting wins.
 _os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
+# One OpenBLAS thread (read when NumPy loads, so only where NumPy is not loaded yet): a policy's NumPy products run
+# beside MuJoCo C's worker threads (DAgger's CPU rollouts, in this process), and OpenBLAS's threads then wait on
+# theirs: on 2 cores one forward pass of 32 rows took 31 ms with its default, 0.48 ms with one thread (notebook
+# firsthour). The CPU backend's worker processes start with one already (backends/cpu.py); a user's setting wins.
+_os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from mjx_pusht.backends.base import resolve
 from mjx_pusht.backends.factory import make_backend

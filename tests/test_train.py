@@ -341,6 +341,44 @@ def test_dagger_learns_to_finish_episodes_on_cpu_in_about_a_minute():
           f"action error {error_before:.3f} -> {error:.3f}; memory {memory_before:.3f} -> {memory:.3f}")
 
 
+def test_a_mujoco_c_rollout_past_its_deadline_stops_stepping_and_keeps_the_samples_it_has():
+    """The budget's cut of a first rollout (train/run.py `Budget`): past its deadline no control step starts, but one
+    always runs (a fit needs samples); the samples are every live episode's steps so far, as without a deadline."""
+    import time
+
+    from mjx_pusht.train.dagger import DaggerConfig, Rollouts
+    from mjx_pusht.train.learner import Learner
+    from mjx_pusht.train.run import _unit, dagger_env
+
+    cfg = DaggerConfig(reset="chapter", envs=4, eval_envs=2, hidden=(8,), batch=16, max_samples=5000)
+    rollouts, learner = Rollouts(dagger_env(cfg, "cpu"), cfg), Learner(cfg)
+    seeds = cfg.train_seeds(0)
+    x, y, n, _ = rollouts.padded(learner.params, _unit(cfg), seeds, 1.0, 0, deadline=time.perf_counter())
+    assert rollouts.cut and rollouts.steps == 1 and n == len(seeds)  # one step of each of the 4 episodes
+    x_all, _, n_all, outcome = rollouts.padded(learner.params, _unit(cfg), seeds, 1.0, 0)
+    assert not rollouts.cut and rollouts.steps > 1 and n_all > n and outcome["success"].all()  # the expert's
+    np.testing.assert_array_equal(x, x_all[:n])  # the same first step: the cut changes only where it stops
+
+
+@pytest.mark.slow
+def test_train_minutes_1_on_a_cpu_ends_within_a_minute_and_a_half_of_wall_clock(tmp_path):
+    """`--minutes` is a promise (issue 57: `train --minutes 1` on this 2-core CPU, auto backend, ran 5.2 minutes):
+    no rollout or fit starts that would pass the budget, the CPU's defaults are sized for it, and the judgements'
+    expected times are said before they start. The whole command, imports and the final eval included, is timed."""
+    import time
+
+    t0 = time.perf_counter()
+    r = cli("train", "--minutes", "1", "--out", str(tmp_path / "run"), "--no-rerun", "--record", "0", "--no-progress")
+    seconds = time.perf_counter() - t0
+    assert r.returncode == 0, r.stderr
+    assert seconds < 90, (seconds, r.stdout[-2000:], r.stderr[-2000:])
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["backend"] == "cpu" and summary["wall_seconds"] < 60 + 15, summary["wall_seconds"]
+    assert summary["config"]["envs"] == 256 and summary["eval"]["n_episodes"] == 64  # the CPU's defaults
+    said = r.stdout + r.stderr
+    assert "held-out seeds: about" in said and "with eval on the held-out seeds" in said, said[-2000:]
+
+
 @pytest.mark.slow
 def test_on_mjx_every_rollout_is_one_batch_shape_and_the_last_judgement_is_the_held_out_seeds(tmp_path):
     """MJX compiles a rollout per batch shape: every iteration's batch, the first and the final judgement

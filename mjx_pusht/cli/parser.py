@@ -202,13 +202,16 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--out", type=_folder, default=Path("outputs/train"))
     t.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     t.add_argument("--share-out", action="store_true", help=SHARE_HELP)
-    t.add_argument("--envs", type=_worlds, default=4096, help="episodes rolled out per iteration (default 4096)")
+    t.add_argument("--envs", type=_worlds, default=None,
+                   help="episodes rolled out per iteration (default 4096; DAgger on cpu 256)")
     t.add_argument("--iterations", type=_positive, default=10,
                    help="DAgger iterations, or PPO's held-out judgements over the run (default 10)")
     t.add_argument("--timesteps", type=_positive, default=None, help="PPO: env control steps in all (default 50M)")
-    t.add_argument("--fit-steps", type=_positive, default=None, help="DAgger: gradient steps per iteration (default 2000)")
+    t.add_argument("--fit-steps", type=_positive, default=None,
+                   help="DAgger: gradient steps per iteration (default 2000; on cpu 1000)")
     t.add_argument("--batch", type=_positive, default=None,
-                   help="DAgger: samples per gradient step (default 4096); PPO: Brax's batch_size (default 256)")
+                   help="DAgger: samples per gradient step (default 4096; on cpu 1024); PPO: Brax's batch_size "
+                        "(default 256)")
     t.add_argument("--image-batch", type=_positive, default=None,
                    help="DAgger from pixels: of each step's --batch samples, how many are rendered to teach the image "
                         "trunk the T's pose (all teach the actions from the true pose; default 512, at most --batch)")
@@ -247,12 +250,13 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--max-samples", type=_int_at_least(1, 1 << 30, " samples"), default=None,
                    help="DAgger: dataset ring size (default 8,000,000)")
     _task_args(t, "start distribution of the chapter task trained and judged on (default task)")
-    t.add_argument("--eval-envs", type=_worlds, default=4096,
-                   help="held-out task seeds judged after every iteration (default 4096)")
+    t.add_argument("--eval-envs", type=_worlds, default=None,
+                   help="held-out task seeds judged after every iteration (default 4096; DAgger on cpu 64)")
     t.add_argument("--max-steps", type=_steps, default=300,
                    help="control steps before an episode is truncated, in training and in every judgement (default "
                         "300, the task's; eval --max-steps judges a policy at the same length)")
-    t.add_argument("--minutes", type=_positive_float, default=None, help="stop after the iteration that passes this")
+    t.add_argument("--minutes", type=_positive_float, default=None,
+                   help="training's budget, its last judgement included: no rollout or fit starts that would pass it")
     t.add_argument("--seed", type=_nonneg, default=0, help="initialisation and sampling seed (default 0)")
     t.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     t.add_argument("--record", type=_nonneg, default=4, help="held-out episodes in eval/eval.rrd (default 4)")

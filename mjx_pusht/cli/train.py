@@ -16,17 +16,21 @@ from mjx_pusht.train.summary import write_summary
 DAGGER_ONLY = {"fit_steps": 2000, "beta_decay": 0.7, "max_samples": 8_000_000, "teacher": "paced",
                "image_batch": None, "image_steps": None, "late_fits": None, "first_fits": None}
 PPO_ONLY = {"timesteps": 50_000_000, "ppo_act": "sample", "lr_schedule": None}
-BOTH = {"max_grad_norm": 1.0}  # the settings both methods take, and their defaults ('off' is None)
+BOTH = {"max_grad_norm": 1.0, "envs": 4096, "eval_envs": 4096}  # both methods' settings, and defaults ('off' is None)
+# DAgger on MuJoCo C (2 cores: a 4,096-episode iteration took 3.8 minutes, its held-out judgement 80 s): sized so
+# `--minutes 1` learns something and ends in time (docs/training.md, "On a CPU"; notebook firsthour)
+CPU_DAGGER = {"envs": 256, "eval_envs": 64, "fit_steps": 1000, "batch": 1024}
 
 
-def _method_settings(args) -> None:
-    """Refuse the other method's settings in one line; fill this method's defaults (the parser leaves them None)."""
+def _method_settings(args, backend: str) -> None:
+    """Refuse the other method's settings in one line; fill this method's defaults (the parser leaves them None),
+    DAgger's on cpu sized for a CPU."""
     own, other = (PPO_ONLY, DAGGER_ONLY) if args.algo == "ppo" else (DAGGER_ONLY, PPO_ONLY)
     given = ["--" + k.replace("_", "-") for k in other if getattr(args, k) is not None]
     if given:
         method, theirs = ("PPO", "DAgger's") if args.algo == "ppo" else ("DAgger", "PPO's (--algo ppo)")
         raise TrainError(f"{', '.join(given)}: {theirs} setting{'s' if len(given) > 1 else ''}, not {method}'s")
-    for k, default in (own | BOTH).items():
+    for k, default in (own | BOTH | (CPU_DAGGER if backend == "cpu" and args.algo == "dagger" else {})).items():
         if getattr(args, k) is None:
             setattr(args, k, default)
     if args.max_grad_norm == "off":
@@ -45,9 +49,9 @@ def cmd_train(args) -> int:
     task = get_task(args.task)
     if args.teacher is None and task.name != "chapter":
         args.teacher = "expert"  # the paced teacher is the chapter expert's
-    _method_settings(args)
     args.reset = task.check_reset(args.reset)
     name, why = resolve(args.backend)
+    _method_settings(args, name)
     if args.algo == "ppo":
         if task.name != "chapter":
             raise TrainError(f"--algo ppo trains on the chapter task; --task {task.name} is DAgger's so far")
@@ -148,6 +152,10 @@ def _judge(args, backend: str, out: Path, summary: dict) -> dict:
     from mjx_pusht.study.evaluate import evaluate
 
     seeds = summary["held_out"]["seeds"]
+    took = summary.pop("judgement_seconds", None)  # DAgger's last judgement of these seeds, in training
+    print(f"judging {out / 'policy.msgpack'} with eval on the held-out seeds {seeds}"
+          + (f": their episodes about {took:.0f} s, as the training's last judgement of them took, after eval's "
+                 "start-up" if took is not None else ""))
     # this run's own judgement of the policy it just wrote: an earlier one (before --resume) judged another policy
     remove_own(out / "eval")
     evaluate(f"policy:{out / 'policy.msgpack'}", seeds, out / "eval", backend=backend,

@@ -31,6 +31,7 @@ memory puts it in, not to situations only the expert's memory would have produce
 from __future__ import annotations
 
 import dataclasses
+import time
 from functools import partial
 
 import numpy as np
@@ -210,6 +211,8 @@ class Rollouts:
         self.env, self.cfg, self.expert = env, cfg, teacher(cfg)
         self.task = cfg.the_task
         self._compiled, self._compact = {}, {}
+        self.steps = 0  # the control steps the last rollout ran (its batch's longest episode; on MJX every step)
+        self.cut = False  # whether the last rollout stopped at its deadline, episodes unfinished
 
     def __call__(self, params, norm, seeds, beta, rng: int, learn: int | None = None):
         """Features and expert labels of every live control step of the first `learn` episodes (all if None;
@@ -218,19 +221,22 @@ class Rollouts:
         x, y, n, outcome = self.padded(params, norm, seeds, beta, rng, learn)
         return x[:n], y[:n], outcome
 
-    def padded(self, params, norm, seeds, beta, rng: int, learn: int | None = None):
+    def padded(self, params, norm, seeds, beta, rng: int, learn: int | None = None, deadline: float | None = None):
         """As calling it, but the samples and labels are the first `n` rows of arrays whose length does not depend
         on how long the episodes ran (on MJX: every live control step's row could be there), returned with `n`:
         (x, y, n, outcomes). DAgger's loop adds them to the ring as they are (`Learner.add(..., n=n)`), so its
-        programs keep one shape from iteration to iteration."""
+        programs keep one shape from iteration to iteration.
+        `deadline` (a `time.perf_counter()` reading; MuJoCo C only, whose steps are a host loop): no control step
+        starts past it, so the episodes may end cut short: for a rollout learned from, never for one judged."""
         beta = np.broadcast_to(np.asarray(beta, np.float32), (len(seeds),))
         learn = len(seeds) if learn is None else learn
         if self.env.backend == "cpu":
-            x, y, outcome = self._cpu(params, norm, seeds, beta, rng, learn)
+            x, y, outcome = self._cpu(params, norm, seeds, beta, rng, learn, deadline)
             return x, y, len(x), outcome
+        self.steps, self.cut = self.cfg.max_steps, False
         return self._mjx(params, norm, seeds, beta, rng, learn)
 
-    def _cpu(self, params, norm, seeds, beta, rng, learn):
+    def _cpu(self, params, norm, seeds, beta, rng, learn, deadline=None):
         from mjx_pusht.train.policy import apply
 
         env, cfg = self.env, self.cfg
@@ -240,9 +246,13 @@ class Rollouts:
         s = env.reset(seeds)
         memory = self.expert.init(s.key)
         xs, ys = [], []
-        for t in range(cfg.max_steps):
+        self.cut = False
+        for self.steps in range(cfg.max_steps + 1):
             done = np.asarray(s.carry["ep"]["done"])
-            if done.all():
+            if done.all() or self.steps == cfg.max_steps:
+                break
+            if deadline is not None and self.steps and time.perf_counter() > deadline:  # a step's samples at least
+                self.cut = True
                 break
             live = ~done
             live[learn:] = False  # judged only: their samples are not learned from

@@ -41,7 +41,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     `keep`: which fit is the run's policy.msgpack: the last one, or ("best") the one whose next rollout
     succeeded most on that iteration's fresh training seeds with the expert's share at most
     VALIDATION_BETA (`curve.kept`); never chosen by the held-out seeds, so its held-out rate is not a maximum
-    taken over the curve's noise."""
+    taken over the curve's noise. `minutes`: the budget of the training and its last judgement (`Budget`)."""
     needs("train_dagger", "train", ("flax", "optax"))  # one line naming the extra, before any work
     import jax
     from tqdm import tqdm
@@ -65,12 +65,13 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     bar = tqdm(desc="dagger", unit="iter", disable=not progress, initial=start, total=cfg.iterations)
     # Each fit's held-out judgement rides in the next iteration's rollout (the same policy drives both: the
     # held-out rows with beta 0, their samples never learned from), so judging costs a bigger batch, not a
-    # second rollout (notebook change 16); the last fit, or the one that spends --minutes, is judged alone.
+    # second rollout (notebook change 16); the last fit, or the last that --minutes leaves time for, is judged alone.
     pending = None  # (iteration, loss, learn seconds, sim seconds) of the fit awaiting its judgement
     writer = [None]  # the thread writing the resume checkpoint
+    clock = Budget(minutes, t_start, backend, len(held_out), cfg.max_steps)
 
-    def judged(held, sim_judge: float, validation=None, validation_beta=None) -> bool:
-        """Curve row, checkpoints and progress for the pending fit; True when --minutes is spent. `validation`:
+    def judged(held, sim_judge: float, validation=None, validation_beta=None, last: bool = False) -> None:
+        """Curve row, checkpoints and progress for the pending fit (`last`: the run's last judgement). `validation`:
         the training rows of the same rollout (fresh seeds, never held out), driven by this fit with the
         expert's share `validation_beta`."""
         nonlocal saved
@@ -89,14 +90,12 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         meta = _meta(cfg, i, env_steps, learner.norm)
         save(ckpt / f"policy_{i:03d}.msgpack", learner.params, meta)
         save(out / "policy.msgpack", learner.params, meta)
-        stop = minutes is not None and row["wall_seconds"] > 60 * minutes
-        if stop or i == cfg.iterations - 1 or time.perf_counter() - saved > every:
+        if last or i == cfg.iterations - 1 or time.perf_counter() - saved > every:
             writer[0] = checkpoint(resume_path, cfg, learner, i, env_steps, curve, writer[0])
             saved = time.perf_counter()
         bar.set_postfix(success=f"{k / n:.1%}", loss=f"{loss:.4f}", steps=env_steps,
                         **({"pose_mm": f"{learner.pose_error_mm:.2f}"} if cfg.image else {}))
         bar.update(1)
-        return stop
 
     # On MJX every rollout has the held-out rows, so the scan compiles for one batch shape: the first
     # iteration's show the untrained student, unrecorded (a second shape cost ~8 s of a 5-minute budget,
@@ -106,12 +105,19 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         seeds, beta = cfg.train_seeds(i), np.full(cfg.envs, cfg.beta(i), np.float32)
         if pending is not None or one_shape:  # the last fit's judgement, in the same batch
             seeds, beta = np.concatenate([seeds, held_out]), np.concatenate([beta, np.zeros(len(held_out), np.float32)])
+        if pending is not None and clock.spent(clock.rollout(len(seeds)) + clock.fit + clock.judge):
+            break  # this iteration and the next fit's judgement would not fit: the pending fit is judged alone
         (x, y, n, outcome), sim = _timed(rollouts.padded, learner.params, learner.norm or _unit(cfg), seeds, beta, i,
-                                         cfg.envs)
+                                         cfg.envs, clock.first_rollout(pending is None and not one_shape))
+        clock.rolled(sim, len(seeds), rollouts.steps)
+        if rollouts.cut:
+            bar.write(f"iteration {i}'s rollout stopped at control step {rollouts.steps} of {cfg.max_steps} to keep "
+                      f"the {minutes:g}-minute budget: its samples so far are learned from")
         _stop_if_non_finite(non_finite(outcome, seeds, x, y), f"iteration {i}'s rollout", curve, out)
         if pending is not None:
-            stop = judged({k: v[cfg.envs:] for k, v in outcome.items()}, 0.0,
-                          {k: v[:cfg.envs] for k, v in outcome.items()}, float(cfg.beta(i)))
+            stop = clock.spent(clock.fit + clock.judge)  # a fit now would leave no time to judge it
+            judged({k: v[cfg.envs:] for k, v in outcome.items()}, 0.0,
+                   {k: v[:cfg.envs] for k, v in outcome.items()}, float(cfg.beta(i)), last=stop)
             pending = None
             if stop:
                 curve[-1]["sim_seconds"] += sim  # spent, though the samples go unlearned: the judged policy is the run's
@@ -120,28 +126,32 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         learner.add(x, y, keep=i == 0, n=n)
         learn = 0.0
         for part in range(cfg.fits(i)):
+            if part and clock.spent(clock.fit + clock.judge):
+                break  # a late fit more would leave no time to judge it
             if i == 0 and cfg.first_fits:  # from several initialisations, the lowest loss kept
                 loss, seconds = _timed(_first_fit, learner, cfg.first_fits, out, bar)
             else:
                 loss, seconds = _timed(learner.fit, i, part)
             learn += seconds
+            clock.fit = seconds
             _stop_if_non_finite(None if np.isfinite(loss) else f"the loss is {loss}", f"iteration {i}'s fit", curve, out)
         pending = (i, loss, learn, sim)
-        if minutes is not None and time.perf_counter() - t_start > 60 * minutes:
-            break  # judged alone below: no rollout past the budget
     if pending is not None:
         seeds, n_train = held_out, 0
         if one_shape:  # the same shape again: training seeds ride along, their samples not learned
             seeds, n_train = np.concatenate([cfg.train_seeds(pending[0] + 1), held_out]), cfg.envs
+        bar.write(f"judging iteration {pending[0]}'s policy on the {len(held_out)} held-out seeds: about "
+                  f"{clock.judge:.0f} s")
         (_, _, _, held), sim_judge = _timed(rollouts.padded, learner.params, learner.norm, seeds, 0.0,
                                             cfg.iterations + pending[0], 0)
         _stop_if_non_finite(non_finite(held, seeds), f"iteration {pending[0]}'s judgement", curve, out)
         judged({k: v[n_train:] for k, v in held.items()}, sim_judge,
-               {k: v[:n_train] for k, v in held.items()} if n_train else None, 0.0 if n_train else None)
+               {k: v[:n_train] for k, v in held.items()} if n_train else None, 0.0 if n_train else None, last=True)
     if writer[0] is not None:
         writer[0].join()
     if curve and curve[-1]["iteration"] < cfg.iterations - 1:
-        bar.write(f"stopping after iteration {curve[-1]['iteration']}: the {minutes:g}-minute budget is spent")
+        bar.write(f"stopped after iteration {curve[-1]['iteration']}: another would pass the {minutes:g}-minute "
+                  f"budget ({curve[-1]['wall_seconds']:.0f} s used)")
     bar.close()
     jax.block_until_ready(learner.params)
     kept = kept_fit(curve, keep)
@@ -149,7 +159,50 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         shutil.copyfile(ckpt / f"policy_{kept['iteration']:03d}.msgpack", out / "policy.msgpack")
         bar.write(f"keeping iteration {kept['iteration']}'s policy: {kept['validation_success']:.1%} on its "
                   f"validation rollout (held-out {kept['success']:.1%})")
-    return write_summary(cfg, backend, out, curve, rerun, kept=kept, keep=keep)
+    summary = write_summary(cfg, backend, out, curve, rerun, kept=kept, keep=keep)
+    # what the last held-out judgement took (or, judged in a rollout, would take alone): `mjx-pusht train` states it
+    # as the time to expect of `evaluate` on the same seeds, before it starts
+    return summary | {"judgement_seconds": round(sim_judge if pending is not None else clock.judge, 1)}
+
+
+class Budget:
+    """--minutes as a promise: an iteration's rollout, or a fit, starts only when it and the judgement of the fit it
+    leaves fit in what is left, each predicted from the latest one measured (a run overshoots by the prediction's
+    error, not by an iteration). With nothing measured yet (a run's first rollout and fit: it needs a policy), a
+    MuJoCo C rollout that judges nothing stops stepping at a quarter of the time left, its samples kept: the
+    rest is for the first fit and its judgement."""
+
+    def __init__(self, minutes: float | None, t_start: float, backend: str, held_out: int, max_steps: int):
+        self.deadline = None if minutes is None else t_start + 60 * minutes
+        self.cpu, self.held_out, self.max_steps = backend == "cpu", held_out, max_steps
+        self.last = self.step = self.fit = 0.0  # the latest rollout's seconds and seconds a control step; a fit's
+        self.episodes = 1  # the latest rollout's
+
+    def spent(self, seconds: float) -> bool:
+        """Whether `seconds` more from now would pass the budget."""
+        return self.deadline is not None and time.perf_counter() + seconds > self.deadline
+
+    def rolled(self, seconds: float, episodes: int, steps: int) -> None:
+        self.last, self.step, self.episodes = seconds, seconds / max(steps, 1), episodes
+
+    def rollout(self, episodes: int) -> float:
+        """A rollout's predicted seconds: on MuJoCo C every control step as the latest's (a student's episodes may
+        all run to the end), longer in proportion to more episodes, never shorter for fewer (a step's fixed costs:
+        64 held-out episodes took 10 s where the 256 before them predicted 3); on MJX one batch shape, one scan of
+        every step: the latest's."""
+        return self.step * self.max_steps * max(1.0, episodes / self.episodes) if self.cpu else self.last
+
+    @property
+    def judge(self) -> float:
+        """The last fit's judgement alone on the held-out seeds (on MJX, the same batch shape as a rollout)."""
+        return self.rollout(self.held_out)
+
+    def first_rollout(self, cuttable: bool) -> float | None:
+        """The deadline of a rollout with nothing measured before it, if it may be cut (it judges nothing)."""
+        if self.deadline is None or not cuttable:
+            return None
+        now = time.perf_counter()
+        return now + max(self.deadline - now, 0.0) / 4
 
 
 def dagger_env(cfg, backend: str):
