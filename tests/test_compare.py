@@ -107,6 +107,7 @@ def test_two_evals_pair_seed_by_seed_whatever_order_their_rows_are_in(cpu_eval, 
     ({"max_steps": 61}, "differ in max_steps"),
     ({"controller": "nudge"}, "differ in controller"),
     ({"controller_sha256": "0" * 64, "reset": "task"}, "differ in reset"),
+    ({"task": "gym-pusht", "action": "target", "reset": "gym-pusht"}, "differ in task"),  # the cause, not its action
 ])
 def test_evals_of_other_episodes_are_refused_in_one_line(cpu_eval, tmp_path, capsys, change, says):
     from mjx_pusht.cli.commands import main

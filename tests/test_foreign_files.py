@@ -132,3 +132,25 @@ def test_replace_removes_the_commands_own_files_and_nothing_in_its_folders_it_di
     assert (out / "per_seed.parquet").exists()
     remove_own(out / ".parts")  # what a finished sweep does with its chunks: the user's file stays
     assert sorted(p.name for p in (out / ".parts").iterdir()) == ["mine.txt"]
+
+
+# Bad input found only after the folder is claimed: the backend or env refuses the run (found by a newcomer's pass)
+REFUSED_AFTER_CLAIM = {
+    "eval": ("eval", "--backend", "gym-pusht", "--seeds", "2", "--no-rerun"),  # the chapter task on gym-pusht
+    "sweep": ("sweep", "--backend", "gym-pusht", "--seeds", "2", "--no-rerun"),
+    "train": ("train", "--task", "gym-pusht", "--backend", "gym-pusht", "--no-rerun"),  # creates checkpoints/ first
+    "demos": ("demos", "--controller", "zero", "--successful-only", "--backend", "cpu", "--seeds", "2",
+              "--max-steps", "3", "--no-progress"),  # nothing succeeds
+}
+
+
+@pytest.mark.parametrize("command", REFUSED_AFTER_CLAIM)
+def test_a_run_refused_after_its_claim_leaves_no_folder_it_made_and_keeps_one_it_did_not(command, tmp_path, capsys):
+    out = tmp_path / "new" / "run"
+    assert main([*REFUSED_AFTER_CLAIM[command], "--out", str(out)]) == 1
+    one_line(capsys, "mjx-pusht: error:")
+    assert not (tmp_path / "new").exists()  # neither --out nor the folder made above it
+    before = users_files(out, ["notes.md"])
+    assert main([*REFUSED_AFTER_CLAIM[command], "--out", str(out), "--share-out"]) == 1
+    one_line(capsys, "mjx-pusht: error:")
+    assert tree(out).items() >= before.items()

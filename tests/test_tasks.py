@@ -119,6 +119,20 @@ def test_the_gym_pusht_backend_runs_gym_pushts_task_only():
                                            controller=TASKS["chapter"].controller("zero")))
 
 
+@pytest.mark.parametrize(("extra", "why"), [
+    (("--algo", "ppo", "--backend", "mjx-jax"), "--algo ppo trains on the chapter task"),  # not: "--teacher" unasked
+    (("--backend", "gym-pusht"), "train rolls out on cpu, mjx-jax or mjx-warp"),  # before the banner, not after
+])
+def test_train_refuses_on_gym_pushts_task_what_it_cannot_do_in_one_line(extra, why, tmp_path, capsys):
+    from mjx_pusht.cli import main
+
+    assert main(["train", "--task", "gym-pusht", *extra, "--no-rerun", "--out", str(tmp_path / "t")]) == 1
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"mjx-pusht: error: {why}"), captured.err
+    assert captured.out == "" and not (tmp_path / "t").exists()
+
+
 def test_the_functional_env_of_gym_pushts_task_starts_and_ends_episodes_as_gym_pusht_does():
     from gym_pusht.envs.pusht import PushTEnv as Theirs
 

@@ -116,7 +116,7 @@ def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str)
     p.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)"
                    + ("; gym-pusht: gym-pusht 0.1.8 itself, for --task gym-pusht" if name == "eval" else ""))
     p.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
-    p.add_argument("--out", type=_folder, default=Path(f"outputs/{name}"))
+    p.add_argument("--out", type=_folder, default=Path(f"outputs/{name}"), help=f"the run's folder (default outputs/{name})")
     p.add_argument("--chunk", type=_positive, default=None, help=f"{rows} per batch (default: by backend)")
     p.add_argument("--resume", action="store_true", help=f"finish an interrupted {name} in --out")
     p.add_argument("--replace", action="store_true", help=REPLACE_HELP)
@@ -148,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=_seed, default=0, help="seeds the block's start pose, like a PushT reset")
     s.add_argument("--steps", type=_steps, default=120, help="nudge length in steps (default 120)")
     s.add_argument("--smoke", action="store_true", help="fixed 120-step run; two runs match byte for byte")
-    s.add_argument("--out", type=_folder, default=Path("outputs/scene"))
+    s.add_argument("--out", type=_folder, default=Path("outputs/scene"), help="the run's folder (default outputs/scene)")
     s.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     s.add_argument("--share-out", action="store_true", help=SHARE_HELP)
     s.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip the .rrd recording")
@@ -199,7 +199,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="what the policy sees (default state; pixels_agent_pos: the 96 x 96 top camera and the "
                         "pusher's position, DAgger only)")
     t.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
-    t.add_argument("--out", type=_folder, default=Path("outputs/train"))
+    t.add_argument("--out", type=_folder, default=Path("outputs/train"), help="the run's folder (default outputs/train)")
     t.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     t.add_argument("--share-out", action="store_true", help=SHARE_HELP)
     t.add_argument("--envs", type=_worlds, default=None,
@@ -265,8 +265,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser("compare", help="CPU vs MJX fidelity report: compare.json, compare.md, compare.png")
     c.add_argument("--seeds", default="64", help="N, A:B or a,b,c (default 64)")
-    c.add_argument("--backend", default="mjx-jax", help="mjx-jax or mjx-warp (default mjx-jax)")
-    c.add_argument("--out", type=_folder, default=Path("outputs/compare"))
+    c.add_argument("--backend", default="mjx-jax", help="mjx-jax or mjx-warp (default mjx-jax); gym-pusht: gym-pusht "
+                                                         "0.1.8 itself, for --task gym-pusht --controller C")
+    c.add_argument("--out", type=_folder, default=Path("outputs/compare"),
+                   help="the report's folder (default outputs/compare)")
     c.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     c.add_argument("--share-out", action="store_true", help=SHARE_HELP)
     c.add_argument("--no-root-cause", dest="root_cause", action="store_false",
@@ -281,7 +283,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--max-steps", type=_steps, default=300, help="closed loop: control steps per episode")
     c.add_argument("--evals", nargs=2, type=Path, metavar=("EVAL_DIR", "EVAL_DIR"), default=None,
                    help="pair two finished eval folders of the same controller and seeds, one run on the cpu backend "
-                        "and one on MJX (e.g. on two machines), into the closed-loop report; runs nothing")
+                        "and one on MJX or gym-pusht (e.g. on two machines), into the closed-loop report; runs nothing")
 
     from mjx_pusht.cli.demos import add_parser as add_demos
 

@@ -47,14 +47,17 @@ def cmd_train(args) -> int:
     from mjx_pusht.task.tasks import get as get_task
 
     task = get_task(args.task)
-    if args.teacher is None and task.name != "chapter":
+    if args.algo == "ppo" and task.name != "chapter":
+        raise TrainError(f"--algo ppo trains on the chapter task; --task {task.name} is DAgger's so far")
+    if args.algo == "dagger" and args.teacher is None and task.name != "chapter":
         args.teacher = "expert"  # the paced teacher is the chapter expert's
     args.reset = task.check_reset(args.reset)
     name, why = resolve(args.backend)
+    if name == "gym-pusht":  # found now, before the banner promises a run
+        raise TrainError("train rolls out on cpu, mjx-jax or mjx-warp; gym-pusht itself judges a trained policy: "
+                         "eval --task gym-pusht --backend gym-pusht --controller policy:PATH")
     _method_settings(args, name)
     if args.algo == "ppo":
-        if task.name != "chapter":
-            raise TrainError(f"--algo ppo trains on the chapter task; --task {task.name} is DAgger's so far")
         return _cmd_ppo(args, name, why)
     cfg = DaggerConfig(obs_type=args.obs, envs=args.envs, iterations=args.iterations, hidden=tuple(args.hidden),
                        learning_rate=args.lr or 1e-3, batch=args.batch or 4096, fit_steps=args.fit_steps,

@@ -22,6 +22,8 @@ def prepare_out_dir(path: Path) -> Path:
     try:
         if path.exists() and not path.is_dir():
             raise OutputError(f"--out {path} is a file, not a folder")
+        if not path.exists():  # it, and the folders above it this run makes, innermost first
+            _CREATED[path.resolve()] = [p.resolve() for p in path.parents if not p.exists()]
         path.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=path, prefix=".probe-"):
             pass
@@ -114,6 +116,7 @@ INSIDE = {
     ".demos-partial": _DATASET,
 }
 _HELD: dict[Path, object] = {}  # folders this process has locked, and their open lock files
+_CREATED: dict[Path, list] = {}  # --out folders this process made, and the folders it made above them
 
 
 def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool = False, reads=(),
@@ -293,11 +296,28 @@ def _lock(path: Path) -> None:
 
 class held_folders:
     """`with held_folders():` around a command: the folders it locked are let go when it ends (a command
-    run inside another, as train runs eval, lets go of its own only)."""
+    run inside another, as train runs eval, lets go of its own only). A command that failed (bad input found
+    after its claim, as a backend refusing the task) leaves no folder it made that holds only its claim."""
 
     def __enter__(self):
         self.before = set(_HELD)
 
-    def __exit__(self, *exc):
+    def __exit__(self, kind, exc, tb):
         for key in set(_HELD) - self.before:
             _HELD.pop(key).close()
+            if exc is not None and key in _CREATED and _only_claim(key):
+                for name in os.listdir(key):
+                    if (key / name).is_dir():
+                        (key / name).rmdir()
+                    else:
+                        (key / name).unlink()
+                for folder in (key, *_CREATED[key]):
+                    if os.listdir(folder):
+                        break
+                    folder.rmdir()
+
+
+def _only_claim(path: Path) -> bool:
+    """`path` holds nothing but a claim: the bookkeeping files, and folders a run made and left empty."""
+    return all(n in BOOKKEEPING or ((path / n).is_dir() and not (path / n).is_symlink() and not os.listdir(path / n))
+               for n in os.listdir(path))

@@ -45,7 +45,8 @@ def compare_episodes(seeds: np.ndarray, impl: str, out: Path, *, controller=None
     seeds = np.asarray(seeds, np.int64)
     t0 = time.perf_counter()
     name = impl if impl == "gym-pusht" else f"mjx-{impl}"
-    progress(f"[compare] {describe(controller)} on {task}'s {reset} starts: {name} ...")
+    starts = f"{task}'s starts" if reset == task else f"{task}'s {reset} starts"  # not "gym-pusht's gym-pusht starts"
+    progress(f"[compare] {describe(controller)} on {starts}: {name} ...")
     scenario = Scenario(the_task.scene(), reset=reset, controller=controller, episode=episode)
     backend = make_backend(name, scenario) if impl == "gym-pusht" else MjxBackend(scenario, impl)
     try:
@@ -101,8 +102,9 @@ def episodes_report(mjx_r, cpu_r, jit=None, **meta) -> dict:
     return report
 
 
-# What two eval runs must share to be paired row by row: everything that makes an episode but the backend.
-_SAME = ("controller_sha256", "action", "task", "reset", "break_it", "max_steps", "frame_skip", "params")
+# What two eval runs must share to be paired row by row: everything that makes an episode but the backend (the task
+# first: two tasks differ in their actions too, and the task is the difference to name).
+_SAME = ("task", "controller_sha256", "action", "reset", "break_it", "max_steps", "frame_skip", "params")
 # What the pairing reads from each eval's summary.json (and its config block)
 _NEEDS = ("backend", "controller")
 _NEEDS_CONFIG = ("backend", "controller", "reset", "max_steps", "frame_skip")
@@ -147,7 +149,8 @@ def evals_report(first: Path, second: Path) -> dict:
     c_cpu, c = s_cpu["config"], s_mjx["config"]
     # a policy is the same policy by its file's hash where both runs recorded one (evals since change 27), by
     # its controller string where either did not
-    same = _SAME if c_cpu.get("controller_sha256") and c.get("controller_sha256") else ("controller",) + _SAME[1:]
+    by_hash = c_cpu.get("controller_sha256") and c.get("controller_sha256")
+    same = _SAME if by_hash else tuple("controller" if k == "controller_sha256" else k for k in _SAME)
     for key in same:
         if c_cpu.get(key) != c.get(key):
             raise ConfigError(f"the two evals differ in {key} ({c_cpu.get(key)!r} on the cpu, {c.get(key)!r} on "

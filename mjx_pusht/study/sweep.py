@@ -164,7 +164,8 @@ def run_sweep(
     t0 = time.perf_counter()
     compile0 = backend.compile_seconds
     bar = tqdm(total=last - first, initial=int(done[first:last].sum()), unit="seed", disable=not progress,
-               file=sys.stderr, desc=f"sweep [{backend.name}]" + (f" process {processes.process_id}" if processes.many else ""))
+               file=sys.stderr, desc=f"{'eval' if episodes else 'sweep'} [{backend.name}]"
+               + (f" process {processes.process_id}" if processes.many else ""))
     # Pipelined where the backend can: chunk k + 1 is on the device while the host scores chunk k
     # and a writer thread puts its file on disk. The chunks still land one file each, in order.
     pipelined = backend.pipelined
