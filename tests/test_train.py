@@ -557,19 +557,18 @@ def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
 def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp_path):
     pytest.importorskip("brax")
     out = tmp_path / "ppo"
-    # 20-step episodes: each judgement and the eval cost a fifteenth of the task's 300 (this test's time is MJX on a
-    # CPU; 50 steps took 119-274 s on this 2-core machine, the suite's slowest test)
+    # 50-step episodes: each judgement and the eval cost a sixth of the task's 300 (this test's time is MJX on a CPU)
     args = ["train", "--algo", "ppo", "--backend", "mjx-jax", "--envs", "8", "--batch", "8", "--timesteps", "10240",
             "--iterations", "1", "--eval-envs", "4", "--hidden", "32,32", "--no-rerun", "--record", "0",
-            "--no-progress", "--out", str(out), "--keep", "best", "--max-steps", "20"]
+            "--no-progress", "--out", str(out), "--keep", "best", "--max-steps", "50"]
     r = cli(*args)
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["method"] == "ppo" and [c["env_steps"] for c in summary["curve"]] == [0, 10240]
     assert summary["config"]["max_grad_norm"] == 1.0  # clipped by default: unclipped, PPO's curves collapsed (issue 40)
     # --max-steps reaches the trainer, its judge and the eval after it: every held-out episode ran 50 steps
-    assert summary["config"]["max_steps"] == summary["held_out"]["max_steps"] == 20
-    assert pq.read_table(out / "eval" / "per_episode.parquet").to_pydict()["episode_length"] == [20] * 4
+    assert summary["config"]["max_steps"] == summary["held_out"]["max_steps"] == 50
+    assert pq.read_table(out / "eval" / "per_episode.parquet").to_pydict()["episode_length"] == [50] * 4
     # every judgement: both actions on the held-out seeds, the saved one's on the validation seeds, and after
     # training, Brax's own loss metrics of the epoch that made it
     for row in summary["curve"]:
@@ -766,7 +765,7 @@ def test_ppo_max_grad_norm_and_adaptive_kl_reach_braxs_optimiser(tmp_path):
     out = tmp_path / "ppo"
     r = cli("train", "--algo", "ppo", "--backend", "mjx-jax", "--envs", "8", "--batch", "8", "--timesteps", "10240",
             "--iterations", "1", "--eval-envs", "4", "--hidden", "32,32", "--no-rerun", "--record", "0", "--no-progress",
-            "--out", str(out), "--max-grad-norm", "1e-12", "--lr-schedule", "adaptive-kl", "--max-steps", "20")
+            "--out", str(out), "--max-grad-norm", "1e-12", "--lr-schedule", "adaptive-kl", "--max-steps", "50")
     assert r.returncode == 0, r.stderr
     config = json.loads((out / "summary.json").read_text())["config"]
     assert config["max_grad_norm"] == 1e-12 and config["lr_schedule"] == "adaptive-kl"
