@@ -233,3 +233,19 @@ def test_daggers_judgement_of_a_gym_pusht_student_is_evals_of_its_checkpoint(tmp
     evaluated = json.loads((out / "eval" / "summary.json").read_text())["final_coverage"]["mean"]
     # (curve.csv keeps 7 digits); the student moved the T
     assert judged == pytest.approx(evaluated, abs=1e-6) and evaluated > 0.02
+
+
+def nan_targets(obs, t):
+    return np.full(obs["state"].shape[:-1] + (2,), np.nan if t == 2 else 0.0)
+
+
+def test_a_non_finite_action_in_gym_pusht_is_the_controllers_error_naming_seeds_and_step():
+    from mjx_pusht.task.controllers import FromFunction
+
+    task = get("gym-pusht")
+    sc = Scenario(task.scene(), reset=task.reset, episode=task.episode(max_steps=5),
+                  controller=FromFunction(name="nan", action_type="target", fn=nan_targets))
+    from mjx_pusht.backends.gym_pusht import episodes
+
+    with pytest.raises(MjxPushtError, match=r"non-finite action at step 2 for seeds \[3, 11\]"):
+        episodes(sc, np.array([3, 11]))

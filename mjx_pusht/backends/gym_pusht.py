@@ -144,8 +144,14 @@ def episodes(scenario, seeds: np.ndarray, trace: bool = False, poses=None):
             obs["pixels"] = np.stack(pixels)
         action, carry = controller.act(carry, obs, k, key)
         target = frame.to_px(np.asarray(action, np.float64))
+        bad = live & ~np.isfinite(target).all(-1)
+        if bad.any():  # the controller's bug, said as the other backends say it: never a pusher quietly held still
+            from mjx_pusht.task.controllers import ControllerError
+
+            raise ControllerError(f"controller {controller.name} gave a non-finite action at step {k} for seeds "
+                                  f"{seeds[bad][:8].tolist()}")
         for i in np.flatnonzero(live):
-            a = np.clip(np.where(np.isfinite(target[i]), target[i], frame.to_px(state[i, None, 0:2])[0]), 0.0, 512.0)
+            a = np.clip(target[i], 0.0, 512.0)
             o, _, terminated, _, info = envs[i].step(a)
             pixels[i] = o["pixels"] if image else None
             state[i] = world_state(envs[i])
