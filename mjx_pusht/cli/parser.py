@@ -46,7 +46,7 @@ _frame_skip = _int_at_least(1, validate.MAX_FRAME_SKIP, " physics steps a contro
 _worlds = _int_at_least(1, 1 << 22, " episodes at once")
 
 
-def _grad_norm(text: str) -> float | str:
+def _positive_or_off(text: str) -> float | str:
     """An argparse type: a finite float > 0, or "off"."""
     if text == "off":
         return text
@@ -224,10 +224,10 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--first-fits", type=_positive, default=None,
                    help="DAgger: the first fit is made from this many initialisations and the one with the lowest "
                         "training loss kept (default 1): where a run starts, its loss holds through the run")
-    t.add_argument("--action-eps", type=_positive_float, default=None,
+    t.add_argument("--action-eps", type=_positive_or_off, default=None,
                    help="DAgger: weigh each action's squared error by (0.1^2 + eps^2) / (|label|^2 + eps^2), eps in m/s "
-                        "(default: plain squared error): a nudge of a few mm is learned as precisely, relative to "
-                        "its size, as a 0.1 m/s move")
+                        "('off': plain squared error; default: the task's, gym-pusht 0.01, chapter off): a nudge of a "
+                        "few mm is learned as precisely, relative to its size, as a 0.1 m/s move")
     t.add_argument("--keep", choices=("last", "best"), default="last",
                    help="DAgger: the run's policy is the last fit (default), or the fit whose next rollout succeeded "
                         "most on that iteration's fresh training seeds once the expert's share there is at most 1%%; "
@@ -236,7 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--ppo-act", choices=("sample", "mean"), default=None,
                    help="PPO: the saved policy acts with a draw from its Gaussian keyed by seed and step, what PPO "
                         "trains (default), or with the Gaussian's mean, Brax's deterministic action")
-    t.add_argument("--max-grad-norm", type=_grad_norm, default=None,
+    t.add_argument("--max-grad-norm", type=_positive_or_off, default=None,
                    help="clip the gradient's global norm to this before Adam (default 1.0; 'off': unclipped). PPO: "
                         "Brax's max_grad_norm (unclipped runs collapsed from 99-100%% to 0-6%% and back); DAgger: every "
                         "fit (unclipped, 3 of 16 first fits landed where the student succeeds on 0-0.2%%)")

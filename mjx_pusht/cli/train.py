@@ -36,6 +36,11 @@ def _method_settings(args, backend: str) -> None:
             setattr(args, k, default)
     if args.max_grad_norm == "off":
         args.max_grad_norm = None
+    if args.algo == "dagger":  # the task's own unless given ('off': the plain squared error)
+        from mjx_pusht.task.tasks import get as get_task
+
+        eps = get_task(args.task).action_eps if args.action_eps is None else args.action_eps
+        args.action_eps = None if eps == "off" else eps
 
 
 def cmd_train(args) -> int:
