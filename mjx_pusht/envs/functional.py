@@ -7,7 +7,7 @@
 `step` is the control step every rollout runs (episode.py): the action becomes servo ctrl
 (`task.to_ctrl`), `frame_skip` physics steps follow, each folded into the weld-gap, finite and
 containment invariants, then reward = coverage, and the episode ends at coverage >= 0.95
-(`terminated`) or after `max_steps` control steps (`truncated`). An ended episode holds still
+(`terminated`; `Episode(success=...)`, `for_task(..., success_threshold=...)`: another coverage) or after `max_steps` control steps (`truncated`). An ended episode holds still
 and earns nothing until it is reset.
 
 On MJX `step_one(state, action)` is the pure single-world function: `step` is
@@ -173,12 +173,15 @@ class PushTEnv:
         self.layout = QposLayout.of(self.model)
 
     @classmethod
-    def for_task(cls, task: str, backend: str = "cpu", max_steps: int | None = None, **kwargs) -> "PushTEnv":
-        """A task's env (task/tasks.TASKS): its scene, starts, actions and episodes, e.g. gym-pusht's on the batch."""
+    def for_task(cls, task: str, backend: str = "cpu", max_steps: int | None = None,
+                 success_threshold: float | None = None, **kwargs) -> "PushTEnv":
+        """A task's env (task/tasks.TASKS): its scene, starts, actions and episodes, e.g. gym-pusht's on the batch;
+        success at the task's own coverage (0.95) or at `success_threshold`, in (0, 1]."""
         from mjx_pusht.task.tasks import get
 
         t = get(task)
-        return cls(backend, t.reset, t.action_type, t.episode(max_steps), t.scene(), **kwargs)
+        return cls(backend, t.reset, t.action_type, t.episode(max_steps, success_threshold=success_threshold),
+                   t.scene(), **kwargs)
 
     @property
     def renderer(self):

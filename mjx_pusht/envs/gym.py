@@ -17,8 +17,8 @@ Where this differs from gym-pusht (and how to convert):
   proportional velocity command (task.to_ctrl), gym-pusht's convention; actions are clipped
   to the action space, and a NaN or inf is a one-line error;
 - reward is the coverage itself, in [0, 1] (gym-pusht: coverage / 0.95, clipped); success
-  (terminated) at coverage >= 0.95; a start already on the goal is over at reset (info
-  says success) and its first step reports terminated with that start's coverage as reward;
+  (terminated) at coverage >= 0.95 (`success_threshold=`: another, in (0, 1]); a start already
+  on the goal is over at reset (info says success) and its first step reports terminated with that start's coverage as reward;
   truncation after `max_episode_steps` control steps (300, registered in the spec: gymnasium's
   TimeLimit truncates, so `gym.make(..., max_episode_steps=500)` runs 500);
 - observations: `state` = [pusher x, y, tee x, y, yaw in (-pi, pi]], `keypoints` = the T's 8
@@ -82,13 +82,15 @@ class PushTGymEnv(OneWorld, Pictures, gym.Env):
 
     def __init__(self, obs_type: str = "state", action_type: str = "velocity", render_mode: str | None = None,
                  observation_size: int = IMAGE_SIZE, render_size: int = 512, reset_kind: str = "task",
-                 max_episode_steps: int | None = None, frame_skip: int = 10):
+                 max_episode_steps: int | None = None, frame_skip: int = 10,
+                 success_threshold: float | None = None):
         check_kwargs(obs_type, action_type, observation_size)
         self.render_mode = validate.render_mode(render_mode, human=True)
         self.obs_type, self.action_type = obs_type, action_type
         self.render_size = validate.image_size(render_size, "render_size")
         self._env = functional("cpu", obs_type, action_type, observation_size, reset_kind,
-                               validate.episode_limit(max_episode_steps), frame_skip)
+                               validate.episode_limit(max_episode_steps), frame_skip,
+                               success_threshold=success_threshold)
         self.observation_space, self.action_space = single_spaces(obs_type, action_type, observation_size, np.float64)
         self._low, self._high = action_bounds(action_type)
         self.metadata = {**self.metadata, "render_fps": self._fps}

@@ -6,7 +6,8 @@
 The same kwargs (obs_type, render_mode, observation_/visualization_width/height), spaces,
 units (pixels of gym-pusht's 512 x 512 frame, y down; angles as pymunk's), action (an absolute
 target in pixels, tracked by gym-pusht's PD law, kp 100 and kv 20 at 100 Hz, 10 Hz control),
-reward clip(coverage / 0.95, 0, 1), success coverage > 0.95, info keys, `reset_to_state` (with
+reward clip(coverage / 0.95, 0, 1), success coverage > 0.95 (`success_threshold=`: another, in (0, 1], in both:
+gym-pusht#24 asks for it; gym-pusht itself fixes it at 0.95), info keys, `reset_to_state` (with
 its legacy placement quirk), registration with max_episode_steps=300 (gymnasium's TimeLimit, so
 the kwarg and `_max_episode_steps` behave as they do for gym-pusht), and render_fps 10.
 
@@ -19,6 +20,7 @@ What still differs from pymunk's physics, measured, is docs/dropin-physics.md.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -29,7 +31,7 @@ from mjx_pusht.envs.common import OneWorld, Pictures, functional, warn_broken
 from mjx_pusht.envs.vector import PushTVectorEnv
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model import gym_pusht as frame
-from mjx_pusht.task.rules import SUCCESS_COVERAGE, T_RECTS
+from mjx_pusht.task.rules import T_RECTS
 
 spaces = base.gym.spaces
 
@@ -180,9 +182,10 @@ def n_contacts(pusher_xy, tee_pose, corners_px, xp):
     return (pusher | wall).astype(xp.int64 if xp is np else xp.int32)
 
 
-def reward_of(coverage, xp):
+def reward_of(coverage, threshold: float, xp):
+    """gym-pusht's reward, clip(coverage / success threshold, 0, 1)."""
     # clip as minimum(maximum()): what np.clip and jnp.clip compute, without np.clip's checks
-    return xp.minimum(xp.maximum(coverage / SUCCESS_COVERAGE, 0.0), 1.0)
+    return xp.minimum(xp.maximum(coverage / threshold, 0.0), 1.0)
 
 
 def _goal(shape, dtype, xp):
@@ -221,7 +224,7 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
 
     def __init__(self, obs_type: str = "state", render_mode: str | None = "rgb_array", block_cog=None, damping=None,
                  observation_width: int = 96, observation_height: int = 96, visualization_width: int = 680,
-                 visualization_height: int = 680):
+                 visualization_height: int = 680, success_threshold: float | None = None):
         _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping, human=True)
         validate.image_size(visualization_width, "visualization_width")
         validate.image_size(visualization_height, "visualization_height")
@@ -234,11 +237,20 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         self.render_size = visualization_width
         self.observation_space, self.action_space = gym_pusht_spaces(obs_type, observation_width, observation_height)
         self.k_p, self.k_v, self.control_hz, self.dt = frame.KP, frame.KV, 10, 0.01  # as gym-pusht names them
-        self.success_threshold = SUCCESS_COVERAGE
         self._env = functional("cpu", obs_type, "target", observation_width, "gym-pusht", None, 10,
-                               variant="gym-pusht")
+                               variant="gym-pusht", success_threshold=success_threshold)
         self._state, self._last_action = None, None
         self._open_window()
+
+    @property
+    def success_threshold(self) -> float:
+        """The coverage an episode succeeds (terminates) at, and the reward's scale (gym-pusht's attribute)."""
+        return self._env.episode.success
+
+    @success_threshold.setter
+    def success_threshold(self, value: float) -> None:
+        # gym-pusht#24's workaround, `env.unwrapped.success_threshold = 0.9`, works here too: from the next step on
+        self._env.episode = dataclasses.replace(self._env.episode, success=value)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         seed = validate.seed(seed)
@@ -272,7 +284,7 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         m = s.metrics
         cov = m["coverage"].item()
         obs, info = gym_view_row(self.obs_type, {k: v[0] for k, v in s.obs.items()}, cov, bool(s.terminated[0]))
-        info = {**info, "reward": min(max(cov / SUCCESS_COVERAGE, 0.0), 1.0),  # reward_of, on a float
+        info = {**info, "reward": min(max(cov / self.success_threshold, 0.0), 1.0),  # reward_of, on a float
                 "finite": bool(m["finite"][0]), "contained": bool(m["contained"][0])}
         if not (info["finite"] and info["contained"]):
             warn_broken(info)
@@ -298,13 +310,13 @@ class GymPushTVectorEnv(PushTVectorEnv):
                  block_cog=None, damping=None, observation_width: int = 96, observation_height: int = 96,
                  visualization_width: int = 680, visualization_height: int = 680, max_episode_steps: int = 300,
                  backend: str = "auto", autoreset_mode="next_step", array_type: str | None = "numpy",
-                 threads: int | None = None, depth: int = 8):
+                 threads: int | None = None, depth: int = 8, success_threshold: float | None = None):
         _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping)
         self.observation_width, self.observation_height = observation_width, observation_height
         self.visualization_width, self.visualization_height = visualization_width, visualization_height
         super().__init__(num_envs, backend, obs_type, "target", render_mode, observation_width, visualization_width,
                          "gym-pusht", max_episode_steps, 10, autoreset_mode, threads, array_type, depth,
-                         variant="gym-pusht")
+                         variant="gym-pusht", success_threshold=success_threshold)
 
     @staticmethod
     def _check_args(obs_type, action_type, observation_size):
@@ -332,7 +344,7 @@ class GymPushTVectorEnv(PushTVectorEnv):
         obs, info = gym_view(self.obs_type, flat["obs"], cov, flat["terminated"], xp, self._dtype)
         info |= {"steps": flat["step"], "weld_gap_max_dev": flat["gap_max_dev"], "finite": flat["finite"],
                  "contained": flat["contained"]}
-        reward = reward_of(flat["reward"], xp)
+        reward = reward_of(flat["reward"], self._env.episode.success, xp)
         if xp is np:  # the host's convention, as SyncVectorEnv over gym-pusht's envs gives them
             info = {k: np.asarray(v, np.float64 if np.asarray(v).dtype.kind == "f" else
                                   (bool if np.asarray(v).dtype == bool else np.int64)) for k, v in info.items()}

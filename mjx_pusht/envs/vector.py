@@ -64,7 +64,7 @@ class PushTVectorEnv(Pictures, VectorEnv):
                  render_size: int = 512, reset_kind: str = "task", max_episode_steps: int = 300,
                  frame_skip: int = 10, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
                  threads: int | None = None, array_type: str | None = None, depth: int = 8,
-                 variant: str = "chapter"):
+                 variant: str = "chapter", success_threshold: float | None = None):
         from mjx_pusht.backends.base import resolve
         from mjx_pusht.backends.cpu import default_threads
         from mjx_pusht.envs.wrappers import AutoReset, StartPool
@@ -89,7 +89,7 @@ class PushTVectorEnv(Pictures, VectorEnv):
         self.render_size = render_size
         threads = validate.threads(threads) or (min(default_threads(), max(1, self.num_envs // 64)) if self.backend == "cpu" else 1)
         self._env = functional(self.backend, obs_type, action_type, observation_size, reset_kind,
-                                max_episode_steps, frame_skip, threads, variant)
+                                max_episode_steps, frame_skip, threads, variant, success_threshold)
         self._dtype = np.float64 if self.backend == "cpu" else np.dtype(self._env.runner.dtype)
         self.single_observation_space, self.single_action_space = self._single_spaces(
             obs_type, action_type, observation_size, self._dtype)
@@ -109,6 +109,11 @@ class PushTVectorEnv(Pictures, VectorEnv):
         self._since_check = self._steps_since_reset = 0
         self._bad = []
         self._viewer = self._view_jit = None
+
+    @property
+    def success_threshold(self) -> float:
+        """The coverage an episode succeeds (terminates) at (set at make: `success_threshold=`)."""
+        return self._env.episode.success
 
     _check_args = staticmethod(check_kwargs)  # noqa: E303
     _single_spaces = staticmethod(single_spaces)

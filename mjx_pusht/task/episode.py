@@ -47,7 +47,7 @@ class Episode:
         # an env's own episodes may run to the int32 step counters' end (envs.common.NEVER: gymnasium's TimeLimit
         # truncates); a backend's rollout is a scan of max_steps, bounded by Scenario at validate.MAX_STEPS
         validate.steps("max_steps", self.max_steps, 2**31 - 1)
-        validate.fraction("success", self.success)  # NaN never ends an episode, 2.0 never succeeds, 0 always does
+        validate.fraction("success_threshold", self.success)  # NaN never ends an episode, 2.0 never succeeds, 0 always does
 
     @property
     def physics_steps(self) -> int:

@@ -61,11 +61,15 @@ class Task:
 
         return SceneSpec(break_it, variant=self.variant)
 
-    def episode(self, max_steps: int | None = None, frame_skip: int | None = None):
+    def episode(self, max_steps: int | None = None, frame_skip: int | None = None,
+                success_threshold: float | None = None):
+        """This task's episodes: its own length, frame skip and success coverage unless given (a threshold outside
+        (0, 1] is a one-line error, Episode's check)."""
         from mjx_pusht.task.episode import Episode
 
         return Episode(frame_skip=self.frame_skip if frame_skip is None else frame_skip,
-                       max_steps=self.max_steps if max_steps is None else max_steps, success=self.success,
+                       max_steps=self.max_steps if max_steps is None else max_steps,
+                       success=self.success if success_threshold is None else success_threshold,
                        end_covered_start=self.end_covered_start)
 
     def from_velocity(self, action, obs):

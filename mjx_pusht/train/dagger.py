@@ -111,6 +111,9 @@ class DaggerConfig:
     # setting existed still matches). On gym-pusht's task the teacher is its expert, whose targets are taught as the
     # velocities that reach them (`Task.velocity_of`): a policy acts in velocities on either task.
     task: str | None = None
+    # The coverage an episode succeeds (and ends) at, in training and in every judgement; None: the task's own (0.95;
+    # and a resume file from before this setting existed still matches).
+    success_threshold: float | None = None
 
     def __post_init__(self) -> None:
         if self.obs_type not in OBS_TYPES:
@@ -125,6 +128,7 @@ class DaggerConfig:
             raise ConfigError(f"{self.envs} envs x {self.iterations} iterations would reach the held-out seeds "
                               f"({HELD_OUT_FIRST}+)")
         self.the_task.check_reset(self.reset)
+        self.episode()  # a success threshold outside (0, 1] is a one-line error now
         if self.teacher not in TEACHERS:
             raise ConfigError(f"unknown teacher {self.teacher!r}; choose from {', '.join(TEACHERS)}")
         if self.the_task.name != "chapter" and self.teacher != "expert":
@@ -145,6 +149,10 @@ class DaggerConfig:
         from mjx_pusht.task.tasks import get
 
         return get(self.task or "chapter")
+
+    def episode(self):
+        """The episodes trained and judged on: the task's, at `max_steps` and `success_threshold`."""
+        return self.the_task.episode(max_steps=self.max_steps, success_threshold=self.success_threshold)
 
     @property
     def memory(self):

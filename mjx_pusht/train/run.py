@@ -217,7 +217,7 @@ def dagger_env(cfg, backend: str):
     graph_mode = "WARP" if backend == "mjx-warp" and has_gpu() else None
     task = cfg.the_task
     return PushTEnv(backend=backend, reset_kind=cfg.reset, action_type=task.action_type, scene=task.scene(),
-                    episode=task.episode(max_steps=cfg.max_steps), threads=default_threads(), keep_states=False,
+                    episode=cfg.episode(), threads=default_threads(), keep_states=False,
                     pixels=cfg.image, graph_mode=graph_mode)
 
 

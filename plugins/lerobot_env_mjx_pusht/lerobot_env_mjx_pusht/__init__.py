@@ -97,6 +97,9 @@ class MjxPushtEnv(EnvConfig):
     # auto: the drop-in's batch where jax sees a GPU, LeRobot's SyncVectorEnv of MuJoCo C envs elsewhere;
     # cpu: always the latter; mjx-warp / mjx-jax: the batch on that backend (Warp's CPU device without a GPU)
     backend: str = "auto"
+    # the coverage an episode succeeds (and ends) at, and the reward's scale, in (0, 1]: gym-pusht's is fixed at 0.95
+    # (gym-pusht#24); --env.success_threshold=0.9 scores as ManiSkill's PushT does
+    success_threshold: float = 0.95
     features: dict[str, PolicyFeature] = field(
         default_factory=lambda: {
             ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(2,)),
@@ -117,6 +120,9 @@ class MjxPushtEnv(EnvConfig):
             raise ValueError(f"--env.task for mjx_pusht is {TASK!r} (gym-pusht's PushT on MuJoCo), got {self.task!r}")
         if self.backend not in BACKENDS:
             raise ValueError(f"--env.backend must be one of {', '.join(BACKENDS)}, got {self.backend!r}")
+        from mjx_pusht.validate import fraction
+
+        fraction("--env.success_threshold", self.success_threshold)  # a ConfigError (a ValueError): one line
         if self.obs_type == "pixels_agent_pos":
             self.features["pixels"] = PolicyFeature(
                 type=FeatureType.VISUAL, shape=(self.observation_height, self.observation_width, 3)
@@ -144,6 +150,7 @@ class MjxPushtEnv(EnvConfig):
             "observation_width": self.observation_width,
             "observation_height": self.observation_height,
             "max_episode_steps": self.episode_length,
+            "success_threshold": self.success_threshold,
         }
 
     def batch_backend(self) -> str | None:
