@@ -14,6 +14,8 @@ def add_parser(sub, *, positive, folder, replace_help: str, share_help: str, suc
     d.add_argument("--controller", default="expert",
                    help="expert (default: gym-pusht's task's expert), zero, random, a trained policy as policy:PATH, or "
                         "your own as package.module:function (its velocities become gym-pusht targets, pusher + 0.2 s x v)")
+    d.add_argument("--task", choices=("gym-pusht", "gym-pusht-easy"), default="gym-pusht",
+                   help="gym-pusht (default: its starts) or gym-pusht-easy (the T a few cm off the target)")
     d.add_argument("--successful-only", action="store_true",
                    help="write only the episodes that succeeded (the run still reports every episode's outcome)")
     d.add_argument("--action", choices=("velocity", "position"), default=None,
@@ -36,7 +38,7 @@ def cmd_demos(args) -> int:
     s = write_demos(args.controller, parse_seeds(args.seeds), args.out, backend=args.backend, batch=args.batch,
                     max_steps=args.max_steps, action=args.action, replace=args.replace, progress=args.progress,
                     successful_only=args.successful_only, share=args.share_out,
-                    success_threshold=args.success_threshold)
+                    success_threshold=args.success_threshold, task=args.task)
     failed = s["failed_seeds"]
     print(f"{s['controller']}: {s['episodes']} episodes on {s['backend']} in {s['seconds']} s, success "
           f"{s['success_rate']:.1%}" + (f" (failed seeds: {', '.join(map(str, failed[:10]))}"

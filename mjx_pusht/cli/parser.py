@@ -150,7 +150,7 @@ def _task_args(p: argparse.ArgumentParser, reset_help: str) -> None:
 
     p.add_argument("--task", choices=tuple(TASKS), default="chapter",
                    help="; ".join(f"{t.name}: {t.about}" for t in TASKS.values()) + " (default chapter)")
-    p.add_argument("--reset", choices=("task", "chapter"), default=None, help=reset_help)
+    p.add_argument("--reset", choices=TASKS["chapter"].resets, default=None, help=reset_help)
     success_arg(p)
 
 

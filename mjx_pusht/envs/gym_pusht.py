@@ -31,6 +31,8 @@ from mjx_pusht.envs.common import OneWorld, Pictures, functional, warn_broken
 from mjx_pusht.envs.vector import PushTVectorEnv
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model import gym_pusht as frame
+from mjx_pusht.task.reset import SEED_MAX, start_poses
+from mjx_pusht.task.tasks import get as get_task
 from mjx_pusht.task.rules import T_RECTS
 
 spaces = base.gym.spaces
@@ -224,8 +226,9 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
 
     def __init__(self, obs_type: str = "state", render_mode: str | None = "rgb_array", block_cog=None, damping=None,
                  observation_width: int = 96, observation_height: int = 96, visualization_width: int = 680,
-                 visualization_height: int = 680, success_threshold: float | None = None):
+                 visualization_height: int = 680, success_threshold: float | None = None, reset_kind: str = "gym-pusht"):
         _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping, human=True)
+        validate.choice("reset_kind", reset_kind, get_task("gym-pusht").resets + get_task("gym-pusht-easy").resets)
         validate.image_size(visualization_width, "visualization_width")
         validate.image_size(visualization_height, "visualization_height")
         if visualization_width != visualization_height:
@@ -237,7 +240,7 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         self.render_size = visualization_width
         self.observation_space, self.action_space = gym_pusht_spaces(obs_type, observation_width, observation_height)
         self.k_p, self.k_v, self.control_hz, self.dt = frame.KP, frame.KV, 10, 0.01  # as gym-pusht names them
-        self._env = functional("cpu", obs_type, "target", observation_width, "gym-pusht", None, 10,
+        self._env = functional("cpu", obs_type, "target", observation_width, reset_kind, None, 10,
                                variant="gym-pusht", success_threshold=success_threshold)
         self._state, self._last_action = None, None
         self._open_window()
@@ -258,10 +261,13 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         super().reset(seed=seed)
         if "reset_to_state" in options:
             start = _check_state(options["reset_to_state"], 1)
-        else:  # gym-pusht's draws, in its order, from this env's generator
+        elif self._env.reset_kind == "gym-pusht":  # gym-pusht's draws, in its order, from this env's generator
             r = self.np_random
             start = frame.legacy_state_to_world([r.integers(50, 450), r.integers(50, 450), r.integers(100, 400),
                                                  r.integers(100, 400), r.uniform(-np.pi, np.pi)])
+        else:  # another start distribution (`easy`): the seed's start, as the functional env's (PushT-v0's rule)
+            seed = seed if seed is not None else int(self.np_random.integers(SEED_MAX))
+            start = start_poses([seed], reset=self._env.reset_kind)
         self._state = self._env.reset_to(start, [0 if seed is None else seed])
         self._last_action = None
         obs, info = self._view()
@@ -310,12 +316,14 @@ class GymPushTVectorEnv(PushTVectorEnv):
                  block_cog=None, damping=None, observation_width: int = 96, observation_height: int = 96,
                  visualization_width: int = 680, visualization_height: int = 680, max_episode_steps: int = 300,
                  backend: str = "auto", autoreset_mode="next_step", array_type: str | None = "numpy",
-                 threads: int | None = None, depth: int = 8, success_threshold: float | None = None):
+                 threads: int | None = None, depth: int = 8, success_threshold: float | None = None,
+                 reset_kind: str = "gym-pusht"):
         _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping)
         self.observation_width, self.observation_height = observation_width, observation_height
         self.visualization_width, self.visualization_height = visualization_width, visualization_height
+        validate.choice("reset_kind", reset_kind, get_task("gym-pusht").resets + get_task("gym-pusht-easy").resets)
         super().__init__(num_envs, backend, obs_type, "target", render_mode, observation_width, visualization_width,
-                         "gym-pusht", max_episode_steps, 10, autoreset_mode, threads, array_type, depth,
+                         reset_kind, max_episode_steps, 10, autoreset_mode, threads, array_type, depth,
                          variant="gym-pusht", success_threshold=success_threshold)
 
     @staticmethod

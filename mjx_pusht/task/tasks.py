@@ -1,7 +1,7 @@
 """The tasks: which PushT a run is on, as data the one control step reads.
 
 A task names the scene variant it runs on, its reset (seed -> start), what an action means on that
-scene, when an episode ends, and its expert. There are two:
+scene, when an episode ends, and its expert. There are two, and an easy variant of gym-pusht's:
 
 - `chapter`: this project's PushT, the chapter's scene (joint friction, velocity servos), its `task`
   start distribution (or the chapter's own `chapter` reset), an episode over at reset if it starts covered.
@@ -9,6 +9,9 @@ scene, when an episode ends, and its expert. There are two:
   pymunk physics in MJCF, model/gym_pusht_scene.py), gym-pusht's seed -> start, actions as targets
   tracked by its PD law, success at coverage 0.95, 300 control steps, and a start on the goal scored by
   the first step (as gym-pusht does).
+- `gym-pusht-easy`: gym-pusht's task from the `easy` starts (task/reset.py: the tee a few cm and degrees off the
+  target, the pusher beside it), which its expert solves in a few dozen steps: a trivial variant to debug a
+  policy or a training set-up on (gym-pusht#18). The chapter's task takes the same starts as `--reset easy`.
 
 Every backend runs either task through the same rollout; `eval --backend gym-pusht` runs the second in
 gym-pusht itself. A controller written for velocities runs on gym-pusht's scene through `as_targets`.
@@ -87,13 +90,16 @@ class Task:
 
 
 TASKS = {
-    "chapter": Task("chapter", "chapter", ("task", "chapter"), "velocity", "expert", end_covered_start=True,
+    "chapter": Task("chapter", "chapter", ("task", "chapter", "easy"), "velocity", "expert", end_covered_start=True,
                     about="this project's PushT: the chapter's scene and its task starts"),
     "gym-pusht": Task("gym-pusht", "gym-pusht", ("gym-pusht",), "target", "expert-gym-pusht", end_covered_start=False,
                       about="gym-pusht 0.1.8's PushT: its physics, starts, PD-tracked targets and success rule",
                       # its expert's carry: the contact it pursues, -1 before the first
                       memory=CarryFormat(moves=len(CONTACTS) + 1, latches=(), offset=1)),
 }
+TASKS["gym-pusht-easy"] = dataclasses.replace(
+    TASKS["gym-pusht"], name="gym-pusht-easy", resets=("easy",),
+    about="gym-pusht's task from easy starts (the T a few cm off the target): its expert succeeds in a few dozen steps")
 
 
 def get(name: str) -> Task:
