@@ -17,8 +17,8 @@ Where this differs from gym-pusht (and how to convert):
   proportional velocity command (task.to_ctrl), gym-pusht's convention; actions are clipped
   to the action space, and a NaN or inf is a one-line error;
 - reward is the coverage itself, in [0, 1] (gym-pusht: coverage / 0.95, clipped); success
-  (terminated) at coverage >= 0.95 (`success_threshold=`: another, in (0, 1]); a start already
-  on the goal is over at reset (info says success) and its first step reports terminated with that start's coverage as reward;
+  (terminated) at coverage >= 0.95 (`success_threshold=`: another, in (0, 1]); a start already on the
+  goal is over at reset (info says success), its first step terminated with that start's coverage as reward;
   truncation after `max_episode_steps` control steps (300, registered in the spec: gymnasium's
   TimeLimit truncates, so `gym.make(..., max_episode_steps=500)` runs 500);
 - observations: `state` = [pusher x, y, tee x, y, yaw in (-pi, pi]], `keypoints` = the T's 8

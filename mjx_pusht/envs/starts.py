@@ -25,3 +25,23 @@ def clear_of_tee(starts: np.ndarray, variant: str) -> np.ndarray:
             raise ConfigError(f"reset_to_state puts the pusher (radius {PUSHER_RADIUS} m) inside the T in row(s) "
                               f"{', '.join(map(str, r[:8]))}: {starts[r[0]].tolist()}")
     return starts
+
+
+def check_goal(goal: str, pixels: int) -> str:
+    """The functional env's goal option (task/goals.GOALS); pixels draw the target where the scene has it, at the
+    origin, so a random goal with pixel observations is refused rather than drawn in the wrong place."""
+    from mjx_pusht.task.goals import check
+
+    if check(goal) == "random" and pixels:
+        raise ConfigError("random goals are not drawn in pixel observations yet (the target is the scene's, at the "
+                          "origin): use state or keypoints observations")
+    return goal
+
+
+def goals_for(env, seeds) -> np.ndarray | None:
+    """The episodes' goal poses (N, 3) for `seeds` (each seed's own draw: task/goals.py), None for the fixed goal."""
+    if env.goal == "fixed":
+        return None
+    from mjx_pusht.task.goals import goal_poses
+
+    return goal_poses(seeds, env.scene.variant)

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mjx_pusht import validate
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.controllers import seed_key
 from mjx_pusht.task.reset import SEED_MAX, start_poses
@@ -109,6 +110,8 @@ class AutoReset:
                  donate: bool = False, image_pool: bool = True):
         if mode not in MODES:
             raise ConfigError(f"unknown autoreset mode {mode!r}; choose from {', '.join(MODES)}")
+        if getattr(env, "goal", "fixed") != "fixed":  # the pool holds starts, not yet their goals
+            raise ConfigError("the autoreset wrapper runs fixed goals only so far: reset_where resets random-goal rows")
         self.env, self.mode, self.depth = env, mode, int(depth)
         self.final_pixels = final_pixels
         # the new episodes' first images from the pool (one render a step), where two would be needed
@@ -203,10 +206,8 @@ class AutoReset:
         import jax
         import jax.numpy as jnp
 
-        from mjx_pusht.envs.functional import _check_actions
-
-        n = len(state.step)
-        action = _check_actions(jnp.asarray(action), n)
+        n, action = len(state.step), jnp.asarray(action)
+        validate.actions_shape_on_device(action, n)  # (n, 2), never reshaped
         self.env._batch_fns(n)  # this batch size's renderer
         if n not in self._jitted:
             self._jitted[n] = jax.jit(self._step_batch, donate_argnums=(1,) if self.donate else ())

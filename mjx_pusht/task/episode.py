@@ -65,29 +65,40 @@ def _where(xp, cond, old, new):
     return out
 
 
-def begin(layout, qpos0, key, controller, episode: Episode, xp, coverage0=None):
+def begin(layout, qpos0, key, controller, episode: Episode, xp, coverage0=None, goal=None):
     """The rollout's carry at reset: invariants, episode bookkeeping, the controller's state, the poses at the end.
-    `coverage0`: the start's coverage, when already known (an autoreset pool computes it once, ahead)."""
+    `coverage0`: the start's coverage, when already known (an autoreset pool computes it once, ahead). `goal`: the
+    episode's goal poses (..., 3) (task/goals.py), carried, observed and scored against; None: the fixed target
+    (nothing carried: the episodes of before goals, to the bit)."""
     tee = layout.tee_pose(qpos0)
     n = tee.shape[:-1]
     acc = invariants_init(n[0] if n else 1, xp)
     if not n:  # one world (under vmap): drop the batch axis invariants_init adds
         acc = {k: v[0] for k, v in acc.items()}
     acc = {k: (xp.astype(v, qpos0.dtype) if v.dtype != xp.bool else v) for k, v in acc.items()}
-    return {
+    target = () if goal is None else (xp.astype(xp.asarray(goal), tee.dtype),)
+    carry = {
         "inv": acc,
-        "ep": episode_init(coverage(tee) if coverage0 is None else xp.astype(coverage0, tee.dtype), episode.success,
-                           episode.terminate and episode.end_covered_start, xp),
+        "ep": episode_init(coverage(tee, *target) if coverage0 is None else xp.astype(coverage0, tee.dtype),
+                           episode.success, episode.terminate and episode.end_covered_start, xp),
         "ctrl": controller.init(key),
         "final": tee,
         "pusher_final": layout.pusher_xy(qpos0),
     }
+    return carry if goal is None else {**carry, "goal": target[0]}
+
+
+def goal_of(carry) -> tuple:
+    """The episode's goal as `coverage`'s target argument: (goal,), or () for the fixed target."""
+    return (carry["goal"],) if "goal" in carry else ()
 
 
 def act(carry, qpos, k, key, controller, layout, xp, image=None):
     """A controller's action for control step k from the observation of `qpos` (and `image`, the top camera's
     view of it, for a controller that looks: `controller.pixels`), and its next state."""
     obs = observe(layout.pusher_xy(qpos), layout.tee_pose(qpos))
+    if "goal" in carry:
+        obs["goal"] = carry["goal"]
     if image is not None:
         obs["pixels"] = image
     action, cstate = controller.act(carry["ctrl"], obs, k, key)
@@ -135,7 +146,7 @@ def after_control_step(carry, k, layout, qpos, episode: Episode, xp):
         # A study of a fixed schedule (the sweep) is scored once, from its final pose, on the host:
         # no coverage per step inside its 160-step scan.
         return {**carry, "final": tee, "pusher_final": layout.pusher_xy(qpos)}
-    ep = episode_update(carry["ep"], coverage(tee), k, episode.success, episode.terminate)
+    ep = episode_update(carry["ep"], coverage(tee, *goal_of(carry)), k, episode.success, episode.terminate)
     if all_live(carry["ep"]["done"]):  # every row live: the selects below would pick the new poses
         return {**carry, "ep": ep, "final": tee, "pusher_final": layout.pusher_xy(qpos)}
     return {
