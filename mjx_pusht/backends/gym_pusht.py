@@ -110,6 +110,7 @@ def episodes(scenario, seeds: np.ndarray, trace: bool = False, poses=None):
     from gym_pusht.envs.pusht import PushTEnv
 
     from mjx_pusht.task.controllers import seed_key
+    from mjx_pusht.task.goals import draw
     from mjx_pusht.task.rules import episode_init, observe, wrap_angle
 
     controller, episode = scenario.driver()
@@ -135,15 +136,22 @@ def episodes(scenario, seeds: np.ndarray, trace: bool = False, poses=None):
             raise BackendError(f"gym-pusht started seeds {seeds[bad][:8].tolist()} elsewhere than task/reset.py "
                                f"draws them (off by up to {off.max():.3g})")
     key = seed_key(seeds)
+    goal = None if episode.goal is None else draw(key, episode.goal, np.float64)  # as every backend draws it
+    if goal is not None:  # gym-pusht scores coverage against, and draws, its goal_pose, which its reset put back
+        for env, origin, angle in zip(envs, *frame.pose_to_px(goal)):
+            env.goal_pose = np.array([*origin, angle])
     carry = controller.init(key)
     start, pusher_start = state[:, 2:5].copy(), state[:, 0:2].copy()
     live = np.ones(n, bool)
     # gym-pusht scores a start on the goal by its first step: the episode runs (as the drop-in's, task/tasks.py)
     ep = episode_init(np.array([e._get_coverage() for e in envs]), episode.success, False, np)
+    # episode_init hands one array as both coverage and best_coverage; written in place below, each needs its own
+    # (shared, the final coverage read back was the best one: a T pushed past its best ended reporting its best)
+    ep["best_coverage"] = ep["best_coverage"].copy()
     finite, contained = np.isfinite(state).all(-1), _inside(envs)
     states = [state.copy()] if trace else None
     for k in range(episode.max_steps):
-        obs = observe(state[:, 0:2], state[:, 2:5])
+        obs = observe(state[:, 0:2], state[:, 2:5]) | ({} if goal is None else {"goal": goal})
         if image:
             obs["pixels"] = np.stack(pixels)
         action, carry = controller.act(carry, obs, k, key)

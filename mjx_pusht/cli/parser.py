@@ -145,12 +145,15 @@ def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str)
 
 
 def _task_args(p: argparse.ArgumentParser, reset_help: str) -> None:
-    """--task, the chapter task's --reset (task/tasks.py) and --success-threshold."""
+    """--task, the chapter task's --reset (task/tasks.py), --goal and --success-threshold."""
     from mjx_pusht.task.tasks import TASKS
 
     p.add_argument("--task", choices=tuple(TASKS), default="chapter",
                    help="; ".join(f"{t.name}: {t.about}" for t in TASKS.values()) + " (default chapter)")
     p.add_argument("--reset", choices=TASKS["chapter"].resets, default=None, help=reset_help)
+    p.add_argument("--goal", choices=("fixed", "random"), default="fixed",
+                   help="fixed: the target at the centre (default); random: a goal pose per episode from its seed, "
+                        "anywhere the T can be pushed to")
     success_arg(p)
 
 

@@ -47,6 +47,9 @@ def cmd_train(args) -> int:
     from mjx_pusht.task.tasks import get as get_task
 
     task = get_task(args.task)
+    if args.goal != "fixed":
+        raise TrainError("train --goal random: goal-conditioned training is not built yet (eval --goal random judges "
+                         "a policy of the fixed goal on random goals, from each goal's frame)")
     if args.algo == "ppo" and task.name != "chapter":
         raise TrainError(f"--algo ppo trains on the chapter task; --task {task.name} is DAgger's so far")
     if args.algo == "dagger" and args.teacher is None and task.name != "chapter":

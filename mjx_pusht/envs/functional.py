@@ -39,7 +39,7 @@ from mjx_pusht.task.episode import (
     begin,
     control_step,
 )
-from mjx_pusht.envs.starts import START_HI, START_LO, check_goal, clear_of_tee, goals_for
+from mjx_pusht.envs.starts import START_HI, START_LO, clear_of_tee, episode_with_goal
 from mjx_pusht.task.reset import start_poses
 from mjx_pusht.task.rules import ACTION_TYPES, observe
 
@@ -88,7 +88,7 @@ class PushTEnv:
     scene: SceneSpec = SceneSpec()
     pixels: int = 0  # image size for obs["pixels"]; 0: no images
     keypoints: bool = True  # obs["keypoints"]; False spares computing them where nothing reads them
-    goal: str = "fixed"  # task/goals.GOALS: the target at the origin, or a goal per episode (obs["goal"]) from its seed
+    goal: str = "fixed"  # task/goals.GOALS: the target at the origin, or a goal per episode from its seed (obs["goal"])
     threads: int = 1  # cpu: worlds stepped on this many threads at once (same bits as one)
     # cpu: False steps the MjData in place (an old state is then stale): what a stateful vector env wants
     keep_states: bool = True
@@ -107,7 +107,7 @@ class PushTEnv:
         if self.action_type not in ACTION_TYPES:
             raise ConfigError(f"unknown action type {self.action_type!r}; choose from {', '.join(ACTION_TYPES)}")
         self.pixels, self.threads = validate.pixels(self.pixels), validate.positive_int("threads", self.threads)
-        check_goal(self.goal, self.pixels)
+        self.episode = episode_with_goal(self.episode, self.goal, self.scene.variant, self.pixels)
         if self.backend not in ("cpu", "mjx-jax", "mjx-warp"):
             raise BackendError(f"the environment runs on cpu, mjx-jax or mjx-warp, not {self.backend!r}")
         if self.scene.variant == "gym-pusht" and self.reset_kind == "task":
@@ -204,15 +204,14 @@ class PushTEnv:
         seeds = np.zeros(len(starts), np.int64) if seeds is None else validate.seed_array(seeds)
         if len(seeds) != len(starts):
             raise ConfigError(f"seeds: {len(seeds)} seeds for {len(starts)} start states")
-        qpos0, goal = self.layout.initial_qpos(self.model, starts), goals_for(self, seeds)
+        qpos0 = self.layout.initial_qpos(self.model, starts)
         key = seed_key(seeds)
         if self.backend == "cpu":
             from mjx_pusht.backends.cpu import _Lockstep
 
             data = _Lockstep(self.model, self.model, qpos0, self.episode.frame_skip, self.threads)
-            return self._state(data, begin(self.layout, qpos0, key, self._ctrl, self.episode, np, goal=goal), qpos0,
-                               key, 0)
-        return self._reset_mjx(qpos0, key, goal)
+            return self._state(data, begin(self.layout, qpos0, key, self._ctrl, self.episode, np), qpos0, key, 0)
+        return self._reset_mjx(qpos0, key)
 
     def given_starts(self, starts) -> np.ndarray:
         """A user's starts, checked as `_starts` checks any, and the pusher clear of the T (`clear_of_tee`)."""
@@ -230,12 +229,12 @@ class PushTEnv:
             return a
         return validate.starts(a, len(a), START_LO, START_HI)
 
-    def _reset_mjx(self, qpos0, key, goal=None) -> State:
+    def _reset_mjx(self, qpos0, key) -> State:
         import jax.numpy as jnp
 
-        n, dtype = len(qpos0), self.runner.dtype
-        q, g = jnp.asarray(qpos0, dtype), None if goal is None else jnp.asarray(goal, dtype)
-        return self._batch_fns(n)[1](self.template(n), q, jnp.asarray(key), g)
+        n = len(qpos0)
+        q = jnp.asarray(qpos0, self.runner.dtype)
+        return self._batch_fns(n)[1](self.template(n), q, jnp.asarray(key))
 
     def template(self, n: int):
         """The fresh mjx.Data every episode of an `n`-world batch starts from (MJX-Warp sizes its buffers by n)."""
@@ -243,18 +242,18 @@ class PushTEnv:
             self._templates[n] = self.runner.initial_data(n)
         return self._templates[n]
 
-    def fresh_one(self, d0, qpos, key, coverage0=None, goal=None) -> State:
+    def fresh_one(self, d0, qpos, key, coverage0=None) -> State:
         """One world's new episode from `qpos` (pure; no pixels: `with_pixels` adds them). `coverage0`, the
-        start's coverage if known, spares the polygon clipping (the costly part of a reset); `goal`: its goal."""
+        start's coverage if known, spares the polygon clipping (the costly part of a reset)."""
         import jax.numpy as jnp
 
-        carry = begin(self.layout, qpos, key, self._ctrl, self.episode, jnp, coverage0, goal)
+        carry = begin(self.layout, qpos, key, self._ctrl, self.episode, jnp, coverage0)
         return self._state(d0.replace(qpos=qpos), carry, qpos, key, jnp.zeros((), jnp.int32), pixels=False)
 
-    def _reset_batch(self, d0, q, k, g=None) -> State:
+    def _reset_batch(self, d0, q, k) -> State:
         import jax
 
-        return jax.vmap(lambda qp, kk, gg: self.with_pixels(self.fresh_one(d0, qp, kk, goal=gg)))(q, k, g)
+        return jax.vmap(lambda qp, kk: self.with_pixels(self.fresh_one(d0, qp, kk)))(q, k)
 
     def _state(self, data, carry, qpos, key, step, pixels=True) -> State:
         xp = self._xp

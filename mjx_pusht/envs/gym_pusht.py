@@ -59,12 +59,15 @@ def _check_kwargs(obs_type, width, height, render_mode, block_cog, damping, huma
                           "(see docs/envs/dropin.md)")
 
 
-def gym_pusht_spaces(obs_type: str, width: int = 96, height: int = 96, dtype=np.float64):
-    """gym-pusht 0.1.8's observation and action spaces, as it builds them."""
+def gym_pusht_spaces(obs_type: str, width: int = 96, height: int = 96, dtype=np.float64, goal: bool = False):
+    """gym-pusht 0.1.8's observation and action spaces, as it builds them (`goal`: with random goals' beside the T's,
+    its pose after the block's, its T's 8 vertices after the block's)."""
     if obs_type == "state":
-        obs = spaces.Box(low=np.array([0, 0, 0, 0, 0]), high=np.array([512, 512, 512, 512, 2 * np.pi]), dtype=dtype)
+        high = [512, 512, 512, 512, 2 * np.pi] + ([512, 512, 2 * np.pi] if goal else [])
+        obs = spaces.Box(low=np.zeros(len(high)), high=np.array(high), dtype=dtype)
     elif obs_type == "environment_state_agent_pos":
-        obs = spaces.Dict({"environment_state": spaces.Box(low=np.zeros(16), high=np.full((16,), 512), dtype=dtype),
+        k = 32 if goal else 16
+        obs = spaces.Dict({"environment_state": spaces.Box(low=np.zeros(k), high=np.full((k,), 512), dtype=dtype),
                            "agent_pos": spaces.Box(low=np.array([0, 0]), high=np.array([512, 512]), dtype=dtype)})
     else:
         img = spaces.Box(low=0, high=255, shape=(height, width, 3), dtype=np.uint8)
@@ -96,6 +99,14 @@ def gym_view(obs_type: str, obs: dict, coverage, terminated, xp, dtype):
         "is_success": terminated,
         "coverage": coverage,
     }
+    if "goal" in obs:  # a random goal, as gym-pusht would show its goal_pose: beside the block, and in info
+        g_origin, g_angle = frame.pose_to_px(obs["goal"], xp)
+        info["goal_pose"] = xp.concatenate([g_origin, g_angle[..., None]], axis=-1)
+        if obs_type == "state":
+            out = xp.concatenate([out, info["goal_pose"].astype(dtype)], axis=-1)
+        elif obs_type == "environment_state_agent_pos":
+            goal_corners = frame.keypoints_px(g_origin, g_angle, xp).astype(dtype)
+            out = {**out, "environment_state": xp.concatenate([out["environment_state"], goal_corners], axis=-1)}
     return out, info
 
 
@@ -226,7 +237,8 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
 
     def __init__(self, obs_type: str = "state", render_mode: str | None = "rgb_array", block_cog=None, damping=None,
                  observation_width: int = 96, observation_height: int = 96, visualization_width: int = 680,
-                 visualization_height: int = 680, success_threshold: float | None = None, reset_kind: str = "gym-pusht"):
+                 visualization_height: int = 680, success_threshold: float | None = None, reset_kind: str = "gym-pusht",
+                 goal: str = "fixed"):
         _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping, human=True)
         validate.choice("reset_kind", reset_kind, get_task("gym-pusht").resets + get_task("gym-pusht-easy").resets)
         validate.image_size(visualization_width, "visualization_width")
@@ -238,10 +250,11 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         self.observation_width, self.observation_height = observation_width, observation_height
         self.visualization_width, self.visualization_height = visualization_width, visualization_height
         self.render_size = visualization_width
-        self.observation_space, self.action_space = gym_pusht_spaces(obs_type, observation_width, observation_height)
+        self.observation_space, self.action_space = gym_pusht_spaces(obs_type, observation_width, observation_height,
+                                                                     goal=goal != "fixed")
         self.k_p, self.k_v, self.control_hz, self.dt = frame.KP, frame.KV, 10, 0.01  # as gym-pusht names them
         self._env = functional("cpu", obs_type, "target", observation_width, reset_kind, None, 10,
-                               variant="gym-pusht", success_threshold=success_threshold)
+                               variant="gym-pusht", success_threshold=success_threshold, goal=goal)
         self._state, self._last_action = None, None
         self._open_window()
 
@@ -289,7 +302,12 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         s = self._state
         m = s.metrics
         cov = m["coverage"].item()
-        obs, info = gym_view_row(self.obs_type, {k: v[0] for k, v in s.obs.items()}, cov, bool(s.terminated[0]))
+        if "goal" in s.obs:  # random goals: the array view of this one row (the row view knows the fixed goal only)
+            obs, info = gym_view(self.obs_type, s.obs, m["coverage"], s.terminated, np, np.float64)
+            obs = {k: v[0] for k, v in obs.items()} if isinstance(obs, dict) else obs[0]
+            info = {k: v[0] for k, v in info.items()}
+        else:
+            obs, info = gym_view_row(self.obs_type, {k: v[0] for k, v in s.obs.items()}, cov, bool(s.terminated[0]))
         info = {**info, "reward": min(max(cov / self.success_threshold, 0.0), 1.0),  # reward_of, on a float
                 "finite": bool(m["finite"][0]), "contained": bool(m["contained"][0])}
         if not (info["finite"] and info["contained"]):
@@ -317,22 +335,22 @@ class GymPushTVectorEnv(PushTVectorEnv):
                  visualization_width: int = 680, visualization_height: int = 680, max_episode_steps: int = 300,
                  backend: str = "auto", autoreset_mode="next_step", array_type: str | None = "numpy",
                  threads: int | None = None, depth: int = 8, success_threshold: float | None = None,
-                 reset_kind: str = "gym-pusht"):
+                 reset_kind: str = "gym-pusht", goal: str = "fixed"):
         _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping)
         self.observation_width, self.observation_height = observation_width, observation_height
         self.visualization_width, self.visualization_height = visualization_width, visualization_height
         validate.choice("reset_kind", reset_kind, get_task("gym-pusht").resets + get_task("gym-pusht-easy").resets)
         super().__init__(num_envs, backend, obs_type, "target", render_mode, observation_width, visualization_width,
                          reset_kind, max_episode_steps, 10, autoreset_mode, threads, array_type, depth,
-                         variant="gym-pusht", success_threshold=success_threshold)
+                         variant="gym-pusht", success_threshold=success_threshold, goal=goal)
 
     @staticmethod
     def _check_args(obs_type, action_type, observation_size):
         pass  # checked by _check_kwargs, in gym-pusht's terms
 
     @staticmethod
-    def _single_spaces(obs_type, action_type, size, dtype):
-        return gym_pusht_spaces(obs_type, size, size, dtype)
+    def _single_spaces(obs_type, action_type, size, dtype, goal=False):
+        return gym_pusht_spaces(obs_type, size, size, dtype, goal)
 
     @staticmethod
     def _starts_in(starts, rows):

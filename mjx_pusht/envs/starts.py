@@ -27,21 +27,18 @@ def clear_of_tee(starts: np.ndarray, variant: str) -> np.ndarray:
     return starts
 
 
-def check_goal(goal: str, pixels: int) -> str:
-    """The functional env's goal option (task/goals.GOALS); pixels draw the target where the scene has it, at the
-    origin, so a random goal with pixel observations is refused rather than drawn in the wrong place."""
-    from mjx_pusht.task.goals import check
 
-    if check(goal) == "random" and pixels:
+def episode_with_goal(episode, goal: str, variant: str, pixels: int):
+    """The functional env's episodes with its goal option (task/goals.GOALS): random goals drawn in the variant's
+    walls. Pixels draw the target where the scene has it, at the origin, so random goals with pixel observations
+    are refused rather than drawn in the wrong place."""
+    import dataclasses
+
+    from mjx_pusht.task.goals import check, region
+
+    if check(goal) == "fixed":
+        return episode
+    if pixels:
         raise ConfigError("random goals are not drawn in pixel observations yet (the target is the scene's, at the "
                           "origin): use state or keypoints observations")
-    return goal
-
-
-def goals_for(env, seeds) -> np.ndarray | None:
-    """The episodes' goal poses (N, 3) for `seeds` (each seed's own draw: task/goals.py), None for the fixed goal."""
-    if env.goal == "fixed":
-        return None
-    from mjx_pusht.task.goals import goal_poses
-
-    return goal_poses(seeds, env.scene.variant)
+    return dataclasses.replace(episode, goal=region(variant))

@@ -40,6 +40,7 @@ import numpy as np
 from mjx_pusht import validate
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.controllers import seed_key
+from mjx_pusht.task.goals import draw
 from mjx_pusht.task.reset import SEED_MAX, start_poses
 from mjx_pusht.task.rules import coverage
 
@@ -92,8 +93,10 @@ class StartPool:
         self.seeds[slot, row] = seeds
         qpos = self.env.layout.initial_qpos(self.env.model, start_poses(seeds, reset=self.env.reset_kind))
         self.qpos[slot, row] = qpos
-        self.coverage[slot, row] = coverage(self.env.layout.tee_pose(qpos))
-        self.keys[slot, row] = seed_key(seeds)
+        tee, keys, goal = self.env.layout.tee_pose(qpos), seed_key(seeds), self.env.episode.goal
+        # against each episode's goal, which its reset draws from its key (task/goals.py)
+        self.coverage[slot, row] = coverage(tee) if goal is None else coverage(tee, draw(keys, goal, np.float64))
+        self.keys[slot, row] = keys
         self.dirty[slot, row] = True
         self.filled[rows] = self.used[rows] + self.depth
         return True
@@ -110,8 +113,6 @@ class AutoReset:
                  donate: bool = False, image_pool: bool = True):
         if mode not in MODES:
             raise ConfigError(f"unknown autoreset mode {mode!r}; choose from {', '.join(MODES)}")
-        if getattr(env, "goal", "fixed") != "fixed":  # the pool holds starts, not yet their goals
-            raise ConfigError("the autoreset wrapper runs fixed goals only so far: reset_where resets random-goal rows")
         self.env, self.mode, self.depth = env, mode, int(depth)
         self.final_pixels = final_pixels
         # the new episodes' first images from the pool (one render a step), where two would be needed

@@ -11,6 +11,7 @@ import dataclasses
 
 import numpy as np
 
+from mjx_pusht.task.goals import draw
 from mjx_pusht.task.invariants import invariants_fold, invariants_init, invariants_update
 from mjx_pusht.task.rules import (
     SUCCESS_COVERAGE,
@@ -39,6 +40,8 @@ class Episode:
     # A start that is already covered: over at reset (this project's rule: nothing left to do), or,
     # as gym-pusht does, run until its first step scores it (reward 1, terminated).
     end_covered_start: bool = True
+    # Random goals: the region they are drawn in (task/goals.region, from the scene's walls); None: the fixed target.
+    goal: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         from mjx_pusht import validate
@@ -65,18 +68,18 @@ def _where(xp, cond, old, new):
     return out
 
 
-def begin(layout, qpos0, key, controller, episode: Episode, xp, coverage0=None, goal=None):
+def begin(layout, qpos0, key, controller, episode: Episode, xp, coverage0=None):
     """The rollout's carry at reset: invariants, episode bookkeeping, the controller's state, the poses at the end.
-    `coverage0`: the start's coverage, when already known (an autoreset pool computes it once, ahead). `goal`: the
-    episode's goal poses (..., 3) (task/goals.py), carried, observed and scored against; None: the fixed target
-    (nothing carried: the episodes of before goals, to the bit)."""
+    `coverage0`: the start's coverage, when already known (an autoreset pool computes it once, ahead). With random
+    goals (`episode.goal`) the episode draws its goal from its key here (task/goals.py), carries it, observes it and
+    is scored against it; a fixed goal carries nothing (the episodes of before goals, to the bit)."""
     tee = layout.tee_pose(qpos0)
     n = tee.shape[:-1]
     acc = invariants_init(n[0] if n else 1, xp)
     if not n:  # one world (under vmap): drop the batch axis invariants_init adds
         acc = {k: v[0] for k, v in acc.items()}
     acc = {k: (xp.astype(v, qpos0.dtype) if v.dtype != xp.bool else v) for k, v in acc.items()}
-    target = () if goal is None else (xp.astype(xp.asarray(goal), tee.dtype),)
+    target = () if episode.goal is None else (draw(key, episode.goal, tee.dtype),)
     carry = {
         "inv": acc,
         "ep": episode_init(coverage(tee, *target) if coverage0 is None else xp.astype(coverage0, tee.dtype),
@@ -85,7 +88,7 @@ def begin(layout, qpos0, key, controller, episode: Episode, xp, coverage0=None, 
         "final": tee,
         "pusher_final": layout.pusher_xy(qpos0),
     }
-    return carry if goal is None else {**carry, "goal": target[0]}
+    return {**carry, "goal": target[0]} if target else carry
 
 
 def goal_of(carry) -> tuple:

@@ -2,10 +2,12 @@
 
 - `fixed`: the target at the origin with yaw 0 (rules.TARGET_POSE), every episode: every PushT env's goal, and
   this project's default. Nothing of a fixed goal is carried or observed: its episodes are those of before goals.
-- `random`: a goal pose drawn per episode from its seed, by its own generator, `default_rng([seed, GOAL_STREAM])`
-  (the start keeps `default_rng(seed)`, so a seed starts where it always did): the goal T's origin uniform over
-  the square of the scene's walls shrunk by MARGIN on every side (drawn in the walls' own axes: x, then y), then
-  its yaw uniform in [-pi, pi). The same draw on every backend: it is made on the host, as the starts are.
+- `random`: a goal pose drawn per episode from its seed: the goal T's origin uniform over the square of the scene's
+  walls shrunk by MARGIN on every side (x, then y, in the walls' own axes), then its yaw uniform in [-pi, pi).
+  The draws are `uniform_hash` of the episode's seed key at a step no controller reaches (GOAL_STEP), lanes 0-2:
+  counter-based, so every rollout draws its goal where it starts its episode (`episode.begin`), on the host or
+  inside a compiled program, the same numbers on every backend (to float32 rounding on MJX, whose state is
+  float32), without a goal array handed in. A seed's start is what it always was.
 
 The bounds come from the scene's walls: the chapter's inner faces at +-WORKSPACE_HALF; gym-pusht's at
 WALL_INNER_PX in its pixels (model/gym_pusht.py), a square turned by its goal's angle in the world frame. MARGIN
@@ -19,6 +21,7 @@ the goal's frame (the goal at the origin with yaw 0, as it was written for) and 
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -28,7 +31,7 @@ from mjx_pusht.task.reset import CLEARANCE, PUSHER_RADIUS
 from mjx_pusht.task.rules import T_REACH, WORKSPACE_HALF, array_namespace, keypoints, wrap_angle
 
 GOALS = ("fixed", "random")
-GOAL_STREAM = 0x60A1  # the goal generator's second word: default_rng([seed, GOAL_STREAM])
+GOAL_STEP = 0xFFFFFFFF  # uniform_hash's step counter for the goal's draws: past any episode's control steps
 MARGIN = T_REACH + 2 * PUSHER_RADIUS + CLEARANCE  # 0.146 m: from the goal's origin to any wall, at least
 
 
@@ -38,30 +41,45 @@ def check(goal: str) -> str:
     return goal
 
 
-def arena(variant: str) -> tuple[np.ndarray, np.ndarray, float]:
-    """The walled square of a scene variant in the world frame: its centre (2,), its axes (2, 2) (rows: the unit x
-    and y of the walls' own frame) and its inner half-width, in metres."""
+def region(variant: str) -> tuple[float, ...]:
+    """Where a scene variant's random goals lie: (centre x, y, the walls' x axis x, y, their y axis x, y, reach),
+    the goal's origin within +-reach of the centre along both axes (module docstring), in metres."""
     if variant == "chapter":
-        return np.zeros(2), np.eye(2), WORKSPACE_HALF
+        return (0.0, 0.0, 1.0, 0.0, 0.0, 1.0, WORKSPACE_HALF - MARGIN)
     from mjx_pusht.model import gym_pusht as frame
 
     lo, hi = frame.WALL_INNER_PX
     mid = (lo + hi) / 2
     centre, ex, ey = frame.to_world(np.array([[mid, mid], [mid + 1, mid], [mid, mid + 1]], np.float64))
-    axes = np.stack([ex - centre, ey - centre]) / frame.PX
-    return centre, axes, (hi - lo) / 2 * frame.PX
+    ax, ay = (ex - centre) / frame.PX, (ey - centre) / frame.PX
+    return (*centre.tolist(), *ax.tolist(), *ay.tolist(), (hi - lo) / 2 * frame.PX - MARGIN)
+
+
+def draw(key, area: tuple[float, ...], dtype):
+    """(..., 3) goal poses (x, y, yaw) of episodes keyed by `key` (..., 2) uint32 (controllers.seed_key) in
+    `area` (`region`), in `dtype`: NumPy or JAX, whichever `key` is."""
+    from mjx_pusht.task.controllers import uniform_hash
+
+    xp = array_namespace(key)
+    step = xp.asarray(GOAL_STEP, dtype=xp.uint32)  # as uint32: past int32, JAX would not take it as a plain int
+    u, v, w = (2 * xp.astype(uniform_hash(key, step, lane), dtype) - 1 for lane in range(3))
+    cx, cy, ax, ay, bx, by, reach = area
+    return xp.stack([cx + reach * (u * ax + v * bx), cy + reach * (u * ay + v * by), math.pi * w], axis=-1)
 
 
 def goal_poses(seeds, variant: str) -> np.ndarray:
-    """(N, 3) random goal poses (x, y, yaw) for `seeds` on a scene variant (module docstring)."""
-    centre, axes, half = arena(variant)
-    reach = half - MARGIN
-    out = np.empty((len(seeds), 3))
-    for i, seed in enumerate(np.asarray(seeds, np.int64).reshape(-1).tolist()):
-        rng = np.random.default_rng([seed, GOAL_STREAM])
-        u, v = rng.uniform(-reach, reach), rng.uniform(-reach, reach)
-        out[i] = (*(centre + u * axes[0] + v * axes[1]), rng.uniform(-np.pi, np.pi))
-    return out
+    """(N, 3) float64 random goal poses for `seeds` on a scene variant: what their episodes draw on the host."""
+    from mjx_pusht.task.controllers import seed_key
+
+    return draw(seed_key(seeds), region(variant), np.float64)
+
+
+def with_goal(obs, goal, obs_type: str):
+    """A flat observation with the goal beside the T: `state` (..., 5) gets the goal's pose (x, y, yaw) after it,
+    `keypoints` (..., 16) the goal T's 16 after the T's (an env's observation vector, a policy's input)."""
+    xp = array_namespace(obs)
+    extra = goal if obs_type == "state" else keypoints(goal)
+    return xp.concat([obs, xp.astype(extra, obs.dtype)], axis=-1)
 
 
 def to_goal_frame(pose, goal):

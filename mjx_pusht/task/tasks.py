@@ -65,15 +65,17 @@ class Task:
         return SceneSpec(break_it, variant=self.variant)
 
     def episode(self, max_steps: int | None = None, frame_skip: int | None = None,
-                success_threshold: float | None = None):
+                success_threshold: float | None = None, goal: str = "fixed"):
         """This task's episodes: its own length, frame skip and success coverage unless given (a threshold outside
-        (0, 1] is a one-line error, Episode's check)."""
+        (0, 1] is a one-line error, Episode's check), toward the fixed goal or random ones (task/goals.py)."""
         from mjx_pusht.task.episode import Episode
+        from mjx_pusht.task.goals import check, region
 
         return Episode(frame_skip=self.frame_skip if frame_skip is None else frame_skip,
                        max_steps=self.max_steps if max_steps is None else max_steps,
                        success=self.success if success_threshold is None else success_threshold,
-                       end_covered_start=self.end_covered_start)
+                       end_covered_start=self.end_covered_start,
+                       goal=region(self.variant) if check(goal) == "random" else None)
 
     def from_velocity(self, action, obs):
         """A velocity command as this task's scene takes it: itself, or (targets) the target that reaches it."""
@@ -81,12 +83,16 @@ class Task:
             return action
         return obs["state"][..., 0:2] + LEAD * action
 
-    def controller(self, spec: str, *, action: str | None = None, frame_skip: int = 10) -> Controller:
-        """The controller `spec` names (`expert`: this task's expert), commanding what this task's scene takes."""
+    def controller(self, spec: str, *, action: str | None = None, frame_skip: int = 10, goal: str = "fixed") -> Controller:
+        """The controller `spec` names (`expert`: this task's expert), commanding what this task's scene takes; for
+        random goals, seeing the scene from each episode's goal (task/goals.GoalFrame) unless it reads obs["goal"]
+        itself (`reads_goal`)."""
         from mjx_pusht.task.controllers import load
+        from mjx_pusht.task.goals import check, in_goal_frame
 
         ctrl = load(self.expert if spec == "expert" else spec, action_type=action, frame_skip=frame_skip)
-        return as_targets(ctrl) if self.action_type == "target" and ctrl.action_type != "target" else ctrl
+        ctrl = as_targets(ctrl) if self.action_type == "target" and ctrl.action_type != "target" else ctrl
+        return in_goal_frame(ctrl) if check(goal) == "random" and not getattr(ctrl, "reads_goal", False) else ctrl
 
 
 TASKS = {
