@@ -35,7 +35,7 @@ def test_a_seeds_goal_is_drawn_from_its_key_inside_the_walls_with_room_to_push()
 
 
 def goal_episodes(task: str, seeds, max_steps: int):
-    """The task's expert, seeing the T from the goal's frame, on random goals (MuJoCo C): every step's reward checked
+    """The task's expert on random goals (MuJoCo C): every step's reward checked
     against `coverage_one` of the T in its goal's frame. Returns (the best coverage seen, which episodes reached 0.95)."""
     t = get(task)
     env = PushTEnv.for_task(task, max_steps=max_steps, goal="random")
@@ -44,7 +44,7 @@ def goal_episodes(task: str, seeds, max_steps: int):
     np.testing.assert_array_equal(s.obs["state"], fixed.obs["state"])  # a seed starts where it always did
     np.testing.assert_array_equal(s.obs["goal"], goal_poses(seeds, t.variant))
     assert "goal" not in fixed.obs and "goal" not in fixed.carry  # a fixed goal carries nothing
-    ctrl = in_goal_frame(t.controller("expert"))
+    ctrl = t.controller("expert", goal="random")  # each expert pushes toward obs["goal"] itself (reads_goal)
     carry = ctrl.init(s.key)
     reached, best = np.zeros(len(seeds), bool), 0.0
     while not s.carry["ep"]["done"].all():
@@ -71,6 +71,22 @@ def test_reward_follows_the_goal_step_by_step(task):
 def test_the_expert_follows_a_random_goal_and_succeeds_by_it(task):
     _, reached = goal_episodes(task, np.arange(8), 300)
     assert reached.sum() >= 6
+
+
+def test_a_controller_of_the_fixed_goal_acts_from_the_goals_frame_and_its_action_is_put_back():
+    """Seen from the goal's frame, a controller that heads for the T (a velocity, or the T's position as a target)
+    commands what it commands in the world: the frame's rotation and shift are undone exactly."""
+    from mjx_pusht.task.controllers import FromFunction
+
+    rng = np.random.default_rng(0)
+    obs = {"state": rng.uniform(-0.3, 0.3, (6, 5)), "goal": goal_poses(np.arange(6), "chapter")}
+    for kind, fn in (("velocity", lambda o, t: o["state"][:, 2:4] - o["state"][:, 0:2]),
+                     ("position", lambda o, t: o["state"][:, 2:4])):
+        ctrl = FromFunction(name=kind, action_type=kind, fn=fn)
+        seen, _ = in_goal_frame(ctrl).act(None, obs, 0, None)
+        np.testing.assert_allclose(seen, fn(obs, 0), rtol=0, atol=1e-15)
+    alone = {"state": obs["state"]}  # no goal: the controller itself
+    np.testing.assert_array_equal(in_goal_frame(ctrl).act(None, alone, 0, None)[0], ctrl.act(None, alone, 0, None)[0])
 
 
 def test_goal_options_are_checked_in_one_line():
