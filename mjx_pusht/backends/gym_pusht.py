@@ -185,7 +185,8 @@ def episodes(scenario, seeds: np.ndarray, trace: bool = False, poses=None):
         e.close()
     rows = Rollouts(seeds=seeds, start=start, settled=start.copy(), final=state[:, 2:5].copy(),
                     pusher_final=state[:, 0:2].copy(), gap_settled=np.full(n, GAP), gap_max_dev=np.zeros(n),
-                    finite=finite, contained=contained, pusher_start=pusher_start, episode=ep)
+                    finite=finite, contained=contained, pusher_start=pusher_start,
+                    episode=ep if goal is None else {**ep, "goal": goal})
     return rows, (np.stack(states, axis=1) if trace else None)
 
 
