@@ -147,7 +147,7 @@ def test_eval_runs_random_goals_and_what_cannot_take_them_says_so_in_one_line(tm
                  rerun=False, progress=False)
     assert s["config"]["goal"] == "random"
     capsys.readouterr()
-    for argv, why in ((["train", "--goal", "random", "--no-rerun"], "train --goal random: goal-conditioned training"),
+    for argv, why in ((["train", "--algo", "ppo", "--goal", "random", "--no-rerun"], "--goal random trains a goal-"),
                       (["compare", "--goal", "random"], "--success-threshold and --goal are a controller's")):
         assert main([*argv, "--out", str(tmp_path / "o")]) in (1, 2)
         err = capsys.readouterr().err.strip()
@@ -175,3 +175,41 @@ def test_the_gymnasium_envs_observe_the_goal_beside_the_t_and_reward_toward_it()
     np.testing.assert_allclose(obs[5:], [*origin[0], angle[0]], rtol=0, atol=1e-9)
     np.testing.assert_array_equal(info["goal_pose"], obs[5:])
     assert drop_in.observation_space.contains(obs)
+
+
+def chapter_policy(path, goal: bool):
+    """A small untrained student of the chapter's task, written as `train` writes one (`goal`: --goal random's)."""
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_pusht.task.memory import CHAPTER
+    from mjx_pusht.train.policy import feature_size, network, save
+
+    width = feature_size("state", goal=goal)
+    params = network((32,), "relu", 0, 2 + CHAPTER.size).init(jax.random.key(3), jnp.zeros((1, width)))["params"]
+    save(path, params, {"obs_type": "state", "activation": "relu", "in_mean": [0.0] * width, "in_std": [0.1] * width,
+                        "method": "dagger", "config": {}} | ({"goal": True} if goal else {}))
+    return f"policy:{path}"
+
+
+def test_a_goal_conditioned_policy_reads_the_goal_and_one_without_sees_it_from_the_goals_frame(tmp_path):
+    state = np.array([[0.1, -0.2, 0.05, 0.02, 0.3]])
+    goal = goal_poses([5], "chapter")
+    task = get("chapter")
+    reader = task.controller(chapter_policy(tmp_path / "g.msgpack", goal=True), goal="random")
+    assert reader.reads_goal and reader.name.startswith("policy:")  # not wrapped: it reads obs["goal"] itself
+    carry = reader.init(np.zeros((1, 2), np.uint32))
+    toward = reader.act(carry, {"state": state, "goal": goal}, 0, None)[0]
+    elsewhere = reader.act(carry, {"state": state, "goal": goal + 0.1}, 0, None)[0]
+    at_centre = reader.act(carry, {"state": state}, 0, None)[0]  # the fixed goal: the target at the origin
+    np.testing.assert_array_equal(at_centre, reader.act(carry, {"state": state, "goal": np.zeros((1, 3))}, 0, None)[0])
+    assert np.abs(toward - elsewhere).max() > 0  # its action depends on where the goal is
+    # a policy of the fixed goal (no "goal" in its file, as every policy before goals) loads and runs as it did,
+    # and on random goals acts from the goal's frame: its action there is its action on the scene seen from the goal
+    plain = task.controller(chapter_policy(tmp_path / "p.msgpack", goal=False), goal="random")
+    assert isinstance(plain, type(in_goal_frame(plain.inner))) and not plain.inner.reads_goal
+    seen = np.concatenate([to_goal_frame(state[:, 0:2], goal), to_goal_frame(state[:, 2:5], goal)], axis=-1)
+    own = plain.inner.act(carry, {"state": seen}, 0, None)[0]
+    c, s = np.cos(goal[0, 2]), np.sin(goal[0, 2])
+    np.testing.assert_allclose(plain.act(carry, {"state": state, "goal": goal}, 0, None)[0],
+                               own @ np.array([[c, s], [-s, c]]), rtol=0, atol=1e-12)

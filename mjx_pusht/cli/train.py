@@ -47,9 +47,8 @@ def cmd_train(args) -> int:
     from mjx_pusht.task.tasks import get as get_task
 
     task = get_task(args.task)
-    if args.goal != "fixed":
-        raise TrainError("train --goal random: goal-conditioned training is not built yet (eval --goal random judges "
-                         "a policy of the fixed goal on random goals, from each goal's frame)")
+    if args.algo == "ppo" and args.goal != "fixed":
+        raise TrainError("--goal random trains a goal-conditioned policy with DAgger; PPO trains on the fixed goal")
     if args.algo == "ppo" and task.name != "chapter":
         raise TrainError(f"--algo ppo trains on the chapter task; --task {task.name} is DAgger's so far")
     if args.algo == "dagger" and args.teacher is None and task.name != "chapter":
@@ -69,7 +68,7 @@ def cmd_train(args) -> int:
                        image_batch=args.image_batch or min(512, args.batch or 4096), image_steps=args.image_steps,
                        late_fits=args.late_fits, first_fits=args.first_fits, max_grad_norm=args.max_grad_norm,
                        max_steps=args.max_steps, task=None if task.name == "chapter" else task.name,
-                       success_threshold=args.success_threshold)
+                       success_threshold=args.success_threshold, goal=None if args.goal == "fixed" else args.goal)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
@@ -169,6 +168,7 @@ def _judge(args, backend: str, out: Path, summary: dict) -> dict:
     evaluate(f"policy:{out / 'policy.msgpack'}", seeds, out / "eval", backend=backend,
              task=summary["held_out"].get("task", "chapter"), reset=summary["held_out"]["reset"],
              max_steps=summary["held_out"]["max_steps"], success_threshold=summary["held_out"]["success_coverage"],
+             goal=summary["held_out"].get("goal", "fixed"),
              record=args.record, progress=args.progress, rerun=args.rerun)
     s = json.loads((out / "eval" / "summary.json").read_text())
     return {k: s[k] for k in ("n_episodes", "n_success", "success_rate", "success_rate_ci95", "median_steps_to_success",

@@ -124,7 +124,7 @@ class Expert(Controller):
     """A scripted closed-loop pusher that solves PushT: turn, then translate, then trim."""
 
     name: str = "expert"
-    reads_goal: ClassVar[bool] = True  # pushes toward obs["goal"] when there is one (not through task/goals.GoalFrame)
+    reads_goal: ClassVar[bool] = True  # pushes toward obs["goal"] when there is one
     yaw_enter: float = 0.15  # a push that drifts the yaw past this stops to turn
     yaw_done: float = 0.006  # a turn stops here
     pos_tol: float = 0.0007  # per body axis, m

@@ -74,7 +74,7 @@ class ExpertGymPusht(Controller):
 
     name: str = "expert-gym-pusht"
     action_type: str = "target"
-    reads_goal: ClassVar[bool] = True  # pushes toward obs["goal"] when there is one (not through task/goals.GoalFrame)
+    reads_goal: ClassVar[bool] = True  # pushes toward obs["goal"] when there is one
     turn_px: float = 60.0  # px of COG error one radian of yaw error weighs as
     gap: float = 8.0  # px: a push starts this far from its face
     margin: float = 8.0  # px: the travel ring's clearance beyond the agent's radius

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import ClassVar
 
 import numpy as np
 
@@ -82,6 +83,20 @@ def with_goal(obs, goal, obs_type: str):
     return xp.concat([obs, xp.astype(extra, obs.dtype)], axis=-1)
 
 
+def goal_features(obs: dict, obs_type: str):
+    """What a goal-conditioned policy reads of its goal (train/policy.features): state: the goal's (x, y), the cosine
+    and sine of its yaw, the T's offset from it in its frame, the cosine and sine of the T's yaw from it (8);
+    keypoints: the goal T's 8 corners (16). Without obs["goal"], the fixed target's (the origin, yaw 0)."""
+    xp = array_namespace(obs["state"])
+    s = obs["state"]
+    g = xp.astype(obs["goal"], s.dtype) if "goal" in obs else xp.zeros(s.shape[:-1] + (3,), dtype=s.dtype)
+    if obs_type == "keypoints":
+        return keypoints(g)
+    e = to_goal_frame(obs["state"][..., 2:5], g)
+    return xp.concat([g[..., 0:2], xp.cos(g[..., 2:3]), xp.sin(g[..., 2:3]), e[..., 0:2], xp.cos(e[..., 2:3]),
+                      xp.sin(e[..., 2:3])], axis=-1)
+
+
 def to_goal_frame(pose, goal):
     """(..., 3) poses (or (..., 2) points) in the frame of (..., 3) goals: the goal at the origin with yaw 0."""
     xp = array_namespace(goal)
@@ -109,6 +124,7 @@ class GoalFrame(Controller):
     by their world positions misjudges them in the goal's frame (the goal's MARGIN leaves a pusher's room)."""
 
     inner: Controller | None = None
+    reads_goal: ClassVar[bool] = True  # it reads obs["goal"]: wrapped once
 
     @property
     def pixels(self) -> int:

@@ -92,7 +92,7 @@ class Task:
 
         ctrl = load(self.expert if spec == "expert" else spec, action_type=action, frame_skip=frame_skip)
         ctrl = as_targets(ctrl) if self.action_type == "target" and ctrl.action_type != "target" else ctrl
-        return in_goal_frame(ctrl) if check(goal) == "random" and not getattr(ctrl, "reads_goal", False) else ctrl
+        return in_goal_frame(ctrl) if check(goal) == "random" and not ctrl.reads_goal else ctrl
 
 
 TASKS = {
@@ -126,6 +126,10 @@ class AsTargets(Controller):
     def pixels(self) -> int:
         return self.inner.pixels
 
+    @property
+    def reads_goal(self) -> bool:
+        return self.inner.reads_goal
+
     def init(self, key):
         return self.inner.init(key)
 
@@ -149,6 +153,10 @@ class AsVelocities(Controller):
 
     inner: Controller | None = None
     action_type: str = "velocity"
+
+    @property
+    def reads_goal(self) -> bool:
+        return self.inner.reads_goal
 
     def init(self, key):
         return self.inner.init(key)

@@ -114,6 +114,9 @@ class DaggerConfig:
     # The coverage an episode succeeds (and ends) at, in training and in every judgement; None: the task's own (0.95;
     # and a resume file from before this setting existed still matches).
     success_threshold: float | None = None
+    # Goals (task/goals.py): "random", a goal per episode, the student reading it (a goal-conditioned policy: its
+    # features gain the goal's, train/policy.features); None: the fixed goal (a resume file from before matches).
+    goal: str | None = None
 
     def __post_init__(self) -> None:
         if self.obs_type not in OBS_TYPES:
@@ -128,7 +131,9 @@ class DaggerConfig:
             raise ConfigError(f"{self.envs} envs x {self.iterations} iterations would reach the held-out seeds "
                               f"({HELD_OUT_FIRST}+)")
         self.the_task.check_reset(self.reset)
-        self.episode()  # a success threshold outside (0, 1] is a one-line error now
+        self.episode()  # a success threshold outside (0, 1] or an unknown goal is a one-line error now
+        if self.goal_conditioned and self.obs_type.startswith("pixels"):
+            raise ConfigError("--goal random trains from state or keypoints: pixels draw the target at the centre")
         if self.teacher not in TEACHERS:
             raise ConfigError(f"unknown teacher {self.teacher!r}; choose from {', '.join(TEACHERS)}")
         if self.the_task.name != "chapter" and self.teacher != "expert":
@@ -152,7 +157,12 @@ class DaggerConfig:
 
     def episode(self):
         """The episodes trained and judged on: the task's, at `max_steps` and `success_threshold`."""
-        return self.the_task.episode(max_steps=self.max_steps, success_threshold=self.success_threshold)
+        return self.the_task.episode(max_steps=self.max_steps, success_threshold=self.success_threshold,
+                                     goal=self.goal or "fixed")
+
+    @property
+    def goal_conditioned(self) -> bool:
+        return self.goal == "random"
 
     @property
     def memory(self):
@@ -174,7 +184,7 @@ class DaggerConfig:
     @property
     def sample_width(self) -> int:
         """A dataset row's width: the features, after the image's key for a pixel student."""
-        return feature_size(self.obs_type, self.memory) + (RENDER_KEY if self.image else 0)
+        return feature_size(self.obs_type, self.memory, self.goal_conditioned) + (RENDER_KEY if self.image else 0)
 
     def beta(self, iteration: int) -> float:
         return self.beta_decay ** iteration
@@ -264,7 +274,7 @@ class Rollouts:
                 break
             live = ~done
             live[learn:] = False  # judged only: their samples are not learned from
-            x = features(s.obs, cfg.obs_type, memory, cfg.memory)
+            x = features(s.obs, cfg.obs_type, memory, cfg.memory, cfg.goal_conditioned)
             label, label_memory = self.expert.act(memory, s.obs, s.step, s.key)
             student = apply(params, meta, x, s.obs.get("pixels"))
             action, memory = _choose(np, (label, label_memory), student, gen.random(len(seeds)) < beta)
@@ -308,7 +318,7 @@ class Rollouts:
 
         def one(s, memory, beta, key, t):
             live = ~s.carry["ep"]["done"]
-            x = features(s.obs, cfg.obs_type, memory, cfg.memory).astype(jnp.float32)
+            x = features(s.obs, cfg.obs_type, memory, cfg.memory, cfg.goal_conditioned).astype(jnp.float32)
             label, label_memory = self.expert.act(memory, s.obs, s.step, s.key)
             take = jax.random.uniform(jax.random.fold_in(key, t)) < beta
             action, memory = _choose(jnp, (label, label_memory), apply(params, meta, x, s.obs.get("pixels")), take)

@@ -41,6 +41,8 @@ class GymPushtPolicy:
         task = (meta.get("config") or {}).get("task") or "chapter"
         if task not in TASKS or TASKS[task].variant != "gym-pusht":  # gym-pusht's task, or its easy variant
             raise ControllerError(f"policy {path} was trained on the {task} task, not gym-pusht's (train --task gym-pusht)")
+        if self.controller.reads_goal:
+            raise ControllerError(f"policy {path} reads a goal per episode (train --goal random); gym-pusht's is fixed")
         self.obs_type = "pixels_agent_pos" if self.controller.pixels else "state"
         self._targets = as_targets(self.controller)
         self._key = seed_key([seed])  # a sampling policy's draws are keyed by seed and step
