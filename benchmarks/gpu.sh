@@ -129,6 +129,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # session like train-pixels, then `watch-seeds`. A machine is held at most 30 minutes, so give each hold
           # what fits: ppo 2 seeds (~11.5 min each), dagger-state 4 (~5.7), dagger-pixels 1 (~22); aggregate the
           # holds' copied-back runs here with `python -m benchmarks.train_seeds --collect DIR... --out DIR`.
+          # ACTION_EPS (DAgger): --action-eps, the actions' loss relative to each label's size above it (m/s).
           # LATE_FITS (DAgger): --late-fits, fits an iteration once the expert's share is at most 1%.
           # FIRST_FITS (DAgger): --first-fits, initialisations of the first fit, the lowest loss kept (notebook lead5;
           # dagger-state 4 by default since notebook lead6, 1 is the plain fit; dagger-pixels 1, not measured with more).
@@ -141,7 +142,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # GPU: the one GPU of a several-GPU machine this run takes (CUDA_VISIBLE_DEVICES), so that each GPU runs
           # its own seeds at one GPU's speed; NAME (default RECIPE) names the run's folder, one a concurrent run.
           run=$HOME/runs/seeds-${NAME:-${RECIPE:?RECIPE=ppo, dagger-state or dagger-pixels}}; mkdir -p "$run"
-          dagger="$dagger_fit ${LATE_FITS:+--late-fits $LATE_FITS}"
+          dagger="$dagger_fit ${LATE_FITS:+--late-fits $LATE_FITS} ${ACTION_EPS:+--action-eps $ACTION_EPS}"
           # TASK (default chapter, from its task starts): gym-pusht trains on gym-pusht's task; MINUTES: dagger-state's
           task="--reset task"; [ -n "${TASK:-}" ] && task="--task $TASK"
           case "$RECIPE" in

@@ -243,6 +243,10 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--first-fits", type=_positive, default=None,
                    help="DAgger: the first fit is made from this many initialisations and the one with the lowest "
                         "training loss kept (default 1): where a run starts, its loss holds through the run")
+    t.add_argument("--action-eps", type=_positive_float, default=None,
+                   help="DAgger: weigh each action's squared error by (0.1^2 + eps^2) / (|label|^2 + eps^2), eps in m/s "
+                        "(default: plain squared error): a nudge of a few mm is learned as precisely, relative to "
+                        "its size, as a 0.1 m/s move")
     t.add_argument("--keep", choices=("last", "best"), default="last",
                    help="DAgger: the run's policy is the last fit (default), or the fit whose next rollout succeeded "
                         "most on that iteration's fresh training seeds once the expert's share there is at most 1%%; "

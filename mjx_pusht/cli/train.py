@@ -14,7 +14,8 @@ from mjx_pusht.train.summary import write_summary
 
 # Each method's own settings and their defaults: given to the other method, a setting is refused, not ignored.
 DAGGER_ONLY = {"fit_steps": 2000, "beta_decay": 0.7, "max_samples": 8_000_000, "teacher": "paced",
-               "image_batch": None, "image_steps": None, "late_fits": None, "first_fits": None}
+               "image_batch": None, "image_steps": None, "late_fits": None, "first_fits": None,
+               "action_eps": None}
 PPO_ONLY = {"timesteps": 50_000_000, "ppo_act": "sample", "lr_schedule": None}
 BOTH = {"max_grad_norm": 1.0, "envs": 4096, "eval_envs": 4096}  # both methods' settings, and defaults ('off' is None)
 # DAgger on MuJoCo C (2 cores: a 4,096-episode iteration took 3.8 minutes, its held-out judgement 80 s): sized so
@@ -67,6 +68,7 @@ def cmd_train(args) -> int:
                        seed=args.seed, reset=args.reset, teacher=args.teacher,
                        image_batch=args.image_batch or min(512, args.batch or 4096), image_steps=args.image_steps,
                        late_fits=args.late_fits, first_fits=args.first_fits, max_grad_norm=args.max_grad_norm,
+                       action_eps=args.action_eps,
                        max_steps=args.max_steps, task=None if task.name == "chapter" else task.name,
                        success_threshold=args.success_threshold, goal=None if args.goal == "fixed" else args.goal)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)  # the run's settings: checked on --resume

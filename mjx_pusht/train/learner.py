@@ -8,7 +8,7 @@ from functools import partial
 import numpy as np
 
 from mjx_pusht.errors import ConfigError
-from mjx_pusht.train.dagger import MEMORY_WEIGHT, RENDER_KEY, DaggerConfig
+from mjx_pusht.train.dagger import ACTION_REF, MEMORY_WEIGHT, RENDER_KEY, DaggerConfig
 from mjx_pusht.train.policy import POSE_SCALE, feature_size, network
 
 
@@ -46,7 +46,7 @@ class Learner:
         self.loss_max = None  # the last fit's largest minibatch loss (the actions'): a spike in the fit shows here
         self._write = jax.jit(_ring_write, donate_argnums=(0, 1))
         self._fit = jax.jit(partial(_fit, self.model, self.opts, cfg.batch, cfg.image_batch,
-                                    (cfg.fit_steps, cfg.reader_steps), render, cfg.memory))
+                                    (cfg.fit_steps, cfg.reader_steps), render, cfg.memory, cfg.action_eps))
 
     def start(self, key) -> None:
         """A fresh network from `key` and fresh optimiser states for it."""
@@ -151,7 +151,7 @@ def _parts(params: dict, image: int) -> tuple[dict, ...]:
     return {k: v for k, v in params.items() if k not in reader}, reader
 
 
-def _fit(model, opts, batch, image_batch, steps, render, fmt, params, opt_state, x, y, filled, norm, key):
+def _fit(model, opts, batch, image_batch, steps, render, fmt, eps, params, opt_state, x, y, filled, norm, key):
     """Adam steps on minibatches of `batch` samples from the ring; returns the new parameters and optimiser states,
     the loss and (a pixel student) the pose estimate's squared error, each over the last tenth of its steps, and the
     actions' largest minibatch loss over all the steps.
@@ -178,7 +178,10 @@ def _fit(model, opts, batch, image_batch, steps, render, fmt, params, opt_state,
 
     def imitation(head, yb):
         pred = jnp.tanh(head[:, :2]) * CTRL_LIMIT
-        mse = jnp.mean(jnp.sum((pred - yb[:, :2]) ** 2, axis=-1))
+        err = jnp.sum((pred - yb[:, :2]) ** 2, axis=-1)
+        if eps is not None:  # relative to the label's size above eps, a 0.1 m/s label weighed as before (action_eps)
+            err = err * (ACTION_REF**2 + eps**2) / (jnp.sum(yb[:, :2] ** 2, axis=-1) + eps**2)
+        mse = jnp.mean(err)
         memory = yb[:, 2].astype(jnp.int32)
         move = optax.softmax_cross_entropy_with_integer_labels(head[:, 2:2 + fmt.moves], fmt.move(memory))
         if fmt.latches:
