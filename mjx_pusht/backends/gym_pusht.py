@@ -110,6 +110,7 @@ def episodes(scenario, seeds: np.ndarray, trace: bool = False, poses=None):
     from gym_pusht.envs.pusht import PushTEnv
 
     from mjx_pusht.task.controllers import seed_key
+    from mjx_pusht.task.goals import draw
     from mjx_pusht.task.rules import episode_init, observe, wrap_angle
 
     controller, episode = scenario.driver()
@@ -117,6 +118,10 @@ def episodes(scenario, seeds: np.ndarray, trace: bool = False, poses=None):
     obs_type = "pixels_agent_pos" if image else "state"
     kw = {"observation_width": image, "observation_height": image} if image else {}
     envs = [PushTEnv(obs_type=obs_type, **kw) for _ in range(n)]
+    for env in envs:
+        # gym-pusht fixes its success_threshold at 0.95 in __init__ (no kwarg: gym-pusht#24) and reads the attribute
+        # each step (reward clip(coverage / threshold), is_success coverage > threshold): set, it judges at ours
+        env.success_threshold = episode.success
     pixels = [None] * n
     for i, (env, seed) in enumerate(zip(envs, seeds)):
         o, _ = env.reset(seed=int(seed))
@@ -131,15 +136,22 @@ def episodes(scenario, seeds: np.ndarray, trace: bool = False, poses=None):
             raise BackendError(f"gym-pusht started seeds {seeds[bad][:8].tolist()} elsewhere than task/reset.py "
                                f"draws them (off by up to {off.max():.3g})")
     key = seed_key(seeds)
+    goal = None if episode.goal is None else draw(key, episode.goal, np.float64)  # as every backend draws it
+    if goal is not None:  # gym-pusht scores coverage against, and draws, its goal_pose, which its reset put back
+        for env, origin, angle in zip(envs, *frame.pose_to_px(goal)):
+            env.goal_pose = np.array([*origin, angle])
     carry = controller.init(key)
     start, pusher_start = state[:, 2:5].copy(), state[:, 0:2].copy()
     live = np.ones(n, bool)
     # gym-pusht scores a start on the goal by its first step: the episode runs (as the drop-in's, task/tasks.py)
     ep = episode_init(np.array([e._get_coverage() for e in envs]), episode.success, False, np)
+    # episode_init hands one array as both coverage and best_coverage; written in place below, each needs its own
+    # (shared, the final coverage read back was the best one: a T pushed past its best ended reporting its best)
+    ep["best_coverage"] = ep["best_coverage"].copy()
     finite, contained = np.isfinite(state).all(-1), _inside(envs)
     states = [state.copy()] if trace else None
     for k in range(episode.max_steps):
-        obs = observe(state[:, 0:2], state[:, 2:5])
+        obs = observe(state[:, 0:2], state[:, 2:5]) | ({} if goal is None else {"goal": goal})
         if image:
             obs["pixels"] = np.stack(pixels)
         action, carry = controller.act(carry, obs, k, key)
@@ -157,7 +169,7 @@ def episodes(scenario, seeds: np.ndarray, trace: bool = False, poses=None):
             state[i] = world_state(envs[i])
             cov = float(info["coverage"])
             ep["length"][i] = k + 1
-            ep["return"][i] += cov  # the task's reward, coverage (gym-pusht's own is clip(coverage / 0.95))
+            ep["return"][i] += cov  # the task's reward, coverage (gym-pusht's own is clip(coverage / threshold))
             ep["coverage"][i], ep["best_coverage"][i] = cov, max(ep["best_coverage"][i], cov)
             if info["is_success"] and not ep["success"][i]:
                 ep["success"][i], ep["steps_to_success"][i] = True, k + 1
@@ -173,7 +185,8 @@ def episodes(scenario, seeds: np.ndarray, trace: bool = False, poses=None):
         e.close()
     rows = Rollouts(seeds=seeds, start=start, settled=start.copy(), final=state[:, 2:5].copy(),
                     pusher_final=state[:, 0:2].copy(), gap_settled=np.full(n, GAP), gap_max_dev=np.zeros(n),
-                    finite=finite, contained=contained, pusher_start=pusher_start, episode=ep)
+                    finite=finite, contained=contained, pusher_start=pusher_start,
+                    episode=ep if goal is None else {**ep, "goal": goal})
     return rows, (np.stack(states, axis=1) if trace else None)
 
 

@@ -85,9 +85,12 @@ class Rollouts:
                                    else np.asarray(self.warnings, np.int32))
         for name, v in (self.params or {}).items():
             cols[f"param_{name}"] = np.asarray(v, np.float64)
-        score = task_score(self.final)
+        goal = (self.episode or {}).get("goal")  # random goals: each row's, scored against and written down
+        score = task_score(self.final) if goal is None else task_score(self.final, goal)
         for k, v in score.items():
             cols[f"task_{k}"] = v
+        for k, axis in enumerate(("x", "y", "yaw") if goal is not None else ()):
+            cols[f"goal_{axis}"] = goal[:, k]
         if episodes:
             if self.episode is None or self.pusher_start is None:
                 raise ConfigError("these rollouts ran no episodes")
@@ -124,7 +127,8 @@ class Rollouts:
             episode=({"success": np.asarray(cols["success"], bool), "steps_to_success": np.asarray(cols["steps_to_success"]),
                       "length": np.asarray(cols["episode_length"]), "coverage": np.asarray(cols["final_coverage"]),
                       "best_coverage": np.asarray(cols["best_coverage"]), "return": np.asarray(cols["return"]),
-                      "done": np.asarray(cols["success"], bool)} if "success" in cols else None),
+                      "done": np.asarray(cols["success"], bool)} | ({"goal": stack("goal")} if "goal_x" in cols else {})
+                     if "success" in cols else None),
         )
 
     @classmethod
@@ -175,7 +179,8 @@ def from_carry(seeds, poses, pusher_start, carry) -> Rollouts:
         finite=np.asarray(acc["finite"], bool),
         contained=np.asarray(acc["contained"], bool),
         pusher_start=f64(pusher_start),
-        episode={k: np.asarray(v) for k, v in ep.items()},
+        # random goals (task/goals.py): each episode's goal, which its reset drew and it was scored against
+        episode={k: np.asarray(v) for k, v in ep.items()} | ({"goal": f64(carry["goal"])} if "goal" in carry else {}),
     )
 
 

@@ -27,19 +27,25 @@ def cmd_compare(args) -> int:
     if task.name != "chapter" and not args.controller:
         raise UsageError(f"compare --task {task.name} compares a controller's episodes: give --controller "
                          "(expert: the task's expert)")
+    if (args.success_threshold is not None or args.goal != "fixed") and not args.controller:
+        raise UsageError("--success-threshold and --goal are a controller's episodes': give --controller (the open-loop "
+                         "comparison pushes toward no goal and scores no success)")
     reset = task.check_reset(args.reset)
+    episode = task.episode(max_steps=args.max_steps, success_threshold=args.success_threshold, goal=args.goal)
     # a controller that cannot load is a one-line error before anything is written
-    controller = task.controller(args.controller) if args.controller else None
+    controller = task.controller(args.controller, goal=args.goal) if args.controller else None
     out = claim_out_dir(args.out, "compare", {**{k: getattr(args, k) for k in (
         "seeds", "backend", "controller", "max_steps", "root_cause", "tolerance", "iterations")}, "reset": reset,
-        **({"task": task.name} if task.name != "chapter" else {})}, replace=args.replace,
+        **({"task": task.name} if task.name != "chapter" else {}),
+        **({"success_threshold": episode.success} if args.success_threshold is not None else {}),
+        **({"goal": args.goal} if args.goal != "fixed" else {})}, replace=args.replace,
         share=args.share_out)
     banner = Banner("compare")
     if controller is not None:
         from mjx_pusht.backends.cpu import default_threads
         from mjx_pusht.study.closed_loop import compare_episodes
         r = compare_episodes(seeds, IMPL.get(args.backend, args.backend), out, controller=controller, task=task.name,
-                             reset=reset, episode=task.episode(max_steps=args.max_steps), workers=default_threads())
+                             reset=reset, episode=episode, workers=default_threads())
         _print_episodes(r, out)
         banner.done()
         return 0

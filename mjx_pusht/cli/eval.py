@@ -13,7 +13,7 @@ def cmd_eval(args) -> int:
     params = parse_params(args.param)
     try:
         evaluate(args.controller, seeds, args.out, backend=args.backend, action=args.action, task=args.task,
-                 reset=args.reset,
+                 reset=args.reset, success_threshold=args.success_threshold, goal=args.goal,
                  break_it=args.break_it, max_steps=args.max_steps, frame_skip=args.frame_skip, params=params,
                  chunk=args.chunk, resume=args.resume, replace=args.replace, progress=args.progress,
                  record=args.record, rerun=args.rerun, video=args.video, video_episodes=args.video_episodes,

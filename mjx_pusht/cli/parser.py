@@ -78,6 +78,21 @@ def _fraction(text: str) -> float:
     return v
 
 
+def _threshold(text: str) -> float:
+    """An argparse type: a success threshold, a coverage in (0, 1] (validate.fraction's rule: 0, NaN and 1.5 refused)."""
+    try:
+        return validate.fraction("--success-threshold", float(text))
+    except (ValueError, MjxPushtError):
+        raise argparse.ArgumentTypeError(f"must be a coverage in (0, 1], got {text}") from None
+
+
+def success_arg(p: argparse.ArgumentParser) -> None:
+    """--success-threshold: the coverage an episode succeeds at (every command that judges success takes it)."""
+    p.add_argument("--success-threshold", type=_threshold, default=None, metavar="COVERAGE",
+                   help="the coverage of the target an episode succeeds (and ends) at, in (0, 1] (default: the "
+                        "task's own, 0.95; ManiSkill's PushT scores at 0.9)")
+
+
 def _widths(text: str) -> tuple[int, ...]:
     """An argparse type: comma-separated positive layer widths."""
     try:
@@ -130,12 +145,16 @@ def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str)
 
 
 def _task_args(p: argparse.ArgumentParser, reset_help: str) -> None:
-    """--task and the chapter task's --reset (task/tasks.py)."""
+    """--task, the chapter task's --reset (task/tasks.py), --goal and --success-threshold."""
     from mjx_pusht.task.tasks import TASKS
 
     p.add_argument("--task", choices=tuple(TASKS), default="chapter",
                    help="; ".join(f"{t.name}: {t.about}" for t in TASKS.values()) + " (default chapter)")
-    p.add_argument("--reset", choices=("task", "chapter"), default=None, help=reset_help)
+    p.add_argument("--reset", choices=TASKS["chapter"].resets, default=None, help=reset_help)
+    p.add_argument("--goal", choices=("fixed", "random"), default="fixed",
+                   help="fixed: the target at the centre (default); random: a goal pose per episode from its seed, "
+                        "anywhere the T can be pushed to")
+    success_arg(p)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -291,5 +310,6 @@ def build_parser() -> argparse.ArgumentParser:
 
     from mjx_pusht.cli.demos import add_parser as add_demos
 
-    add_demos(sub, positive=_positive, folder=_folder, replace_help=REPLACE_HELP, share_help=SHARE_HELP)
+    add_demos(sub, positive=_positive, folder=_folder, replace_help=REPLACE_HELP, share_help=SHARE_HELP,
+              success=success_arg)
     return p

@@ -53,6 +53,8 @@ def cmd_train(args) -> int:
     from mjx_pusht.task.tasks import get as get_task
 
     task = get_task(args.task)
+    if args.algo == "ppo" and args.goal != "fixed":
+        raise TrainError("--goal random trains a goal-conditioned policy with DAgger; PPO trains on the fixed goal")
     if args.algo == "ppo" and task.name != "chapter":
         raise TrainError(f"--algo ppo trains on the chapter task; --task {task.name} is DAgger's so far")
     if args.algo == "dagger" and args.teacher is None and task.name != "chapter":
@@ -72,7 +74,8 @@ def cmd_train(args) -> int:
                        image_batch=args.image_batch or min(512, args.batch or 4096), image_steps=args.image_steps,
                        late_fits=args.late_fits, first_fits=args.first_fits, max_grad_norm=args.max_grad_norm,
                        action_eps=args.action_eps,
-                       max_steps=args.max_steps, task=None if task.name == "chapter" else task.name)
+                       max_steps=args.max_steps, task=None if task.name == "chapter" else task.name,
+                       success_threshold=args.success_threshold, goal=None if args.goal == "fixed" else args.goal)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
@@ -119,7 +122,8 @@ def _cmd_ppo(args, name: str, why: str) -> int:
     cfg = PPOConfig(obs_type=args.obs, envs=args.envs, timesteps=args.timesteps, evals=args.iterations,
                     hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
                     eval_envs=args.eval_envs, seed=args.seed, reset=args.reset, act=args.ppo_act,
-                    max_grad_norm=args.max_grad_norm, lr_schedule=args.lr_schedule, max_steps=args.max_steps)
+                    max_grad_norm=args.max_grad_norm, lr_schedule=args.lr_schedule, max_steps=args.max_steps,
+                    success_threshold=args.success_threshold)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)
     _restart(out, args)
     _check_rerun(args)
@@ -170,7 +174,9 @@ def _judge(args, backend: str, out: Path, summary: dict) -> dict:
     remove_own(out / "eval")
     evaluate(f"policy:{out / 'policy.msgpack'}", seeds, out / "eval", backend=backend,
              task=summary["held_out"].get("task", "chapter"), reset=summary["held_out"]["reset"],
-             max_steps=summary["held_out"]["max_steps"], record=args.record, progress=args.progress, rerun=args.rerun)
+             max_steps=summary["held_out"]["max_steps"], success_threshold=summary["held_out"]["success_coverage"],
+             goal=summary["held_out"].get("goal", "fixed"),
+             record=args.record, progress=args.progress, rerun=args.rerun)
     s = json.loads((out / "eval" / "summary.json").read_text())
     return {k: s[k] for k in ("n_episodes", "n_success", "success_rate", "success_rate_ci95", "median_steps_to_success",
                               "n_non_finite", "n_rigid")} | {"backend": s["backend"], "seeds": seeds,

@@ -61,13 +61,16 @@ def _brax_compat() -> None:
 _brax_compat()
 from mjx_pusht.task.controllers import seed_key
 from mjx_pusht.task.episode import Episode
+from mjx_pusht.task.goals import with_goal
 from mjx_pusht.task.reset import start_poses
 
 OBS_TYPES = ("state", "keypoints")
 
 
 class BraxPushT(Env):
-    """One PushT world as a Brax Env (state or keypoints observations; reward: coverage, or your `reward_fn`)."""
+    """One PushT world as a Brax Env (state or keypoints observations; reward: coverage, or your `reward_fn`).
+    `episode`: e.g. `tasks.get("chapter").episode(success_threshold=0.9, goal="random")`, random goals observed
+    beside the T (task/goals.with_goal)."""
 
     def __init__(self, backend: str = "mjx-warp", obs_type: str = "state", reset_kind: str = "task",
                  episode: Episode = Episode(), max_worlds: int = 4096, table: int = 65536, first_seed: int = 0,
@@ -104,8 +107,9 @@ class BraxPushT(Env):
         if "bad_action" in pipeline_info:
             metrics["bad_action"] = (pipeline_info["bad_action"]["step"] >= 0).astype(jnp.float32)
         done = (s.terminated | s.truncated).astype(jnp.float32)
-        return State(pipeline_state=s, obs=s.obs[self.obs_type], reward=reward, done=done, metrics=metrics,
-                     info=pipeline_info)
+        obs = s.obs[self.obs_type]
+        obs = obs if "goal" not in s.obs else with_goal(obs, s.obs["goal"], self.obs_type)  # random goals: beside the T
+        return State(pipeline_state=s, obs=obs, reward=reward, done=done, metrics=metrics, info=pipeline_info)
 
     def reset(self, rng: jax.Array) -> State:
         i = jax.random.randint(rng, (), 0, self.table)

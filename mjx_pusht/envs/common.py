@@ -16,7 +16,6 @@ from mjx_pusht.envs.functional import PushTEnv
 from mjx_pusht.envs.row import applies, step_row
 from mjx_pusht.envs.starts import START_HI, START_LO
 from mjx_pusht.render.pixels import IMAGE_SIZE
-from mjx_pusht.task.episode import Episode
 from mjx_pusht.task.rules import ACTION_TYPES, CTRL_LIMIT, WORKSPACE_HALF
 
 OBS_TYPES = ("state", "keypoints", "pixels", "pixels_agent_pos")
@@ -41,15 +40,15 @@ def action_bounds(action_type: str) -> tuple[float, float]:
     return -limit, limit
 
 
-def single_spaces(obs_type: str, action_type: str, size: int, dtype) -> tuple[spaces.Space, spaces.Box]:
-    """The observation and action space of one environment."""
+def single_spaces(obs_type: str, action_type: str, size: int, dtype, goal: bool = False):
+    """The observation and action space of one environment (`goal`: random goals, observed beside the T)."""
     img = spaces.Box(0, 255, (size, size, 3), np.uint8)
     agent = spaces.Box(-TABLE_HALF, TABLE_HALF, (2,), dtype)
     if obs_type == "state":
-        hi = np.array([TABLE_HALF] * 4 + [math.pi])
-        obs = spaces.Box(-hi, hi, (5,), dtype)
+        hi = np.array([TABLE_HALF] * 4 + [math.pi] + ([TABLE_HALF] * 2 + [math.pi] if goal else []))
+        obs = spaces.Box(-hi, hi, hi.shape, dtype)
     elif obs_type == "keypoints":
-        obs = spaces.Box(-TABLE_HALF, TABLE_HALF, (16,), dtype)
+        obs = spaces.Box(-TABLE_HALF, TABLE_HALF, (32 if goal else 16,), dtype)
     elif obs_type == "pixels":
         obs = img
     else:
@@ -70,19 +69,21 @@ def warn_broken(info: dict) -> None:
 
 
 def functional(backend: str, obs_type: str, action_type: str, observation_size: int, reset_kind: str,
-               max_episode_steps: int | None, frame_skip: int, threads: int = 1, variant: str = "chapter") -> PushTEnv:
+               max_episode_steps: int | None, frame_skip: int, threads: int = 1, variant: str = "chapter",
+               success_threshold: float | None = None, goal: str = "fixed") -> PushTEnv:
     """The functional env behind the gymnasium envs; stepped in place (a gymnasium env keeps no old states).
-    The gym-pusht variant's episodes run as gym-pusht's do: a start on the goal is scored by the first step.
-    `max_episode_steps` None: no limit of the env's own (gymnasium's TimeLimit truncates)."""
-    from mjx_pusht.model.scene import SceneSpec
+    Its episodes are the variant's task's (task/tasks.py): the gym-pusht variant's run as gym-pusht's do (a start
+    on the goal is scored by the first step), and success is at the task's coverage unless `success_threshold`.
+    `max_episode_steps` None: no limit of the env's own (gymnasium's TimeLimit truncates). `goal`: task/goals.GOALS."""
+    from mjx_pusht.task.tasks import get
 
     limit = NEVER if max_episode_steps is None else validate.positive_int("max_episode_steps", max_episode_steps)
+    task = get(variant)  # each scene variant's own task has its name
     return PushTEnv(backend=backend, reset_kind=reset_kind, action_type=action_type,
                     pixels=observation_size if obs_type.startswith("pixels") else 0,
-                    episode=Episode(frame_skip=validate.positive_int("frame_skip", frame_skip), max_steps=limit,
-                                    end_covered_start=variant == "chapter"),
-                    scene=SceneSpec(variant=variant), threads=threads, keep_states=False,
-                    keypoints=obs_type == "keypoints")
+                    episode=task.episode(limit, validate.positive_int("frame_skip", frame_skip), success_threshold),
+                    scene=task.scene(), threads=threads, keep_states=False,
+                    keypoints=obs_type == "keypoints", goal=goal)
 
 
 class OneWorld:

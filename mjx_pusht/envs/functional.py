@@ -6,9 +6,9 @@
 
 `step` is the control step every rollout runs (episode.py): the action becomes servo ctrl
 (`task.to_ctrl`), `frame_skip` physics steps follow, each folded into the weld-gap, finite and
-containment invariants, then reward = coverage, and the episode ends at coverage >= 0.95
-(`terminated`) or after `max_steps` control steps (`truncated`). An ended episode holds still
-and earns nothing until it is reset.
+containment invariants, then reward = coverage, and the episode ends at coverage >= 0.95 (`terminated`;
+`for_task(..., success_threshold=)`: another) or after `max_steps` control steps (`truncated`). An ended
+episode holds still and earns nothing. `goal="random"`: a goal per episode, obs["goal"] (task/goals.py).
 
 On MJX `step_one(state, action)` is the pure single-world function: `step` is
 `jax.jit(jax.vmap(step_one))`, and a user may vmap, jit or scan it as they like. On `cpu` the
@@ -39,7 +39,7 @@ from mjx_pusht.task.episode import (
     begin,
     control_step,
 )
-from mjx_pusht.envs.starts import START_HI, START_LO, clear_of_tee
+from mjx_pusht.envs.starts import START_HI, START_LO, clear_of_tee, episode_with_goal
 from mjx_pusht.task.reset import start_poses
 from mjx_pusht.task.rules import ACTION_TYPES, observe
 
@@ -66,15 +66,6 @@ class State(NamedTuple):
             "gap_max_dev": inv["gap_max_dev"], "finite": inv["finite"], "contained": inv["contained"]}
 
 
-def _check_actions(action, n: int):
-    """Actions must be (n, 2): anything else is an error, never reshaped (a reshape scrambles the worlds)."""
-    shape = getattr(action, "shape", None)
-    if shape != (n, 2):
-        raise ConfigError(f"actions must have shape ({n}, 2), one (x, y) per environment; got "
-                          f"{'no array' if shape is None else tuple(shape)}")
-    return action
-
-
 # The env steps one control step per call, from buffers XLA hands it anew each call: staged, Warp replays
 # one graph whatever the addresses. Measured on an H100 (notebook change 13): the gymnasium vector env,
 # torch output, 237k / 650k / 1.17 M control steps/s at 4,096 / 16,384 / 65,536 envs, against 114k /
@@ -97,6 +88,7 @@ class PushTEnv:
     scene: SceneSpec = SceneSpec()
     pixels: int = 0  # image size for obs["pixels"]; 0: no images
     keypoints: bool = True  # obs["keypoints"]; False spares computing them where nothing reads them
+    goal: str = "fixed"  # task/goals.GOALS: the target at the origin, or a goal per episode from its seed (obs["goal"])
     threads: int = 1  # cpu: worlds stepped on this many threads at once (same bits as one)
     # cpu: False steps the MjData in place (an old state is then stale): what a stateful vector env wants
     keep_states: bool = True
@@ -115,6 +107,7 @@ class PushTEnv:
         if self.action_type not in ACTION_TYPES:
             raise ConfigError(f"unknown action type {self.action_type!r}; choose from {', '.join(ACTION_TYPES)}")
         self.pixels, self.threads = validate.pixels(self.pixels), validate.positive_int("threads", self.threads)
+        self.episode = episode_with_goal(self.episode, self.goal, self.scene.variant, self.pixels)
         if self.backend not in ("cpu", "mjx-jax", "mjx-warp"):
             raise BackendError(f"the environment runs on cpu, mjx-jax or mjx-warp, not {self.backend!r}")
         if self.scene.variant == "gym-pusht" and self.reset_kind == "task":
@@ -173,12 +166,14 @@ class PushTEnv:
         self.layout = QposLayout.of(self.model)
 
     @classmethod
-    def for_task(cls, task: str, backend: str = "cpu", max_steps: int | None = None, **kwargs) -> "PushTEnv":
-        """A task's env (task/tasks.TASKS): its scene, starts, actions and episodes, e.g. gym-pusht's on the batch."""
+    def for_task(cls, task: str, backend: str = "cpu", max_steps: int | None = None,
+                 success_threshold: float | None = None, **kwargs) -> "PushTEnv":
+        """A task's env (task/tasks.TASKS): its scene, starts, actions and episodes (success at `success_threshold`)."""
         from mjx_pusht.task.tasks import get
 
         t = get(task)
-        return cls(backend, t.reset, t.action_type, t.episode(max_steps), t.scene(), **kwargs)
+        return cls(backend, t.reset, t.action_type, t.episode(max_steps, success_threshold=success_threshold),
+                   t.scene(), **kwargs)
 
     @property
     def renderer(self):
@@ -263,7 +258,7 @@ class PushTEnv:
     def _state(self, data, carry, qpos, key, step, pixels=True) -> State:
         xp = self._xp
         ep = carry["ep"]
-        obs = self._observe(qpos, data, pixels)
+        obs = self._observe(qpos, data, pixels, goal=carry.get("goal"))
         n = qpos.shape[:-1]
         # an episode that starts covered is terminated at reset, before any step
         dropped = xp.zeros(n, dtype=xp.int32) if self.backend == "mjx-warp" else None
@@ -317,11 +312,13 @@ class PushTEnv:
         terminated = ep["done"] & ep["success"]
         truncated = ~terminated & (step >= self.episode.max_steps)
         carry = {**carry, "ep": {**ep, "done": ep["done"] | truncated}}
-        return State(data, carry, self._observe(qpos, data, pixels, qvel), reward, terminated, truncated, step,
-                     state.key, state.dropped, state.info)
+        obs = self._observe(qpos, data, pixels, qvel, carry.get("goal"))
+        return State(data, carry, obs, reward, terminated, truncated, step, state.key, state.dropped, state.info)
 
-    def _observe(self, qpos, data, pixels=True, qvel=None):
-        obs = observe(self.layout.pusher_xy(qpos), self.layout.tee_pose(qpos), self.keypoints)
+    def _observe(self, qpos, data, pixels=True, qvel=None, goal=None):
+        # a random goal's pose beside the T's (a fixed goal is the origin, never observed)
+        obs = observe(self.layout.pusher_xy(qpos), self.layout.tee_pose(qpos), self.keypoints) | (
+            {} if goal is None else {"goal": goal})
         if self.scene.variant == "gym-pusht":  # gym-pusht reports its agent's velocity (info["vel_agent"])
             if qvel is None:
                 qvel = data.qvel[-1] if self.backend == "cpu" else data.qvel
@@ -375,7 +372,8 @@ class PushTEnv:
         import jax
         import jax.numpy as jnp
 
-        action = _check_actions(jnp.asarray(action), len(state.step))
+        action = jnp.asarray(action)
+        validate.actions_shape_on_device(action, len(state.step))  # (n, 2), never reshaped; traced too
         if not isinstance(action, jax.core.Tracer):
             validate.actions_on_device(action, len(state.step), jnp)
         return self._batch_fns(len(state.step))[0](state, action)

@@ -17,13 +17,15 @@ Where this differs from gym-pusht (and how to convert):
   proportional velocity command (task.to_ctrl), gym-pusht's convention; actions are clipped
   to the action space, and a NaN or inf is a one-line error;
 - reward is the coverage itself, in [0, 1] (gym-pusht: coverage / 0.95, clipped); success
-  (terminated) at coverage >= 0.95; a start already on the goal is over at reset (info
-  says success) and its first step reports terminated with that start's coverage as reward;
+  (terminated) at coverage >= 0.95 (`success_threshold=`: another, in (0, 1]); a start already on the
+  goal is over at reset (info says success), its first step terminated with that start's coverage as reward;
   truncation after `max_episode_steps` control steps (300, registered in the spec: gymnasium's
   TimeLimit truncates, so `gym.make(..., max_episode_steps=500)` runs 500);
 - observations: `state` = [pusher x, y, tee x, y, yaw in (-pi, pi]], `keypoints` = the T's 8
   outline corners (16 values), `pixels` = (96, 96, 3) uint8, `pixels_agent_pos` = {pixels,
-  agent_pos}; `options={"reset_to_state": [tee x, y, yaw, pusher x, y]}` starts from a given
+  agent_pos}; `goal="random"`: a goal pose per episode from its seed (task/goals.py), its (x, y, yaw)
+  after the state and its T's 16 keypoints after the T's, `info["goal_pose"]`, reward and success toward
+  it; `options={"reset_to_state": [tee x, y, yaw, pusher x, y]}` starts from a given
   state (the order `reset.start_poses` uses); reset options this env does not use are ignored.
 
 The single env runs on NumPy and MuJoCo C only (no JAX), so it can be forked.
@@ -51,6 +53,7 @@ from mjx_pusht.envs.common import (
     single_spaces,
     warn_broken,
 )
+from mjx_pusht.task.goals import with_goal
 from mjx_pusht.render.pixels import IMAGE_SIZE
 from mjx_pusht.envs.vector import PushTVectorEnv  # noqa: F401  (the vector entry point's historical home)
 from mjx_pusht.task.reset import SEED_MAX
@@ -82,14 +85,17 @@ class PushTGymEnv(OneWorld, Pictures, gym.Env):
 
     def __init__(self, obs_type: str = "state", action_type: str = "velocity", render_mode: str | None = None,
                  observation_size: int = IMAGE_SIZE, render_size: int = 512, reset_kind: str = "task",
-                 max_episode_steps: int | None = None, frame_skip: int = 10):
+                 max_episode_steps: int | None = None, frame_skip: int = 10,
+                 success_threshold: float | None = None, goal: str = "fixed"):
         check_kwargs(obs_type, action_type, observation_size)
         self.render_mode = validate.render_mode(render_mode, human=True)
         self.obs_type, self.action_type = obs_type, action_type
         self.render_size = validate.image_size(render_size, "render_size")
         self._env = functional("cpu", obs_type, action_type, observation_size, reset_kind,
-                               validate.episode_limit(max_episode_steps), frame_skip)
-        self.observation_space, self.action_space = single_spaces(obs_type, action_type, observation_size, np.float64)
+                               validate.episode_limit(max_episode_steps), frame_skip,
+                               success_threshold=success_threshold, goal=goal)
+        self.observation_space, self.action_space = single_spaces(obs_type, action_type, observation_size, np.float64,
+                                                                  goal != "fixed")
         self._low, self._high = action_bounds(action_type)
         self.metadata = {**self.metadata, "render_fps": self._fps}
         self._state = None
@@ -123,9 +129,10 @@ class PushTGymEnv(OneWorld, Pictures, gym.Env):
         s = o["state"][0]
         if t == "state":
             px, py, tx, ty, yaw = s.tolist()
-            return np.array([px, py, tx, ty, wrap_yaw(yaw)])
+            out = np.array([px, py, tx, ty, wrap_yaw(yaw)])
+            return out if "goal" not in o else with_goal(out, o["goal"][0], t)
         if t == "keypoints":
-            return o["keypoints"][0].copy()
+            return o["keypoints"][0].copy() if "goal" not in o else with_goal(o["keypoints"][0], o["goal"][0], t)
         if t == "pixels":
             return o["pixels"][0]
         return {"pixels": o["pixels"][0], "agent_pos": s[0:2].copy()}
@@ -143,6 +150,8 @@ class PushTGymEnv(OneWorld, Pictures, gym.Env):
             "finite": m["finite"][0],  # every state of the episode finite and bounded
             "contained": m["contained"][0],  # the block and the pusher never left the walls (no missed contact)
         }
+        if "goal" in s.obs:  # a random goal's pose (a fixed one is the origin)
+            info["goal_pose"] = s.obs["goal"][0].copy()
         if not (info["finite"] and info["contained"]):
             warn_broken(info)
         return info

@@ -6,7 +6,8 @@
 The same kwargs (obs_type, render_mode, observation_/visualization_width/height), spaces,
 units (pixels of gym-pusht's 512 x 512 frame, y down; angles as pymunk's), action (an absolute
 target in pixels, tracked by gym-pusht's PD law, kp 100 and kv 20 at 100 Hz, 10 Hz control),
-reward clip(coverage / 0.95, 0, 1), success coverage > 0.95, info keys, `reset_to_state` (with
+reward clip(coverage / 0.95, 0, 1), success coverage > 0.95 (`success_threshold=`: another, in (0, 1], in both:
+gym-pusht#24 asks for it; gym-pusht itself fixes it at 0.95), info keys, `reset_to_state` (with
 its legacy placement quirk), registration with max_episode_steps=300 (gymnasium's TimeLimit, so
 the kwarg and `_max_episode_steps` behave as they do for gym-pusht), and render_fps 10.
 
@@ -19,6 +20,7 @@ What still differs from pymunk's physics, measured, is docs/dropin-physics.md.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -29,7 +31,9 @@ from mjx_pusht.envs.common import OneWorld, Pictures, functional, warn_broken
 from mjx_pusht.envs.vector import PushTVectorEnv
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model import gym_pusht as frame
-from mjx_pusht.task.rules import SUCCESS_COVERAGE, T_RECTS
+from mjx_pusht.task.reset import SEED_MAX, start_poses
+from mjx_pusht.task.tasks import get as get_task
+from mjx_pusht.task.rules import T_RECTS
 
 spaces = base.gym.spaces
 
@@ -55,12 +59,15 @@ def _check_kwargs(obs_type, width, height, render_mode, block_cog, damping, huma
                           "(see docs/envs/dropin.md)")
 
 
-def gym_pusht_spaces(obs_type: str, width: int = 96, height: int = 96, dtype=np.float64):
-    """gym-pusht 0.1.8's observation and action spaces, as it builds them."""
+def gym_pusht_spaces(obs_type: str, width: int = 96, height: int = 96, dtype=np.float64, goal: bool = False):
+    """gym-pusht 0.1.8's observation and action spaces, as it builds them (`goal`: with random goals' beside the T's,
+    its pose after the block's, its T's 8 vertices after the block's)."""
     if obs_type == "state":
-        obs = spaces.Box(low=np.array([0, 0, 0, 0, 0]), high=np.array([512, 512, 512, 512, 2 * np.pi]), dtype=dtype)
+        high = [512, 512, 512, 512, 2 * np.pi] + ([512, 512, 2 * np.pi] if goal else [])
+        obs = spaces.Box(low=np.zeros(len(high)), high=np.array(high), dtype=dtype)
     elif obs_type == "environment_state_agent_pos":
-        obs = spaces.Dict({"environment_state": spaces.Box(low=np.zeros(16), high=np.full((16,), 512), dtype=dtype),
+        k = 32 if goal else 16
+        obs = spaces.Dict({"environment_state": spaces.Box(low=np.zeros(k), high=np.full((k,), 512), dtype=dtype),
                            "agent_pos": spaces.Box(low=np.array([0, 0]), high=np.array([512, 512]), dtype=dtype)})
     else:
         img = spaces.Box(low=0, high=255, shape=(height, width, 3), dtype=np.uint8)
@@ -92,6 +99,14 @@ def gym_view(obs_type: str, obs: dict, coverage, terminated, xp, dtype):
         "is_success": terminated,
         "coverage": coverage,
     }
+    if "goal" in obs:  # a random goal, as gym-pusht would show its goal_pose: beside the block, and in info
+        g_origin, g_angle = frame.pose_to_px(obs["goal"], xp)
+        info["goal_pose"] = xp.concatenate([g_origin, g_angle[..., None]], axis=-1)
+        if obs_type == "state":
+            out = xp.concatenate([out, info["goal_pose"].astype(dtype)], axis=-1)
+        elif obs_type == "environment_state_agent_pos":
+            goal_corners = frame.keypoints_px(g_origin, g_angle, xp).astype(dtype)
+            out = {**out, "environment_state": xp.concatenate([out["environment_state"], goal_corners], axis=-1)}
     return out, info
 
 
@@ -180,9 +195,10 @@ def n_contacts(pusher_xy, tee_pose, corners_px, xp):
     return (pusher | wall).astype(xp.int64 if xp is np else xp.int32)
 
 
-def reward_of(coverage, xp):
+def reward_of(coverage, threshold: float, xp):
+    """gym-pusht's reward, clip(coverage / success threshold, 0, 1)."""
     # clip as minimum(maximum()): what np.clip and jnp.clip compute, without np.clip's checks
-    return xp.minimum(xp.maximum(coverage / SUCCESS_COVERAGE, 0.0), 1.0)
+    return xp.minimum(xp.maximum(coverage / threshold, 0.0), 1.0)
 
 
 def _goal(shape, dtype, xp):
@@ -221,8 +237,10 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
 
     def __init__(self, obs_type: str = "state", render_mode: str | None = "rgb_array", block_cog=None, damping=None,
                  observation_width: int = 96, observation_height: int = 96, visualization_width: int = 680,
-                 visualization_height: int = 680):
+                 visualization_height: int = 680, success_threshold: float | None = None, reset_kind: str = "gym-pusht",
+                 goal: str = "fixed"):
         _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping, human=True)
+        validate.choice("reset_kind", reset_kind, get_task("gym-pusht").resets + get_task("gym-pusht-easy").resets)
         validate.image_size(visualization_width, "visualization_width")
         validate.image_size(visualization_height, "visualization_height")
         if visualization_width != visualization_height:
@@ -232,13 +250,23 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         self.observation_width, self.observation_height = observation_width, observation_height
         self.visualization_width, self.visualization_height = visualization_width, visualization_height
         self.render_size = visualization_width
-        self.observation_space, self.action_space = gym_pusht_spaces(obs_type, observation_width, observation_height)
+        self.observation_space, self.action_space = gym_pusht_spaces(obs_type, observation_width, observation_height,
+                                                                     goal=goal != "fixed")
         self.k_p, self.k_v, self.control_hz, self.dt = frame.KP, frame.KV, 10, 0.01  # as gym-pusht names them
-        self.success_threshold = SUCCESS_COVERAGE
-        self._env = functional("cpu", obs_type, "target", observation_width, "gym-pusht", None, 10,
-                               variant="gym-pusht")
+        self._env = functional("cpu", obs_type, "target", observation_width, reset_kind, None, 10,
+                               variant="gym-pusht", success_threshold=success_threshold, goal=goal)
         self._state, self._last_action = None, None
         self._open_window()
+
+    @property
+    def success_threshold(self) -> float:
+        """The coverage an episode succeeds (terminates) at, and the reward's scale (gym-pusht's attribute)."""
+        return self._env.episode.success
+
+    @success_threshold.setter
+    def success_threshold(self, value: float) -> None:
+        # gym-pusht#24's workaround, `env.unwrapped.success_threshold = 0.9`, works here too: from the next step on
+        self._env.episode = dataclasses.replace(self._env.episode, success=value)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         seed = validate.seed(seed)
@@ -246,10 +274,13 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         super().reset(seed=seed)
         if "reset_to_state" in options:
             start = _check_state(options["reset_to_state"], 1)
-        else:  # gym-pusht's draws, in its order, from this env's generator
+        elif self._env.reset_kind == "gym-pusht":  # gym-pusht's draws, in its order, from this env's generator
             r = self.np_random
             start = frame.legacy_state_to_world([r.integers(50, 450), r.integers(50, 450), r.integers(100, 400),
                                                  r.integers(100, 400), r.uniform(-np.pi, np.pi)])
+        else:  # another start distribution (`easy`): the seed's start, as the functional env's (PushT-v0's rule)
+            seed = seed if seed is not None else int(self.np_random.integers(SEED_MAX))
+            start = start_poses([seed], reset=self._env.reset_kind)
         self._state = self._env.reset_to(start, [0 if seed is None else seed])
         self._last_action = None
         obs, info = self._view()
@@ -271,8 +302,13 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         s = self._state
         m = s.metrics
         cov = m["coverage"].item()
-        obs, info = gym_view_row(self.obs_type, {k: v[0] for k, v in s.obs.items()}, cov, bool(s.terminated[0]))
-        info = {**info, "reward": min(max(cov / SUCCESS_COVERAGE, 0.0), 1.0),  # reward_of, on a float
+        if "goal" in s.obs:  # random goals: the array view of this one row (the row view knows the fixed goal only)
+            obs, info = gym_view(self.obs_type, s.obs, m["coverage"], s.terminated, np, np.float64)
+            obs = {k: v[0] for k, v in obs.items()} if isinstance(obs, dict) else obs[0]
+            info = {k: v[0] for k, v in info.items()}
+        else:
+            obs, info = gym_view_row(self.obs_type, {k: v[0] for k, v in s.obs.items()}, cov, bool(s.terminated[0]))
+        info = {**info, "reward": min(max(cov / self.success_threshold, 0.0), 1.0),  # reward_of, on a float
                 "finite": bool(m["finite"][0]), "contained": bool(m["contained"][0])}
         if not (info["finite"] and info["contained"]):
             warn_broken(info)
@@ -298,21 +334,23 @@ class GymPushTVectorEnv(PushTVectorEnv):
                  block_cog=None, damping=None, observation_width: int = 96, observation_height: int = 96,
                  visualization_width: int = 680, visualization_height: int = 680, max_episode_steps: int = 300,
                  backend: str = "auto", autoreset_mode="next_step", array_type: str | None = "numpy",
-                 threads: int | None = None, depth: int = 8):
+                 threads: int | None = None, depth: int = 8, success_threshold: float | None = None,
+                 reset_kind: str = "gym-pusht", goal: str = "fixed"):
         _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping)
         self.observation_width, self.observation_height = observation_width, observation_height
         self.visualization_width, self.visualization_height = visualization_width, visualization_height
+        validate.choice("reset_kind", reset_kind, get_task("gym-pusht").resets + get_task("gym-pusht-easy").resets)
         super().__init__(num_envs, backend, obs_type, "target", render_mode, observation_width, visualization_width,
-                         "gym-pusht", max_episode_steps, 10, autoreset_mode, threads, array_type, depth,
-                         variant="gym-pusht")
+                         reset_kind, max_episode_steps, 10, autoreset_mode, threads, array_type, depth,
+                         variant="gym-pusht", success_threshold=success_threshold, goal=goal)
 
     @staticmethod
     def _check_args(obs_type, action_type, observation_size):
         pass  # checked by _check_kwargs, in gym-pusht's terms
 
     @staticmethod
-    def _single_spaces(obs_type, action_type, size, dtype):
-        return gym_pusht_spaces(obs_type, size, size, dtype)
+    def _single_spaces(obs_type, action_type, size, dtype, goal=False):
+        return gym_pusht_spaces(obs_type, size, size, dtype, goal)
 
     @staticmethod
     def _starts_in(starts, rows):
@@ -332,7 +370,7 @@ class GymPushTVectorEnv(PushTVectorEnv):
         obs, info = gym_view(self.obs_type, flat["obs"], cov, flat["terminated"], xp, self._dtype)
         info |= {"steps": flat["step"], "weld_gap_max_dev": flat["gap_max_dev"], "finite": flat["finite"],
                  "contained": flat["contained"]}
-        reward = reward_of(flat["reward"], xp)
+        reward = reward_of(flat["reward"], self._env.episode.success, xp)
         if xp is np:  # the host's convention, as SyncVectorEnv over gym-pusht's envs gives them
             info = {k: np.asarray(v, np.float64 if np.asarray(v).dtype.kind == "f" else
                                   (bool if np.asarray(v).dtype == bool else np.int64)) for k, v in info.items()}

@@ -82,7 +82,8 @@ def applies(env, state) -> bool:
     """The row step computes this env's control step for this state (else: the array path)."""
     data = state.data
     return (env.backend == "cpu" and not env.keep_states and len(state.step) == 1 and env.layout.tee is not None
-            and env.episode.terminate and len(getattr(data, "datas", ())) == 1)
+            and env.episode.terminate and len(getattr(data, "datas", ())) == 1
+            and "goal" not in state.carry)  # its coverage is the fixed target's
 
 
 def step_row(env, state, x: float, y: float):

@@ -25,3 +25,20 @@ def clear_of_tee(starts: np.ndarray, variant: str) -> np.ndarray:
             raise ConfigError(f"reset_to_state puts the pusher (radius {PUSHER_RADIUS} m) inside the T in row(s) "
                               f"{', '.join(map(str, r[:8]))}: {starts[r[0]].tolist()}")
     return starts
+
+
+
+def episode_with_goal(episode, goal: str, variant: str, pixels: int):
+    """The functional env's episodes with its goal option (task/goals.GOALS): random goals drawn in the variant's
+    walls. Pixels draw the target where the scene has it, at the origin, so random goals with pixel observations
+    are refused rather than drawn in the wrong place."""
+    import dataclasses
+
+    from mjx_pusht.task.goals import check, region
+
+    if check(goal) == "fixed":
+        return episode
+    if pixels:
+        raise ConfigError("random goals are not drawn in pixel observations yet (the target is the scene's, at the "
+                          "origin): use state or keypoints observations")
+    return dataclasses.replace(episode, goal=region(variant))

@@ -22,6 +22,7 @@ from mjx_pusht.envs.common import (
     single_spaces,
     warn_broken,
 )
+from mjx_pusht.task.goals import with_goal
 from mjx_pusht.envs.handoff import check_array_type, from_user, hand_off
 from mjx_pusht.render.pixels import IMAGE_SIZE
 from mjx_pusht.errors import ConfigError
@@ -64,7 +65,7 @@ class PushTVectorEnv(Pictures, VectorEnv):
                  render_size: int = 512, reset_kind: str = "task", max_episode_steps: int = 300,
                  frame_skip: int = 10, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
                  threads: int | None = None, array_type: str | None = None, depth: int = 8,
-                 variant: str = "chapter"):
+                 variant: str = "chapter", success_threshold: float | None = None, goal: str = "fixed"):
         from mjx_pusht.backends.base import resolve
         from mjx_pusht.backends.cpu import default_threads
         from mjx_pusht.envs.wrappers import AutoReset, StartPool
@@ -89,10 +90,10 @@ class PushTVectorEnv(Pictures, VectorEnv):
         self.render_size = render_size
         threads = validate.threads(threads) or (min(default_threads(), max(1, self.num_envs // 64)) if self.backend == "cpu" else 1)
         self._env = functional(self.backend, obs_type, action_type, observation_size, reset_kind,
-                                max_episode_steps, frame_skip, threads, variant)
+                                max_episode_steps, frame_skip, threads, variant, success_threshold, goal)
         self._dtype = np.float64 if self.backend == "cpu" else np.dtype(self._env.runner.dtype)
         self.single_observation_space, self.single_action_space = self._single_spaces(
-            obs_type, action_type, observation_size, self._dtype)
+            obs_type, action_type, observation_size, self._dtype, goal != "fixed")
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.metadata["render_fps"] = self._fps
@@ -109,6 +110,11 @@ class PushTVectorEnv(Pictures, VectorEnv):
         self._since_check = self._steps_since_reset = 0
         self._bad = []
         self._viewer = self._view_jit = None
+
+    @property
+    def success_threshold(self) -> float:
+        """The coverage an episode succeeds (terminates) at (set at make: `success_threshold=`)."""
+        return self._env.episode.success
 
     _check_args = staticmethod(check_kwargs)  # noqa: E303
     _single_spaces = staticmethod(single_spaces)
@@ -253,7 +259,7 @@ class PushTVectorEnv(Pictures, VectorEnv):
     def _arrays(self, flat: dict):
         """The gymnasium view of a state's arrays, then handed off: on the device in one jitted call,
         copied to the host first for NumPy."""
-        keys = {"state", "pusher_vel"} | ({"keypoints"} if self.obs_type == "keypoints" else set()) | (
+        keys = {"state", "pusher_vel", "goal"} | ({"keypoints"} if self.obs_type == "keypoints" else set()) | (
             {"pixels"} if self.obs_type.startswith("pixels") else set())
         flat = {**flat, "obs": {k: v for k, v in flat["obs"].items() if k in keys}}
         if self.array_type == "numpy":  # MuJoCo C's arrays are on the host already: no JAX on the cpu path
@@ -283,6 +289,8 @@ class PushTVectorEnv(Pictures, VectorEnv):
             "finite": flat["finite"],  # every state of the episode finite and bounded
             "contained": flat["contained"],  # the block and the pusher never left the walls (no missed contact)
         }
+        if "goal" in o:  # random goals: beside the T in the observation, and in info
+            obs, info["goal_pose"] = with_goal(obs, o["goal"], self.obs_type), o["goal"]
         if xp is np:  # the host's convention, as the single env and SyncVectorEnv give them
             info = {k: np.asarray(v, np.float64 if np.asarray(v).dtype.kind == "f" else
                                   (bool if np.asarray(v).dtype == bool else np.int64)) for k, v in info.items()}

@@ -37,8 +37,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from mjx_pusht import validate
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.controllers import seed_key
+from mjx_pusht.task.goals import draw
 from mjx_pusht.task.reset import SEED_MAX, start_poses
 from mjx_pusht.task.rules import coverage
 
@@ -91,8 +93,10 @@ class StartPool:
         self.seeds[slot, row] = seeds
         qpos = self.env.layout.initial_qpos(self.env.model, start_poses(seeds, reset=self.env.reset_kind))
         self.qpos[slot, row] = qpos
-        self.coverage[slot, row] = coverage(self.env.layout.tee_pose(qpos))
-        self.keys[slot, row] = seed_key(seeds)
+        tee, keys, goal = self.env.layout.tee_pose(qpos), seed_key(seeds), self.env.episode.goal
+        # against each episode's goal, which its reset draws from its key (task/goals.py)
+        self.coverage[slot, row] = coverage(tee) if goal is None else coverage(tee, draw(keys, goal, np.float64))
+        self.keys[slot, row] = keys
         self.dirty[slot, row] = True
         self.filled[rows] = self.used[rows] + self.depth
         return True
@@ -203,10 +207,8 @@ class AutoReset:
         import jax
         import jax.numpy as jnp
 
-        from mjx_pusht.envs.functional import _check_actions
-
-        n = len(state.step)
-        action = _check_actions(jnp.asarray(action), n)
+        n, action = len(state.step), jnp.asarray(action)
+        validate.actions_shape_on_device(action, n)  # (n, 2), never reshaped
         self.env._batch_fns(n)  # this batch size's renderer
         if n not in self._jitted:
             self._jitted[n] = jax.jit(self._step_batch, donate_argnums=(1,) if self.donate else ())

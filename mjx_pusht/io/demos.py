@@ -107,11 +107,14 @@ def rollout_batch(env, ctrl, seeds: np.ndarray, max_steps: int, encoder, writer:
 
 def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str = "auto", batch: int | None = None,
                 max_steps: int = 300, action: str | None = None, replace: bool = False, progress: bool = True,
-                successful_only: bool = False, share: bool = False) -> dict:
+                successful_only: bool = False, share: bool = False, success_threshold: float | None = None,
+                task: str = "gym-pusht") -> dict:
     """Roll out `controller` (`expert`: gym-pusht's task's expert) from each seed's gym-pusht start on the drop-in
     and write the episodes (with `successful_only`, those that succeeded) to `out` as a LeRobot dataset. An
     existing dataset in `out` is replaced only with `replace`, and only once the new one is complete. Returns a
-    summary (episodes run and written, frames, success rate, the failed seeds, seconds)."""
+    summary (episodes run and written, frames, success rate, the failed seeds, seconds). `success_threshold`: the
+    coverage an episode succeeds and ends at (None: the task's, 0.95). `task`: gym-pusht's, or a task on its scene
+    (`gym-pusht-easy`: its easy starts)."""
     import gymnasium as gym
 
     from mjx_pusht.backends.base import resolve
@@ -119,14 +122,21 @@ def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str =
     from mjx_pusht.task.controllers import ControllerError, describe
     from mjx_pusht.task.tasks import get as get_task
 
-    ctrl = get_task("gym-pusht").controller(controller, action=action)
+    task = get_task(task)
+    if task.variant != "gym-pusht":
+        raise ConfigError(f"the demos run on the gym-pusht drop-in: the {task.name} task is on the {task.variant} scene")
+    task.episode(success_threshold=success_threshold)  # a threshold outside (0, 1]: one line, before anything is written
+    ctrl = task.controller(controller, action=action)
     if ctrl.pixels:
         raise ControllerError(f"controller {controller!r} looks at the chapter scene's camera; the demos run "
                               "gym-pusht's scene: give a controller that reads the state")
     name, _ = resolve(backend)
     out = claim_out_dir(out, "demos", {"controller": controller, "seeds": seeds.tolist(), "backend": name,
                                        "max_steps": max_steps, "action": action,
-                                       **({"successful_only": True} if successful_only else {})}, replace=replace,
+                                       **({"successful_only": True} if successful_only else {}),
+                                       **({"task": task.name} if task.name != "gym-pusht" else {}),
+                                       **({"success_threshold": success_threshold} if success_threshold is not None else {})},
+                         replace=replace,
                          share=share)
     if (out / "meta" / "info.json").exists() and not replace:
         raise OutputError(f"--out {out} holds a LeRobot dataset; pass --replace to overwrite it, or choose another --out")
@@ -134,7 +144,8 @@ def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str =
     env = gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", num_envs=batch, vectorization_mode="vector_entry_point",
                        backend=name, obs_type="pixels_agent_pos", observation_width=IMAGE_SIZE,
                        observation_height=IMAGE_SIZE, render_mode=None, max_episode_steps=max_steps,
-                       autoreset_mode="disabled", array_type="numpy")
+                       autoreset_mode="disabled", array_type="numpy", success_threshold=success_threshold,
+                       reset_kind=task.reset)
     partial = out / ".demos-partial"
     remove_own(partial)
     t0 = time.perf_counter()

@@ -310,7 +310,8 @@ def record_episodes(path: Path, model: mujoco.MjModel, traced: Rollouts, everyon
             rr.log(root, rr.Transform3D(translation=[k * SEED_SPACING, 0, 0]), static=True)
             _log_static_scene(rr, root, model)
             _log_frames(rr, root, model, qpos, dt, f"plots/weld_gap/{label}")
-            cov = coverage_np(layout.tee_pose(qpos))
+            goal = traced.episode.get("goal")  # random goals: each episode's own target
+            cov = coverage_np(layout.tee_pose(qpos), *(() if goal is None else (goal[k],)))
             tl = rr.TimeColumn("sim_time", duration=np.arange(frames) * dt)
             rr.send_columns(f"plots/coverage/{label}", indexes=[tl], columns=rr.Scalars.columns(scalars=cov))
             steps = np.arange(1, frames // fs + 1) * fs  # the frame that ends each control step

@@ -155,6 +155,9 @@ def evals_report(first: Path, second: Path) -> dict:
         if c_cpu.get(key) != c.get(key):
             raise ConfigError(f"the two evals differ in {key} ({c_cpu.get(key)!r} on the cpu, {c.get(key)!r} on "
                               f"{c['backend']}): their episodes are not the same episodes")
+    if s_cpu.get("success_coverage") != s_mjx.get("success_coverage"):  # every eval's summary has it
+        raise ConfigError(f"the two evals judged success at other coverages ({s_cpu.get('success_coverage')} on the "
+                          f"cpu, {s_mjx.get('success_coverage')} on {c['backend']}): their verdicts do not pair")
     if len(cpu_r) != len(mjx_r) or not np.array_equal(np.unique(cpu_r.seeds), np.unique(mjx_r.seeds)) \
             or len(np.unique(cpu_r.seeds)) != len(cpu_r):
         only_cpu, only_mjx = np.setdiff1d(cpu_r.seeds, mjx_r.seeds), np.setdiff1d(mjx_r.seeds, cpu_r.seeds)

@@ -11,14 +11,15 @@ import numpy as np
 
 
 def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str | None = None, task: str = "chapter",
-             reset: str | None = None,
+             reset: str | None = None, success_threshold: float | None = None, goal: str = "fixed",
              break_it: str = "none", max_steps: int = 300, frame_skip: int = 10, params=(), chunk: int | None = None,
              resume: bool = False, replace: bool = False, progress: bool = True, record: int = 4, rerun: bool = True,
              video: Path | None = None, video_episodes: int = 16, video_size: int = 128, share: bool = False) -> dict:
     """Run `controller` (a `task.controllers.load` spec: `expert`, `policy:PATH`, ...) for an episode from each
     seed's start state (`seeds`: an array, or a spec such as "512" or "A:B") on `backend`, into `out`; returns
     the summary (also written as summary.json). `task`: task/tasks.TASKS (`expert` is its expert; `reset` None:
-    its default starts). `params`: (name, values) pairs swept as a grid.
+    its default starts; `success_threshold` None: its own success coverage; `goal`: "fixed", or "random", a goal
+    per episode from its seed, toward which a controller of the fixed goal acts from the goal's frame). `params`: (name, values) pairs swept as a grid.
 
     Bad input (a controller that cannot load, a video name without an encoder) fails before anything is
     written. Interrupted, the finished chunks stay in `out` (finished with `resume=True`) and the
@@ -40,8 +41,8 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
     params = tuple((n, tuple(v)) for n, v in params)
     the_task = get_task(task)
     reset = the_task.check_reset(reset)
-    episode = the_task.episode(max_steps, frame_skip)
-    spec, controller = controller, the_task.controller(controller, action=action, frame_skip=frame_skip)
+    episode = the_task.episode(max_steps, frame_skip, success_threshold, goal)
+    spec, controller = controller, the_task.controller(controller, action=action, frame_skip=frame_skip, goal=goal)
     if video is not None:
         from mjx_pusht.io.video import check_grid, check_path
 
@@ -49,7 +50,7 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
         check_grid(video_size, min(video_episodes, len(seeds)), max_steps)
     name, why = resolve(backend)
     config = {"command": "eval", "backend": name, "controller": spec, "action": controller.action_type,
-              "task": task, "reset": reset, "break_it": break_it, "max_steps": max_steps,
+              "task": task, "reset": reset, "success_threshold": episode.success, "goal": goal, "break_it": break_it, "max_steps": max_steps,
               "frame_skip": frame_skip, "params": [[n, list(v)] for n, v in params],
               "controller_sha256": policy_sha256(spec)}
     scenario = Scenario(the_task.scene(break_it), params=params, reset=reset, controller=controller, episode=episode)

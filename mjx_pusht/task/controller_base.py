@@ -29,6 +29,9 @@ class Controller:
     # The side of the top-camera image the controller looks at, in obs["pixels"] (each backend renders it for
     # every control step; render/pixels.py); 0: it reads the state alone, and nothing is rendered.
     pixels: ClassVar[int] = 0
+    # Whether it pushes toward obs["goal"] (random goals, task/goals.py) itself; if not, it runs on random goals
+    # seeing the scene from each goal's frame (task/goals.GoalFrame).
+    reads_goal: ClassVar[bool] = False
 
     def __post_init__(self) -> None:
         if self.action_type not in ACTION_TYPES:

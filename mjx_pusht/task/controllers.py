@@ -17,6 +17,7 @@ import dataclasses
 import importlib
 import math
 from collections.abc import Callable
+from typing import ClassVar
 
 import numpy as np
 
@@ -123,6 +124,7 @@ class Expert(Controller):
     """A scripted closed-loop pusher that solves PushT: turn, then translate, then trim."""
 
     name: str = "expert"
+    reads_goal: ClassVar[bool] = True  # pushes toward obs["goal"] when there is one
     yaw_enter: float = 0.15  # a push that drifts the yaw past this stops to turn
     yaw_done: float = 0.006  # a turn stops here
     pos_tol: float = 0.0007  # per body axis, m
@@ -149,11 +151,14 @@ class Expert(Controller):
         def to_body(v):
             return xp.stack([c * v[..., 0] + sn * v[..., 1], -sn * v[..., 0] + c * v[..., 1]], axis=-1)
         q = to_body(p - o)  # pusher, body frame
+        # the T's offset from the goal and the yaw it ends at: an episode's own goal (task/goals.py) if it has one.
+        # The walls stay where they are in the world, and the pushes along world x and y (the joints) stay so too.
+        eo, yaw_goal = (o, 0.0) if "goal" not in obs else (o - obs["goal"][..., 0:2], obs["goal"][..., 2])
         # Far from the target the T is translated at the multiple of 90 degrees nearest its yaw (its
         # faces then meet world x and y square on), never with its stem toward a wall it must be
         # pushed away from (no room behind the stem); near the target it turns to yaw 0 itself.
         # (bit NEAR of the carry latches "near", so the boundary cannot flip the target back and forth)
-        reach = xp.maximum(xp.abs(o[..., 0]), xp.abs(o[..., 1]))
+        reach = xp.maximum(xp.abs(eo[..., 0]), xp.abs(eo[..., 1]))
         was_near = (mode & NEAR) != 0
         far = xp.where(was_near, reach > self.near + 0.04, reach > self.near)
         reverse = (mode & REVERSE) != 0
@@ -167,10 +172,10 @@ class Expert(Controller):
             better = cost < best if best is not None else xp.ones_like(far)
             psi = xp.where(better, psi_k, psi)
             best = cost if best is None else xp.minimum(best, cost)
-        eth = wrap_angle(xp.where(far, psi, 0.0) - th)
+        eth = wrap_angle(xp.where(far, psi, yaw_goal) - th)
         # Translation errors in the world frame: x and y are separate joints, each with its own
         # 1.2 N of frictionloss, so a push along world x through the origin moves world x alone.
-        ex, ey = xp.abs(o[..., 0]), xp.abs(o[..., 1])
+        ex, ey = xp.abs(eo[..., 0]), xp.abs(eo[..., 1])
         ae = xp.abs(eth)
 
         # which move: hysteresis so a move is finished before the next one starts
@@ -194,8 +199,8 @@ class Expert(Controller):
         # the bar's top), where the push's line through the origin crosses that face, shifted by
         # `lat` to steer the yaw (the torque of a unit push at c along n is c_x n_y - c_y n_x)
         is_x = (mode == PUSH_X)[..., None]
-        w = xp.where(is_x, xp.stack([xp.where(o[..., 0] <= 0, 1.0, -1.0), zero], -1),
-                     xp.stack([zero, xp.where(o[..., 1] <= 0, 1.0, -1.0)], -1))
+        w = xp.where(is_x, xp.stack([xp.where(eo[..., 0] <= 0, 1.0, -1.0), zero], -1),
+                     xp.stack([zero, xp.where(eo[..., 1] <= 0, 1.0, -1.0)], -1))
         nb = to_body(w)
         along_x = xp.abs(nb[..., 0]) >= xp.abs(nb[..., 1])
         gx, gy = xp.where(nb[..., 0] >= 0, 1.0, -1.0), xp.where(nb[..., 1] >= 0, 1.0, -1.0)

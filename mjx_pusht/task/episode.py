@@ -11,6 +11,7 @@ import dataclasses
 
 import numpy as np
 
+from mjx_pusht.task.goals import draw
 from mjx_pusht.task.invariants import invariants_fold, invariants_init, invariants_update
 from mjx_pusht.task.rules import (
     SUCCESS_COVERAGE,
@@ -39,6 +40,8 @@ class Episode:
     # A start that is already covered: over at reset (this project's rule: nothing left to do), or,
     # as gym-pusht does, run until its first step scores it (reward 1, terminated).
     end_covered_start: bool = True
+    # Random goals: the region they are drawn in (task/goals.region, from the scene's walls); None: the fixed target.
+    goal: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         from mjx_pusht import validate
@@ -47,7 +50,7 @@ class Episode:
         # an env's own episodes may run to the int32 step counters' end (envs.common.NEVER: gymnasium's TimeLimit
         # truncates); a backend's rollout is a scan of max_steps, bounded by Scenario at validate.MAX_STEPS
         validate.steps("max_steps", self.max_steps, 2**31 - 1)
-        validate.fraction("success", self.success)  # NaN never ends an episode, 2.0 never succeeds, 0 always does
+        validate.fraction("success_threshold", self.success)  # NaN never ends an episode, 2.0 never succeeds, 0 always does
 
     @property
     def physics_steps(self) -> int:
@@ -67,27 +70,38 @@ def _where(xp, cond, old, new):
 
 def begin(layout, qpos0, key, controller, episode: Episode, xp, coverage0=None):
     """The rollout's carry at reset: invariants, episode bookkeeping, the controller's state, the poses at the end.
-    `coverage0`: the start's coverage, when already known (an autoreset pool computes it once, ahead)."""
+    `coverage0`: the start's coverage, when already known (an autoreset pool computes it once, ahead). With random
+    goals (`episode.goal`) the episode draws its goal from its key here (task/goals.py), carries it, observes it and
+    is scored against it; a fixed goal carries nothing (the episodes of before goals, to the bit)."""
     tee = layout.tee_pose(qpos0)
     n = tee.shape[:-1]
     acc = invariants_init(n[0] if n else 1, xp)
     if not n:  # one world (under vmap): drop the batch axis invariants_init adds
         acc = {k: v[0] for k, v in acc.items()}
     acc = {k: (xp.astype(v, qpos0.dtype) if v.dtype != xp.bool else v) for k, v in acc.items()}
-    return {
+    target = () if episode.goal is None else (draw(key, episode.goal, tee.dtype),)
+    carry = {
         "inv": acc,
-        "ep": episode_init(coverage(tee) if coverage0 is None else xp.astype(coverage0, tee.dtype), episode.success,
-                           episode.terminate and episode.end_covered_start, xp),
+        "ep": episode_init(coverage(tee, *target) if coverage0 is None else xp.astype(coverage0, tee.dtype),
+                           episode.success, episode.terminate and episode.end_covered_start, xp),
         "ctrl": controller.init(key),
         "final": tee,
         "pusher_final": layout.pusher_xy(qpos0),
     }
+    return {**carry, "goal": target[0]} if target else carry
+
+
+def goal_of(carry) -> tuple:
+    """The episode's goal as `coverage`'s target argument: (goal,), or () for the fixed target."""
+    return (carry["goal"],) if "goal" in carry else ()
 
 
 def act(carry, qpos, k, key, controller, layout, xp, image=None):
     """A controller's action for control step k from the observation of `qpos` (and `image`, the top camera's
     view of it, for a controller that looks: `controller.pixels`), and its next state."""
     obs = observe(layout.pusher_xy(qpos), layout.tee_pose(qpos))
+    if "goal" in carry:
+        obs["goal"] = carry["goal"]
     if image is not None:
         obs["pixels"] = image
     action, cstate = controller.act(carry["ctrl"], obs, k, key)
@@ -135,7 +149,7 @@ def after_control_step(carry, k, layout, qpos, episode: Episode, xp):
         # A study of a fixed schedule (the sweep) is scored once, from its final pose, on the host:
         # no coverage per step inside its 160-step scan.
         return {**carry, "final": tee, "pusher_final": layout.pusher_xy(qpos)}
-    ep = episode_update(carry["ep"], coverage(tee), k, episode.success, episode.terminate)
+    ep = episode_update(carry["ep"], coverage(tee, *goal_of(carry)), k, episode.success, episode.terminate)
     if all_live(carry["ep"]["done"]):  # every row live: the selects below would pick the new poses
         return {**carry, "ep": ep, "final": tee, "pusher_final": layout.pusher_xy(qpos)}
     return {

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import ClassVar
 
 import numpy as np
 
@@ -73,6 +74,7 @@ class ExpertGymPusht(Controller):
 
     name: str = "expert-gym-pusht"
     action_type: str = "target"
+    reads_goal: ClassVar[bool] = True  # pushes toward obs["goal"] when there is one
     turn_px: float = 60.0  # px of COG error one radian of yaw error weighs as
     gap: float = 8.0  # px: a push starts this far from its face
     margin: float = 8.0  # px: the travel ring's clearance beyond the agent's radius
@@ -105,7 +107,11 @@ class ExpertGymPusht(Controller):
 
         cog_x = o[..., 0] - sn[..., 0] * COG[1]
         cog_y = o[..., 1] + c[..., 0] * COG[1]
-        err = xp.stack([GOAL_COG[0] - cog_x, GOAL_COG[1] - cog_y, self.turn_px * wrap_angle(GOAL_ANGLE - a)], -1)
+        goal_x, goal_y, goal_a = GOAL_COG[0], GOAL_COG[1], GOAL_ANGLE
+        if "goal" in obs:  # an episode's own goal (task/goals.py): its COG and angle in pixels, the walls as they are
+            go, goal_a = frame.pose_to_px(obs["goal"], xp)
+            goal_x, goal_y = go[..., 0] - xp.sin(goal_a) * COG[1], go[..., 1] + xp.cos(goal_a) * COG[1]
+        err = xp.stack([goal_x - cog_x, goal_y - cog_y, self.turn_px * wrap_angle(goal_a - a)], -1)
 
         # each contact's twist per pixel pushed (world x, y, weighted yaw), and the push that best cuts the error
         kt, kw = (xp.asarray(v, dtype=dt) for v in _twists(CONTACTS))

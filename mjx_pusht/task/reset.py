@@ -11,6 +11,12 @@ so seed s starts the same in a batch of a million as alone, on every backend:
 - `gym-pusht`: gym-pusht's own reset, for the gym-pusht scene: its five draws (agent x, y and
   block x, y as integer pixels, then the angle) from the same generator, placed as it places
   them (model/gym_pusht.py), so a seed starts where gym-pusht's `reset(seed=seed)` does.
+- `easy`: a start to debug a policy on (gym-pusht#18 asks for "a trivial variant"), on either scene:
+  the tee 1.5 to 4 cm from the target in any direction (distance, then direction), its yaw within
+  +-0.3 rad, then the pusher just clear of the T's reach in any direction (an angle). Never covered
+  at reset (the most covered of 200,000 seeds' starts is 0.78: the 1.5 cm alone uncovers the T well
+  past 5%; test), and both tasks' experts
+  succeed from it in a few dozen control steps (docs/task.md).
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ import numpy as np
 
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model.layout import PUSHER_START_Y
-from mjx_pusht.task.rules import distance_to_tee
+from mjx_pusht.task.rules import T_REACH, distance_to_tee
 
 # numpy's SeedSequence takes any non-negative int; the tables' int64 seed column holds up to this
 SEED_MAX = 2**63 - 1
@@ -29,7 +35,7 @@ SEED_MAX = 2**63 - 1
 TEE_X_RANGE = (-0.03, 0.03)
 TEE_Y_RANGE = (0.02, 0.06)
 TEE_YAW_RANGE = (-0.2, 0.2)
-RESETS = ("chapter", "task", "gym-pusht")
+RESETS = ("chapter", "task", "gym-pusht", "easy")
 
 # task: the walls' inner faces are at +-0.39 m. A tee centre within TASK_TEE_HALF keeps every point
 # of the T (reach 0.106 m) 1 cm clear of them; a pusher centre within TASK_PUSHER_HALF keeps the
@@ -39,6 +45,12 @@ TASK_PUSHER_HALF = 0.36
 PUSHER_RADIUS = 0.015
 CLEARANCE = 0.01
 PUSHER_TRIES = 16  # a draw lands on the (inflated) T with p < 0.05, so 16 tries all fail with p < 1e-20
+
+# easy: the tee's offset from the target (m) and its yaw (rad); the pusher this far from the tee's origin, clear of
+# every point of the T (T_REACH) by CLEARANCE: 0.131 m, inside either scene's walls from a tee this near the target
+EASY_OFFSET = (0.015, 0.04)
+EASY_YAW = 0.3
+EASY_PUSHER = T_REACH + PUSHER_RADIUS + CLEARANCE
 
 
 def start_pose(seed: int) -> tuple[float, float, float]:
@@ -68,8 +80,8 @@ def start_state(seed: int, reset: str = "chapter") -> tuple[float, ...]:
         return (*start_pose(seed), 0.0, PUSHER_START_Y)
     if reset == "task":
         return task_start(seed)
-    if reset == "gym-pusht":
-        return tuple(float(v) for v in gym_pusht_starts([seed])[0])
+    if reset in ("gym-pusht", "easy"):
+        return tuple(float(v) for v in start_poses([seed], reset=reset)[0])
     raise ConfigError(f"unknown reset {reset!r}; choose from {', '.join(RESETS)}")
 
 
@@ -77,8 +89,8 @@ _BLOCK = 1 << 16  # seeds per block: the uint64 temporaries stay in cache
 
 
 def start_poses(seeds: Sequence[int] | np.ndarray, *, reset: str = "chapter") -> np.ndarray:
-    """(N, 3) float64 tee start poses for `chapter` ((N, 5) with the pusher's (x, y) for `task`),
-    row i exactly what seed i's own `default_rng` draws (`start_pose`, `task_start`).
+    """(N, 3) float64 tee start poses for `chapter` ((N, 5) with the pusher's (x, y) for the others),
+    row i exactly what seed i's own `default_rng` draws (`start_pose`, `task_start`, the `easy` draws in order).
 
     The generators are computed for all seeds at once (pcg64.Streams, well under 1 us a seed),
     not constructed one by one (~20 us a seed).
@@ -100,6 +112,10 @@ def _draw(seeds: np.ndarray, reset: str) -> np.ndarray:
     st = Streams(seeds)
     if reset == "chapter":
         return np.stack([st.uniform(*TEE_X_RANGE), st.uniform(*TEE_Y_RANGE), st.uniform(*TEE_YAW_RANGE)], axis=-1)
+    if reset == "easy":
+        dist, heading, yaw = st.uniform(*EASY_OFFSET), st.uniform(-np.pi, np.pi), st.uniform(-EASY_YAW, EASY_YAW)
+        x, y, side = dist * np.cos(heading), dist * np.sin(heading), st.uniform(-np.pi, np.pi)
+        return np.stack([x, y, yaw, x + EASY_PUSHER * np.cos(side), y + EASY_PUSHER * np.sin(side)], axis=-1)
     tee = np.stack([st.uniform(-TASK_TEE_HALF, TASK_TEE_HALF), st.uniform(-TASK_TEE_HALF, TASK_TEE_HALF),
                     st.uniform(-np.pi, np.pi)], axis=-1)
     pusher = np.empty((len(seeds), 2))

@@ -22,13 +22,14 @@ __all__ = ["SUCCESS_COVERAGE", "T_AREA", "T_REACH", "T_RECTS", "TARGET_POSE", "c
 
 
 def task_score(final: np.ndarray, target=TARGET_POSE) -> dict[str, np.ndarray]:
-    """Per seed: position error (m), yaw error wrapped to (-pi, pi], coverage, and success (coverage >= 0.95)."""
+    """Per seed: position error (m), yaw error wrapped to (-pi, pi], coverage, and success (coverage >= 0.95), against
+    the target pose, or (N, 3) targets (random goals: each row's own)."""
     final = np.atleast_2d(np.asarray(final, np.float64))
-    tgt = np.asarray(target, float)
+    tgt = np.broadcast_to(np.asarray(target, float), final.shape)
     cov = coverage(final, tgt)
     return {
-        "pos_err": np.hypot(final[:, 0] - tgt[0], final[:, 1] - tgt[1]),
-        "yaw_err": wrap_angle(final[:, 2] - tgt[2]),
+        "pos_err": np.hypot(final[:, 0] - tgt[:, 0], final[:, 1] - tgt[:, 1]),
+        "yaw_err": wrap_angle(final[:, 2] - tgt[:, 2]),
         "coverage": cov,
         "success": cov >= SUCCESS_COVERAGE,
     }

@@ -1,7 +1,7 @@
 """The tasks: which PushT a run is on, as data the one control step reads.
 
 A task names the scene variant it runs on, its reset (seed -> start), what an action means on that
-scene, when an episode ends, and its expert. There are two:
+scene, when an episode ends, and its expert. There are two, and an easy variant of gym-pusht's:
 
 - `chapter`: this project's PushT, the chapter's scene (joint friction, velocity servos), its `task`
   start distribution (or the chapter's own `chapter` reset), an episode over at reset if it starts covered.
@@ -9,6 +9,9 @@ scene, when an episode ends, and its expert. There are two:
   pymunk physics in MJCF, model/gym_pusht_scene.py), gym-pusht's seed -> start, actions as targets
   tracked by its PD law, success at coverage 0.95, 300 control steps, and a start on the goal scored by
   the first step (as gym-pusht does).
+- `gym-pusht-easy`: gym-pusht's task from the `easy` starts (task/reset.py: the tee a few cm and degrees off the
+  target, the pusher beside it), which its expert solves in a few dozen steps: a trivial variant to debug a
+  policy or a training set-up on (gym-pusht#18). The chapter's task takes the same starts as `--reset easy`.
 
 Every backend runs either task through the same rollout; `eval --backend gym-pusht` runs the second in
 gym-pusht itself. A controller written for velocities runs on gym-pusht's scene through `as_targets`.
@@ -62,12 +65,18 @@ class Task:
 
         return SceneSpec(break_it, variant=self.variant)
 
-    def episode(self, max_steps: int | None = None, frame_skip: int | None = None):
+    def episode(self, max_steps: int | None = None, frame_skip: int | None = None,
+                success_threshold: float | None = None, goal: str = "fixed"):
+        """This task's episodes: its own length, frame skip and success coverage unless given (a threshold outside
+        (0, 1] is a one-line error, Episode's check), toward the fixed goal or random ones (task/goals.py)."""
         from mjx_pusht.task.episode import Episode
+        from mjx_pusht.task.goals import check, region
 
         return Episode(frame_skip=self.frame_skip if frame_skip is None else frame_skip,
-                       max_steps=self.max_steps if max_steps is None else max_steps, success=self.success,
-                       end_covered_start=self.end_covered_start)
+                       max_steps=self.max_steps if max_steps is None else max_steps,
+                       success=self.success if success_threshold is None else success_threshold,
+                       end_covered_start=self.end_covered_start,
+                       goal=region(self.variant) if check(goal) == "random" else None)
 
     def from_velocity(self, action, obs):
         """A velocity command as this task's scene takes it: itself, or (targets) the target that reaches it."""
@@ -75,16 +84,20 @@ class Task:
             return action
         return obs["state"][..., 0:2] + LEAD * action
 
-    def controller(self, spec: str, *, action: str | None = None, frame_skip: int = 10) -> Controller:
-        """The controller `spec` names (`expert`: this task's expert), commanding what this task's scene takes."""
+    def controller(self, spec: str, *, action: str | None = None, frame_skip: int = 10, goal: str = "fixed") -> Controller:
+        """The controller `spec` names (`expert`: this task's expert), commanding what this task's scene takes; for
+        random goals, seeing the scene from each episode's goal (task/goals.GoalFrame) unless it reads obs["goal"]
+        itself (`reads_goal`)."""
         from mjx_pusht.task.controllers import load
+        from mjx_pusht.task.goals import check, in_goal_frame
 
         ctrl = load(self.expert if spec == "expert" else spec, action_type=action, frame_skip=frame_skip)
-        return as_targets(ctrl) if self.action_type == "target" and ctrl.action_type != "target" else ctrl
+        ctrl = as_targets(ctrl) if self.action_type == "target" and ctrl.action_type != "target" else ctrl
+        return in_goal_frame(ctrl) if check(goal) == "random" and not ctrl.reads_goal else ctrl
 
 
 TASKS = {
-    "chapter": Task("chapter", "chapter", ("task", "chapter"), "velocity", "expert", end_covered_start=True,
+    "chapter": Task("chapter", "chapter", ("task", "chapter", "easy"), "velocity", "expert", end_covered_start=True,
                     about="this project's PushT: the chapter's scene and its task starts"),
     "gym-pusht": Task("gym-pusht", "gym-pusht", ("gym-pusht",), "target", "expert-gym-pusht", end_covered_start=False,
                       about="gym-pusht 0.1.8's PushT: its physics, starts, PD-tracked targets and success rule",
@@ -94,6 +107,9 @@ TASKS = {
                       # stood still short of it (91.2%, 94.6% held-out); with 0.01, 98.4-99.0% (notebook lead10)
                       action_eps=0.01),
 }
+TASKS["gym-pusht-easy"] = dataclasses.replace(
+    TASKS["gym-pusht"], name="gym-pusht-easy", resets=("easy",),
+    about="gym-pusht's task from easy starts (the T a few cm off the target): its expert succeeds in a few dozen steps")
 
 
 def get(name: str) -> Task:
@@ -113,6 +129,10 @@ class AsTargets(Controller):
     @property
     def pixels(self) -> int:
         return self.inner.pixels
+
+    @property
+    def reads_goal(self) -> bool:
+        return self.inner.reads_goal
 
     def init(self, key):
         return self.inner.init(key)
@@ -137,6 +157,10 @@ class AsVelocities(Controller):
 
     inner: Controller | None = None
     action_type: str = "velocity"
+
+    @property
+    def reads_goal(self) -> bool:
+        return self.inner.reads_goal
 
     def init(self, key):
         return self.inner.init(key)

@@ -112,6 +112,12 @@ class DaggerConfig:
     # setting existed still matches). On gym-pusht's task the teacher is its expert, whose targets are taught as the
     # velocities that reach them (`Task.velocity_of`): a policy acts in velocities on either task.
     task: str | None = None
+    # The coverage an episode succeeds (and ends) at, in training and in every judgement; None: the task's own (0.95;
+    # and a resume file from before this setting existed still matches).
+    success_threshold: float | None = None
+    # Goals (task/goals.py): "random", a goal per episode, the student reading it (a goal-conditioned policy: its
+    # features gain the goal's, train/policy.features); None: the fixed goal (a resume file from before matches).
+    goal: str | None = None
     # The actions' loss weighs each sample's squared error by (0.1^2 + eps^2) / (|label|^2 + eps^2) (eps in m/s; None:
     # plain squared error, as before this setting existed): an error relative to the label's size above eps, a label
     # of 0.1 m/s (what MEMORY_WEIGHT is balanced against) weighed about as before. Why: near the goal
@@ -133,6 +139,9 @@ class DaggerConfig:
             raise ConfigError(f"{self.envs} envs x {self.iterations} iterations would reach the held-out seeds "
                               f"({HELD_OUT_FIRST}+)")
         self.the_task.check_reset(self.reset)
+        self.episode()  # a success threshold outside (0, 1] or an unknown goal is a one-line error now
+        if self.goal_conditioned and self.obs_type.startswith("pixels"):
+            raise ConfigError("--goal random trains from state or keypoints: pixels draw the target at the centre")
         if self.teacher not in TEACHERS:
             raise ConfigError(f"unknown teacher {self.teacher!r}; choose from {', '.join(TEACHERS)}")
         if self.the_task.name != "chapter" and self.teacher != "expert":
@@ -156,6 +165,15 @@ class DaggerConfig:
 
         return get(self.task or "chapter")
 
+    def episode(self):
+        """The episodes trained and judged on: the task's, at `max_steps` and `success_threshold`."""
+        return self.the_task.episode(max_steps=self.max_steps, success_threshold=self.success_threshold,
+                                     goal=self.goal or "fixed")
+
+    @property
+    def goal_conditioned(self) -> bool:
+        return self.goal == "random"
+
     @property
     def memory(self):
         """The format of the teacher's carry, which the student keeps as its memory (task/memory.py)."""
@@ -176,7 +194,7 @@ class DaggerConfig:
     @property
     def sample_width(self) -> int:
         """A dataset row's width: the features, after the image's key for a pixel student."""
-        return feature_size(self.obs_type, self.memory) + (RENDER_KEY if self.image else 0)
+        return feature_size(self.obs_type, self.memory, self.goal_conditioned) + (RENDER_KEY if self.image else 0)
 
     def beta(self, iteration: int) -> float:
         return self.beta_decay ** iteration
@@ -266,7 +284,7 @@ class Rollouts:
                 break
             live = ~done
             live[learn:] = False  # judged only: their samples are not learned from
-            x = features(s.obs, cfg.obs_type, memory, cfg.memory)
+            x = features(s.obs, cfg.obs_type, memory, cfg.memory, cfg.goal_conditioned)
             label, label_memory = self.expert.act(memory, s.obs, s.step, s.key)
             student = apply(params, meta, x, s.obs.get("pixels"))
             action, memory = _choose(np, (label, label_memory), student, gen.random(len(seeds)) < beta)
@@ -310,7 +328,7 @@ class Rollouts:
 
         def one(s, memory, beta, key, t):
             live = ~s.carry["ep"]["done"]
-            x = features(s.obs, cfg.obs_type, memory, cfg.memory).astype(jnp.float32)
+            x = features(s.obs, cfg.obs_type, memory, cfg.memory, cfg.goal_conditioned).astype(jnp.float32)
             label, label_memory = self.expert.act(memory, s.obs, s.step, s.key)
             take = jax.random.uniform(jax.random.fold_in(key, t)) < beta
             action, memory = _choose(jnp, (label, label_memory), apply(params, meta, x, s.obs.get("pixels")), take)

@@ -27,7 +27,7 @@ import numpy as np
 from mjx_pusht.model import gym_pusht as frame
 from mjx_pusht.task.controllers import ControllerError, seed_key
 from mjx_pusht.task.rules import observe
-from mjx_pusht.task.tasks import as_targets
+from mjx_pusht.task.tasks import TASKS, as_targets
 
 
 class GymPushtPolicy:
@@ -39,8 +39,10 @@ class GymPushtPolicy:
         self.controller = load_policy(f"policy:{path}")
         meta = self.controller.meta
         task = (meta.get("config") or {}).get("task") or "chapter"
-        if task != "gym-pusht":
+        if task not in TASKS or TASKS[task].variant != "gym-pusht":  # gym-pusht's task, or its easy variant
             raise ControllerError(f"policy {path} was trained on the {task} task, not gym-pusht's (train --task gym-pusht)")
+        if self.controller.reads_goal:
+            raise ControllerError(f"policy {path} reads a goal per episode (train --goal random); gym-pusht's is fixed")
         self.obs_type = "pixels_agent_pos" if self.controller.pixels else "state"
         self._targets = as_targets(self.controller)
         self._key = seed_key([seed])  # a sampling policy's draws are keyed by seed and step

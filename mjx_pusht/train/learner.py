@@ -27,7 +27,7 @@ class Learner:
             raise ConfigError("a pixel student's Learner needs the env's renderer (PushTEnv.images)")
         self.cfg = cfg
         self.model = network(cfg.hidden, cfg.activation, cfg.image, 2 + cfg.memory.size)
-        width = feature_size(cfg.obs_type, cfg.memory)
+        width = feature_size(cfg.obs_type, cfg.memory, cfg.goal_conditioned)
         image = (jnp.zeros((1, cfg.image, cfg.image, 3), jnp.uint8), jnp.zeros((1, 2))) if cfg.image else ()  # image, pusher
         self._init = lambda key: self.model.init(key, jnp.zeros((1, width)), *image)["params"]
         # Each fit anneals the learning rate from its value to 5% (cosine, restarted every iteration): the

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pusht.task.controllers import Controller, ControllerError
+from mjx_pusht.task.goals import goal_features
 from mjx_pusht.task.memory import CHAPTER, CarryFormat
 from mjx_pusht.task.rules import CTRL_LIMIT, array_namespace
 from mjx_pusht.train.layers import activation as _activation
@@ -63,9 +64,14 @@ MEMORY_SIZE = CHAPTER.size  # its one-hot / bit encoding in the features
 OUTPUTS = 2 + CHAPTER.size  # action, move logits, latch logits
 
 
-def feature_size(obs_type: str, fmt: CarryFormat = CHAPTER) -> int:
-    """The width of `features` (a pixel policy's features are what it reads beside the image)."""
-    return {"state": 8, "keypoints": 18, "pixels_agent_pos": 2}[obs_type] + fmt.size
+GOAL_FEATURES = {"state": 8, "keypoints": 16}  # a goal-conditioned policy's goal features (`features`)
+
+
+def feature_size(obs_type: str, fmt: CarryFormat = CHAPTER, goal: bool = False) -> int:
+    """The width of `features` (a pixel policy's features are what it reads beside the image; `goal`: a
+    goal-conditioned policy's, its goal's features added)."""
+    return {"state": 8, "keypoints": 18, "pixels_agent_pos": 2}[obs_type] + fmt.size + (
+        GOAL_FEATURES[obs_type] if goal else 0)
 
 
 def conv_out(size: int) -> int:
@@ -75,19 +81,23 @@ def conv_out(size: int) -> int:
     return size
 
 
-def features(obs: dict, obs_type: str, memory, fmt: CarryFormat = CHAPTER):
+def features(obs: dict, obs_type: str, memory, fmt: CarryFormat = CHAPTER, goal: bool = False):
     """The network's input from an observation dict and the policy's memory, (..., feature_size).
 
     state: pusher (x, y), tee (x, y), cos and sin of its yaw (the yaw wraps at +-pi; its cosine and
     sine do not), and the pusher in the tee's body frame (where a push meets the T is the question
     a pusher answers, and it is a rotation away from the world frame). keypoints: the T's 8 corners
     and the pusher (x, y). pixels_agent_pos: the pusher (x, y) only (the T is in the image, read by
-    `apply`'s convolutions). All end with the memory in `fmt`: its move one-hot, then its latch bits.
+    `apply`'s convolutions). `goal` (a goal-conditioned policy, obs["goal"]): then the goal's (x, y), the cosine and
+    sine of its yaw, the T's offset from it in its frame and the cosine and sine of the T's yaw from it (state), or
+    the goal T's 8 corners (keypoints). All end with the memory in `fmt`: its move one-hot, then its latch bits.
     """
     xp = array_namespace(obs["state"])
     s = obs["state"]
     p = s[..., 0:2]
     mem = fmt.encode(memory, s.dtype)
+    if goal:
+        mem = xp.concat([goal_features(obs, obs_type), mem], axis=-1)
     if obs_type == "keypoints":
         return xp.concat([obs["keypoints"], p, mem], axis=-1)
     if obs_type == "pixels_agent_pos":
@@ -286,7 +296,10 @@ def _check(path, params, meta) -> None:
         raise ControllerError(f"policy checkpoint {path}: a {obs_type} policy with image size {image!r}")
     ppo = meta.get("method") == "ppo"  # Brax's policy: raw observations in, (loc[, scale]) out, no memory
     fmt = _memory_format(path, meta)
-    width = OBS_SIZE[obs_type] if ppo else feature_size(obs_type, fmt)
+    goal = meta.get("goal", False)  # a goal-conditioned policy (DAgger --goal random); absent: the fixed goal's
+    if not isinstance(goal, bool) or (goal and (ppo or obs_type not in GOAL_FEATURES)):
+        raise ControllerError(f"policy checkpoint {path}: goal {goal!r} for a {obs_type} policy")
+    width = OBS_SIZE[obs_type] if ppo else feature_size(obs_type, fmt, goal)
     if ppo and not (isinstance(meta.get("act", "mean"), str) and meta.get("act", "mean") in PPO_ACTS):
         raise ControllerError(f"policy checkpoint {path}: unknown PPO action {meta.get('act')!r} (mean or sample)")
     _numbers(path, "input normalisation in_mean", meta.get("in_mean"), (width,))
@@ -358,6 +371,10 @@ class PolicyController(Controller):
         """The side of the top-camera image it looks at (obs["pixels"], rendered by the backend); 0: none."""
         return int(self.meta.get("image", 0))
 
+    @property
+    def reads_goal(self) -> bool:  # else, on random goals, it sees them from the goal's frame (task/goals.GoalFrame)
+        return bool(self.meta.get("goal", False))
+
     def init(self, key):
         """Its memory at reset: its teacher's carry at reset, move class 0 (gym-pusht's expert's -1: no contact yet;
         a 0 there would read as pursuing contact 0, a memory the student never had at a start)."""
@@ -366,7 +383,7 @@ class PolicyController(Controller):
     def act(self, carry, obs, t, key):
         if self.meta.get("method") == "ppo":
             return apply_ppo(self.params, self.meta, obs[self.meta["obs_type"]], key, t), carry
-        x = features(obs, self.meta["obs_type"], carry, CarryFormat.of(self.meta))
+        x = features(obs, self.meta["obs_type"], carry, CarryFormat.of(self.meta), self.reads_goal)
         action, memory = apply(self.params, self.meta, x, obs.get("pixels"))
         return action, memory
 

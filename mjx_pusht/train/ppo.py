@@ -2,7 +2,7 @@
 
 The environment is the Brax adapter (`envs/brax.py`): the env's own control step, fresh task
 starts on every reset (`wrap_for_training`). Brax trains on a reward designed for learning;
-success is never judged by it, only by the task's rule (coverage >= 0.95 within the episode's
+success is never judged by it, only by the task's rule (coverage >= 0.95, or --success-threshold, within the episode's
 control steps) on held-out seeds, by the same code the `policy:PATH` controller runs.
 
 The training reward, per control step (`training_reward`):
@@ -80,6 +80,7 @@ class PPOConfig:
     # held 99.3-100% from their third judgement on, epoch KL <= 0.14.
     max_grad_norm: float | None = 1.0
     lr_schedule: str | None = None  # "adaptive-kl": Brax's ADAPTIVE_KL, the rate /1.5 or x1.5 toward desired_kl 0.01
+    success_threshold: float | None = None  # the coverage an episode succeeds at; None: the chapter task's (0.95)
 
     def __post_init__(self) -> None:
         if self.act not in PPO_ACTS:
@@ -90,6 +91,7 @@ class PPOConfig:
             raise ConfigError(f"PPO: --lr-schedule is adaptive-kl (or not given: constant), not {self.lr_schedule!r}")
         if self.max_grad_norm is not None and not self.max_grad_norm > 0:
             raise ConfigError(f"PPO: --max-grad-norm must be above 0, got {self.max_grad_norm}")
+        self.episode()  # a success threshold outside (0, 1] is a one-line error now
         if self.validation_envs < 0:
             raise ConfigError(f"PPO: validation_envs must be at least 0, got {self.validation_envs}")
         for name in ("envs", "timesteps", "evals", "eval_envs", "max_steps", "unroll_length", "batch_size"):
@@ -103,6 +105,12 @@ class PPOConfig:
             raise ConfigError(f"PPO: --timesteps {self.timesteps} is fewer than one round of {per_epoch} env steps "
                               f"(--batch x {self.num_minibatches} minibatches x unroll {self.unroll_length}) per "
                               f"judgement ({self.evals})")
+
+    def episode(self):
+        """The episodes trained and judged on: the chapter task's, at `max_steps` and `success_threshold`."""
+        from mjx_pusht.task.tasks import get
+
+        return get("chapter").episode(max_steps=self.max_steps, success_threshold=self.success_threshold)
 
     def held_out_seeds(self) -> np.ndarray:
         return held_out_seeds(self.eval_envs)  # the same held-out task seeds as DAgger's
@@ -225,7 +233,6 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     from mjx_pusht.envs.brax import BraxPushT, wrap_for_training
     from mjx_pusht.envs.functional import PushTEnv
     from mjx_pusht.study.stats import wilson
-    from mjx_pusht.task.episode import Episode
     from mjx_pusht.train.policy import save
     from mjx_pusht.train.curve import kept as kept_row
     from mjx_pusht.train.curve import write_curve
@@ -237,7 +244,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     if resume and (cfg.timesteps <= done or evals_left < 1):
         raise TrainError(f"--resume: the run in {out} already reached {done:,} env steps and {len(curve) - 1} "
                          "judgements; raise --timesteps and --iterations to go on")
-    episode = Episode(max_steps=cfg.max_steps)
+    episode = cfg.episode()
     env = BraxPushT(backend=backend, obs_type=cfg.obs_type, reset_kind=cfg.reset, episode=episode,
                     max_worlds=max(cfg.envs, 128), table=TABLE, reward_fn=training_reward)
     judge_env = PushTEnv(backend=backend, reset_kind=cfg.reset, episode=episode, keep_states=False)

@@ -31,7 +31,7 @@ def _meta(cfg, iteration: int, env_steps: int, norm) -> dict:
     return {"obs_type": cfg.obs_type, "activation": cfg.activation, "in_mean": [float(v) for v in norm[0]],
             "in_std": [float(v) for v in norm[1]], "method": "dagger", "iteration": iteration,
             "env_steps": int(env_steps), "config": config_dict(cfg)} | ({"image": cfg.image} if cfg.image else {}) | (
-        {"memory": cfg.memory.meta()} if cfg.memory != CHAPTER else {})
+        {"memory": cfg.memory.meta()} if cfg.memory != CHAPTER else {}) | ({"goal": True} if cfg.goal_conditioned else {})
 
 
 def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes: float | None = None,
@@ -217,7 +217,7 @@ def dagger_env(cfg, backend: str):
     graph_mode = "WARP" if backend == "mjx-warp" and has_gpu() else None
     task = cfg.the_task
     return PushTEnv(backend=backend, reset_kind=cfg.reset, action_type=task.action_type, scene=task.scene(),
-                    episode=task.episode(max_steps=cfg.max_steps), threads=default_threads(), keep_states=False,
+                    episode=cfg.episode(), threads=default_threads(), keep_states=False,
                     pixels=cfg.image, graph_mode=graph_mode)
 
 
@@ -246,7 +246,7 @@ def _stop_if_non_finite(what: str | None, where: str, curve: list[dict], out: Pa
 def _unit(cfg):
     from mjx_pusht.train.policy import feature_size
 
-    w = feature_size(cfg.obs_type, cfg.memory)
+    w = feature_size(cfg.obs_type, cfg.memory, cfg.goal_conditioned)
     return np.zeros(w, np.float32), np.ones(w, np.float32)
 
 

@@ -97,6 +97,12 @@ class MjxPushtEnv(EnvConfig):
     # auto: the drop-in's batch where jax sees a GPU, LeRobot's SyncVectorEnv of MuJoCo C envs elsewhere;
     # cpu: always the latter; mjx-warp / mjx-jax: the batch on that backend (Warp's CPU device without a GPU)
     backend: str = "auto"
+    # the coverage an episode succeeds (and ends) at, and the reward's scale, in (0, 1]: gym-pusht's is fixed at 0.95
+    # (gym-pusht#24); --env.success_threshold=0.9 scores as ManiSkill's PushT does
+    success_threshold: float = 0.95
+    # fixed (gym-pusht's goal) or random: a goal pose per episode from its seed, after the block's in the state and
+    # environment_state observations (gym-pusht#17); pixel observations take the fixed goal only, so far
+    goal: str = "fixed"
     features: dict[str, PolicyFeature] = field(
         default_factory=lambda: {
             ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(2,)),
@@ -117,12 +123,19 @@ class MjxPushtEnv(EnvConfig):
             raise ValueError(f"--env.task for mjx_pusht is {TASK!r} (gym-pusht's PushT on MuJoCo), got {self.task!r}")
         if self.backend not in BACKENDS:
             raise ValueError(f"--env.backend must be one of {', '.join(BACKENDS)}, got {self.backend!r}")
+        from mjx_pusht.task.goals import check
+        from mjx_pusht.validate import fraction
+
+        fraction("--env.success_threshold", self.success_threshold)  # a ConfigError (a ValueError): one line
+        check(self.goal)
         if self.obs_type == "pixels_agent_pos":
             self.features["pixels"] = PolicyFeature(
                 type=FeatureType.VISUAL, shape=(self.observation_height, self.observation_width, 3)
             )
         elif self.obs_type == "environment_state_agent_pos":
-            self.features["environment_state"] = PolicyFeature(type=FeatureType.ENV, shape=(16,))
+            # gym-pusht's T's 8 vertices, and a random goal's T's 8 after them
+            self.features["environment_state"] = PolicyFeature(type=FeatureType.ENV,
+                                                               shape=(32 if self.goal == "random" else 16,))
 
     @property
     def package_name(self) -> str:
@@ -144,6 +157,8 @@ class MjxPushtEnv(EnvConfig):
             "observation_width": self.observation_width,
             "observation_height": self.observation_height,
             "max_episode_steps": self.episode_length,
+            "success_threshold": self.success_threshold,
+            "goal": self.goal,
         }
 
     def batch_backend(self) -> str | None:
