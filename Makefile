@@ -59,7 +59,7 @@ $(LEROBOT_STAMP): pyproject.toml plugins/lerobot_env_mjx_pusht/pyproject.toml
 	$(PYTHON312) -m venv $(LEROBOT_VENV)
 	$(LEROBOT_VENV)/bin/python -m pip install -q --upgrade pip
 	$(LEROBOT_VENV)/bin/python -m pip install -q 'lerobot[pusht,training,evaluation]==0.6.1' 'torch<2.12' 'numpy<2.3' \
-		'pytest>=8' 'pytest-timeout>=2.3' -e '.[warp,gym]' -e plugins/lerobot_env_mjx_pusht
+		'pytest>=8' 'pytest-timeout>=2.3' 'pytest-xdist>=3.6' -e '.[warp,gym]' -e plugins/lerobot_env_mjx_pusht
 	touch $(LEROBOT_STAMP)
 
 test-lerobot: $(LEROBOT_STAMP)

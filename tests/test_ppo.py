@@ -1,0 +1,218 @@
+"""Training with PPO (issues 22, 40): Brax's own trainer on the adapter, its policy a controller everywhere.
+
+The CLI runs compile Brax's trainer on MJX-JAX on the CPU (minutes each, the suite's slowest tests): they are a file
+of their own so that a second test worker runs them beside DAgger's (tests/test_train.py), not after it.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from helpers import cli
+
+pytest.importorskip("flax")
+pytest.importorskip("optax")
+
+from mjx_pusht.task.controllers import load
+from mjx_pusht.train.policy import load_checkpoint, save
+
+
+def jax_leaves(tree):
+    import jax
+
+    return [np.asarray(a) for a in jax.tree.leaves(tree)]
+
+
+def test_a_ppo_checkpoint_acts_as_braxs_own_deterministic_policy(tmp_path):
+    """The saved policy (NumPy on MuJoCo C's side, JAX in MJX's scan) against Brax's make_policy(deterministic)."""
+    pytest.importorskip("brax")
+    import jax
+    import jax.numpy as jnp
+    from brax.training.acme import running_statistics, specs
+    from brax.training.agents.ppo import networks as ppo_networks
+
+    from mjx_pusht.train.ppo_policy import apply_ppo
+    from mjx_pusht.train.ppo import to_checkpoint
+
+    nets = ppo_networks.make_ppo_networks(5, 2, preprocess_observations_fn=running_statistics.normalize,
+                                          policy_hidden_layer_sizes=(16, 16))
+    rng = np.random.default_rng(0)
+    seen = jnp.asarray(rng.normal([0.1, -0.1, 0.0, 0.05, 1.0], [0.2, 0.2, 0.1, 0.1, 2.0], size=(256, 5)), jnp.float32)
+    normalizer = running_statistics.update(running_statistics.init_state(specs.Array((5,), jnp.float32)), seen)
+    params = (normalizer, nets.policy_network.init(jax.random.key(1)), nets.value_network.init(jax.random.key(2)))
+    obs = np.asarray(seen[:32])
+    brax_action, _ = ppo_networks.make_inference_fn(nets)(params, deterministic=True)(jnp.asarray(obs), jax.random.key(3))
+    dense, meta = to_checkpoint(params, "state")
+    assert np.abs(apply_ppo(dense, meta, obs.astype(np.float64)) - np.asarray(brax_action)).max() < 1e-5
+    assert np.abs(np.asarray(jax.jit(lambda o: apply_ppo(dense, meta, o))(jnp.asarray(obs))) - brax_action).max() < 1e-5
+    save(tmp_path / "ppo.msgpack", dense, {**meta, "iteration": 0})
+    ctrl = load(f"policy:{tmp_path / 'ppo.msgpack'}")
+    key = np.zeros((32, 2), np.uint32)
+    action, carry = ctrl.act(ctrl.init(key), {"state": obs.astype(np.float64)}, 0, key)
+    assert np.abs(action - np.asarray(brax_action)).max() < 1e-5 and not carry.any()
+
+
+def test_a_sampled_ppo_action_is_a_draw_from_braxs_own_distribution_keyed_by_seed_and_step():
+    """act "sample": tanh(loc + scale * z) with Brax's own NormalTanhDistribution loc and scale, z standard normal
+    (over 4,096 seeds: mean 0, sd 1, its tails), the same draw in NumPy and in JAX for the same seed and step, a
+    fresh one at the next step, and a row's action does not depend on the rows beside it."""
+    pytest.importorskip("brax")
+    import jax
+    import jax.numpy as jnp
+    from brax.training.acme import running_statistics, specs
+    from brax.training.agents.ppo import networks as ppo_networks
+
+    from mjx_pusht.task.controllers import seed_key
+    from mjx_pusht.task.rules import CTRL_LIMIT
+    from mjx_pusht.train.ppo import to_checkpoint
+    from mjx_pusht.train.ppo_policy import apply_ppo
+
+    nets = ppo_networks.make_ppo_networks(5, 2, preprocess_observations_fn=running_statistics.normalize,
+                                          policy_hidden_layer_sizes=(16, 16))
+    rng = np.random.default_rng(0)
+    normalizer = running_statistics.init_state(specs.Array((5,), jnp.float32))
+    params = (normalizer, nets.policy_network.init(jax.random.key(1)), nets.value_network.init(jax.random.key(2)))
+    dense, meta = to_checkpoint(params, "state", act="sample")
+    n = 4096
+    obs = np.repeat(rng.normal(0, 0.3, size=(1, 5)), n, axis=0)  # one observation, 4,096 episodes
+    key, t = seed_key(np.arange(n)), np.full(n, 7)
+    dist = nets.parametric_action_distribution.create_dist(
+        nets.policy_network.apply(normalizer, params[1], jnp.asarray(obs[:1], jnp.float32)))
+    loc, scale = np.asarray(dist.loc)[0], np.asarray(dist.scale)[0]
+    action = apply_ppo(dense, meta, obs, key, t)
+    z = (np.arctanh(action / CTRL_LIMIT) - loc) / scale
+    assert abs(z.mean()) < 0.05 and abs(z.std() - 1) < 0.05 and 0.02 < (np.abs(z) > 2).mean() < 0.07
+    assert np.abs(np.corrcoef(z.T)[0, 1]) < 0.05  # the two actions draw apart
+    in_jax = np.asarray(jax.jit(lambda o, k, s: apply_ppo(dense, meta, o, k, s))(jnp.asarray(obs, jnp.float32),
+                                                                                  jnp.asarray(key), jnp.asarray(t)))
+    assert np.abs(in_jax - action).max() < 1e-4
+    assert np.abs(apply_ppo(dense, meta, obs, key, t + 1) - action).max() > 0.1  # the next step draws anew
+    assert np.array_equal(apply_ppo(dense, meta, obs[5:6], key[5:6], t[5:6]), action[5:6])
+    assert np.abs(apply_ppo(dense, {**meta, "act": "mean"}, obs[:1]) - np.tanh(loc) * CTRL_LIMIT).max() < 1e-6
+
+
+def test_ppos_training_reward_makes_succeeding_the_best_outcome():
+    """Success ends the episode, so at PPO's discount, ending it now with success must be worth more than
+    staying just short of it forever (with the coverage itself as the reward, it was not: PPO learned to
+    park the T at 0.8 coverage, notebook change 18)."""
+    from types import SimpleNamespace
+
+    import jax.numpy as jnp
+
+    from mjx_pusht.train.ppo import PPOConfig, training_reward
+
+    at = jnp.asarray([0.0, 0.05, 0.0, 0.0, 0.0])  # pusher above the T at the target pose: no shaping change
+
+    def state(cov, success):
+        return SimpleNamespace(obs={"state": at}, metrics={"coverage": jnp.float32(cov), "success": jnp.bool_(success)})
+
+    gamma = PPOConfig().discounting
+    short = state(0.94, False)
+    stay = float(training_reward(short, short)) / (1 - gamma)  # forever at 0.94: never ends
+    finish = float(training_reward(short, state(0.95, True)))  # then nothing: the episode is over
+    assert finish > stay
+    # and the shaping pays for bringing the T toward its pose: at the same coverage, a step from 1 cm off to
+    # the target is worth more than the step back
+    off = SimpleNamespace(obs={"state": at.at[2].set(0.01)}, metrics=short.metrics)
+    assert float(training_reward(off, short)) > float(training_reward(short, off))
+
+
+def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
+    for extra, why in ((("--backend", "cpu"), "Brax's jitted JAX"), (("--backend", "mjx-jax", "--resume"), "nothing to resume")):
+        r = cli("train", "--algo", "ppo", *extra, "--out", str(tmp_path / "p"), "--no-rerun")
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and why in r.stderr, r.stderr
+        assert not (tmp_path / "p" / "checkpoints").exists()
+    # one method's settings given to the other are refused, not ignored
+    for algo, extra, why in (("ppo", ("--late-fits", "2"), "--late-fits: DAgger's setting, not PPO's"),
+                             ("ppo", ("--first-fits", "4"), "--first-fits: DAgger's setting, not PPO's"),
+                             ("ppo", ("--fit-steps", "5", "--teacher", "expert"), "--fit-steps, --teacher: DAgger's"),
+                             ("dagger", ("--lr-schedule", "adaptive-kl", "--timesteps", "9"), "--timesteps, --lr-schedule"),
+                             ("dagger", ("--ppo-act", "mean"), "--ppo-act: PPO's")):
+        r = cli("train", "--algo", algo, "--backend", "mjx-jax", *extra, "--out", str(tmp_path / "q"), "--no-rerun")
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and why in r.stderr, r.stderr
+        assert not (tmp_path / "q").exists()
+
+
+@pytest.mark.slow
+def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp_path):
+    pytest.importorskip("brax")
+    out = tmp_path / "ppo"
+    # 50-step episodes: each judgement and the eval cost a sixth of the task's 300 (this test's time is MJX on a CPU)
+    args = ["train", "--algo", "ppo", "--backend", "mjx-jax", "--envs", "8", "--batch", "8", "--timesteps", "10240",
+            "--iterations", "1", "--eval-envs", "4", "--hidden", "32,32", "--no-rerun", "--record", "0",
+            "--no-progress", "--out", str(out), "--keep", "best", "--max-steps", "50"]
+    r = cli(*args)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["method"] == "ppo" and [c["env_steps"] for c in summary["curve"]] == [0, 10240]
+    assert summary["config"]["max_grad_norm"] == 1.0  # clipped by default: unclipped, PPO's curves collapsed (issue 40)
+    # --max-steps reaches the trainer, its judge and the eval after it: every held-out episode ran 50 steps
+    assert summary["config"]["max_steps"] == summary["held_out"]["max_steps"] == 50
+    assert pq.read_table(out / "eval" / "per_episode.parquet").to_pydict()["episode_length"] == [50] * 4
+    # every judgement: both actions on the held-out seeds, the saved one's on the validation seeds, and after
+    # training, Brax's own loss metrics of the epoch that made it
+    for row in summary["curve"]:
+        assert row["success"] == row["success_sample"] and 0 <= row["success_mean"] <= 1
+        assert 0 <= row["validation_success"] <= 1 and row["validation_beta"] == 0.0
+    first = summary["curve"][1]
+    assert all(np.isfinite(first[f"brax_{k}"]) for k in ("v_loss", "policy_loss", "entropy_loss", "sigma"))
+    assert 0 < first["brax_sigma_min"] <= first["brax_sigma"] and first["brax_loc_min"] <= first["brax_loc_max"]
+    # the normaliser's largest relative std change since the judgement before: the two checkpoints' own stds
+    stds = [np.asarray(load_checkpoint(out / "checkpoints" / f"policy_00{i}.msgpack")[1]["in_std"]) for i in (0, 1)]
+    assert summary["curve"][0]["norm_std_change"] is None
+    assert 0 < first["norm_std_change"] == pytest.approx(np.abs(stds[1] / stds[0] - 1).max(), rel=1e-6)
+    best = max(reversed(summary["curve"]), key=lambda r: r["validation_success"])
+    assert summary["kept"]["rule"] == "best" and summary["kept"]["iteration"] == best["iteration"]
+    kept = out / "checkpoints" / f"policy_{best['iteration']:03d}.msgpack"
+    assert (out / "policy.msgpack").read_bytes() == kept.read_bytes()
+    for name in ("policy.msgpack", "checkpoints/policy_000.msgpack", "checkpoints/policy_001.msgpack", "curve.png"):
+        assert (out / name).is_file(), name
+    assert _moved(out) > 1e-3  # 256 Adam steps at 3e-4 move the layers (see the --max-grad-norm test)
+    # the trainer's judge (its own jitted scan) and `eval --controller policy:...` (the backend's episode
+    # machinery) on the same held-out seeds: MJX-JAX on the CPU is deterministic, so they agree
+    rows = pq.read_table(out / "eval" / "per_episode.parquet").to_pydict()
+    assert summary["eval"]["success_rate"] == best["success"] == summary["held_out_success"]
+    assert best["coverage"] == pytest.approx(np.mean(rows["final_coverage"]), abs=1e-5)
+    # --resume goes on from the last judged policy: the finished judgements stay, more are added; --minutes
+    # (spent at once here) stops it at the first judgement past the budget, 20,480 of the 30,720 steps asked
+    args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "30720", "3"
+    r = cli(*args, "--resume", "--max-grad-norm", "off")  # unclipped is another trainer: not resumed into
+    assert r.returncode == 1 and "max_grad_norm" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    r = cli(*args, "--resume", "--minutes", "0.0001")
+    assert r.returncode == 0, r.stderr
+    assert "the 0.0001-minute budget is spent" in r.stdout + r.stderr
+    after = json.loads((out / "summary.json").read_text())["curve"]
+    assert after[:2] == summary["curve"] and [c["env_steps"] for c in after] == [0, 10240, 20480]
+    assert (out / "checkpoints" / "policy_002.msgpack").is_file()
+    stds = [np.asarray(load_checkpoint(out / "checkpoints" / f"policy_00{i}.msgpack")[1]["in_std"]) for i in (1, 2)]
+    assert after[2]["norm_std_change"] == pytest.approx(np.abs(stds[1] / stds[0] - 1).max(), rel=1e-6)  # vs restored
+    args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "20480", "2"
+    r = cli(*args, "--resume")  # nothing left to do is one line, not a crash inside Brax
+    assert r.returncode == 1 and "already reached 20,480 env steps" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def _moved(out) -> float:
+    """The largest change of any policy weight from the first judgement (the initial network) to the second."""
+    first, second = (load_checkpoint(out / "checkpoints" / f"policy_{i:03d}.msgpack")[0] for i in (0, 1))
+    return max(float(np.max(np.abs(a - b))) for a, b in zip(jax_leaves(first), jax_leaves(second)))
+
+
+@pytest.mark.slow
+def test_ppo_max_grad_norm_and_adaptive_kl_reach_braxs_optimiser(tmp_path):
+    """--max-grad-norm clips the gradient before Adam in Brax's own trainer: clipped to 1e-12, each of the run's 256
+    Adam steps moves a weight by at most lr |g| / (|g| + 1e-8) <= 1e-2 x 1e-4 (ADAPTIVE_KL's highest rate), so the
+    network stays within 2.6e-4 of its start, where the same run unclipped moves it by more than 1e-3 (the test
+    above)."""
+    pytest.importorskip("brax")
+    out = tmp_path / "ppo"
+    r = cli("train", "--algo", "ppo", "--backend", "mjx-jax", "--envs", "8", "--batch", "8", "--timesteps", "10240",
+            "--iterations", "1", "--eval-envs", "4", "--hidden", "32,32", "--no-rerun", "--record", "0", "--no-progress",
+            "--out", str(out), "--max-grad-norm", "1e-12", "--lr-schedule", "adaptive-kl", "--max-steps", "50")
+    assert r.returncode == 0, r.stderr
+    config = json.loads((out / "summary.json").read_text())["config"]
+    assert config["max_grad_norm"] == 1e-12 and config["lr_schedule"] == "adaptive-kl"
+    assert _moved(out) < 2.6e-4
+
