@@ -127,6 +127,26 @@ def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str)
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
                    help="sweep a physical parameter as a grid: kv, tee_damping, tee_frictionloss, tee_mass; "
                         "VALUES is a,b,c, lo:hi:n (evenly spaced) or ~lo:hi:n (n random draws) (repeatable)")
+    randomize_arg(p)
+
+
+def _randomize(text: str) -> dict:
+    """An argparse type: --randomize's NAME=lo:hi,... (model/randomize.parse), its error one line."""
+    from mjx_pusht.model.params import ParamError
+    from mjx_pusht.model.randomize import parse
+
+    try:
+        return parse(text)
+    except ParamError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def randomize_arg(p: argparse.ArgumentParser) -> None:
+    """--randomize: physics drawn per episode from its seed (eval, sweep, train)."""
+    p.add_argument("--randomize", type=_randomize, default=None, metavar="NAME=LO:HI,...",
+                   help="draw physics per episode from its seed: scale factors on the task's own values, uniform in "
+                        "[LO, HI] (LO = HI: fixed). chapter: tee_mass, tee_damping, tee_frictionloss, kv; gym-pusht: "
+                        "kp, kv (e.g. tee_mass=0.5:2,kv=0.8:1.2)")
 
 
 def _task_args(p: argparse.ArgumentParser, reset_help: str) -> None:
