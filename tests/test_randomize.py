@@ -180,3 +180,29 @@ def test_mjx_drawn_worlds_are_one_batch_that_steps_as_mujocos_derived_models():
     env = {**os.environ, "JAX_PLATFORMS": "cpu"}
     r = subprocess.run([sys.executable, "-c", MJX_DRAWN], capture_output=True, text=True, env=env)
     assert "DRAWN_OK" in r.stdout, r.stderr[-2000:]
+
+
+def test_the_env_draws_each_episodes_physics_from_its_seed_as_eval_does():
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.envs.physics import drawn_values
+    from mjx_pusht.envs.wrappers import AutoReset
+    from mjx_pusht.task.episode import Episode
+
+    rz, seeds = {"tee_mass": (0.5, 2.0), "kv": (0.8, 1.2)}, np.arange(5)
+    env = PushTEnv(backend="cpu", randomize=rz)
+    state = env.reset(seeds)
+    table = run_cpu(Scenario(randomize=rz), seeds).params  # eval's param_ columns for the same seeds
+    for name, v in drawn_values(env, state).items():
+        np.testing.assert_array_equal(v, table[name])
+    tee = env.model.body("tee").id
+    assert [m.body_mass[tee] for m in state.data.models] == pytest.approx(list(table["tee_mass"]))
+    # autoreset: each new episode steps with its own seed's physics
+    ar = AutoReset(PushTEnv(backend="cpu", randomize=rz, episode=Episode(max_steps=2)))
+    s = ar.reset(seeds)
+    for _ in range(2):
+        s = ar.step(s, np.zeros((5, 2)))
+    assert (np.asarray(s.info["used"]) == 1).all()
+    new_seeds = ar.pool.seeds[0, np.arange(5)]
+    want = run_cpu(Scenario(randomize=rz), new_seeds).params["tee_mass"]
+    assert [m.body_mass[tee] for m in s.data.models] == pytest.approx(list(want))
+    assert PushTEnv(backend="cpu").reset(seeds).physics is None

@@ -126,6 +126,9 @@ class _Lockstep:
         """This batch with `rows` taken from `other` (a batch of len(rows) worlds): a partial reset."""
         new = self if inplace else self.copy()
         for j, i in enumerate(np.asarray(rows)):
+            if other.models[j] is not new.models[i]:  # a new episode's own physics (randomised): its model too
+                new.models = [*new.models[:i], other.models[j], *new.models[i + 1:]]
+                new._view_cache = None
             mujoco.mj_copyData(new.datas[i], other.models[j], other.datas[j])
             new.qpos[:, i], new.qvel[:, i], new.sens[:, i] = other.qpos[:, j], other.qvel[:, j], other.sens[:, j]
         return new
