@@ -125,7 +125,7 @@ def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str)
     p.add_argument("--no-rerun", dest="rerun", action="store_false", help=f"skip {name}.rrd")
     p.add_argument("--no-progress", dest="progress", action="store_false")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
-                   help="sweep a physical parameter as a grid: kv, tee_damping, tee_frictionloss, tee_mass; "
+                   help="sweep a physical parameter as a grid: kv, kp (gym-pusht), tee_damping, tee_frictionloss, tee_mass; "
                         "VALUES is a,b,c, lo:hi:n (evenly spaced) or ~lo:hi:n (n random draws) (repeatable)")
     randomize_arg(p)
 
