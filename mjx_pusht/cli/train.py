@@ -49,6 +49,9 @@ def cmd_train(args) -> int:
     task = get_task(args.task)
     if args.algo == "ppo" and task.name != "chapter":
         raise TrainError(f"--algo ppo trains on the chapter task; --task {task.name} is DAgger's so far")
+    if args.algo == "ppo" and args.randomize:
+        raise TrainError("--randomize trains DAgger (its rollouts and held-out judgements at each episode's drawn "
+                         "physics); --algo ppo does not take it yet")
     if args.algo == "dagger" and args.teacher is None and task.name != "chapter":
         args.teacher = "expert"  # the paced teacher is the chapter expert's
     args.reset = task.check_reset(args.reset)
@@ -65,14 +68,17 @@ def cmd_train(args) -> int:
                        seed=args.seed, reset=args.reset, teacher=args.teacher,
                        image_batch=args.image_batch or min(512, args.batch or 4096), image_steps=args.image_steps,
                        late_fits=args.late_fits, first_fits=args.first_fits, max_grad_norm=args.max_grad_norm,
-                       max_steps=args.max_steps, task=None if task.name == "chapter" else task.name)
+                       max_steps=args.max_steps, task=None if task.name == "chapter" else task.name,
+                       randomize=args.randomize)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
     banner = Banner("train")
     print(f"backend: {name} ({why}); DAgger from {cfg.obs_type} on the {task.name} task: {cfg.envs} {cfg.reset} "
           f"episodes an iteration, "
-          f"{cfg.iterations} iterations, held-out seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
+          f"{cfg.iterations} iterations, held-out seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}"
+          + ("; physics drawn per episode: " + ", ".join(f"{n} x{lo:g}..{hi:g}" for n, (lo, hi) in cfg.randomize)
+             if cfg.randomize else ""))
     from mjx_pusht.train.run import train_dagger
 
     summary = train_dagger(cfg, name, out, resume=args.resume, minutes=args.minutes, progress=args.progress,
@@ -163,7 +169,8 @@ def _judge(args, backend: str, out: Path, summary: dict) -> dict:
     remove_own(out / "eval")
     evaluate(f"policy:{out / 'policy.msgpack'}", seeds, out / "eval", backend=backend,
              task=summary["held_out"].get("task", "chapter"), reset=summary["held_out"]["reset"],
-             max_steps=summary["held_out"]["max_steps"], record=args.record, progress=args.progress, rerun=args.rerun)
+             max_steps=summary["held_out"]["max_steps"], randomize=summary["held_out"].get("randomize"),
+             record=args.record, progress=args.progress, rerun=args.rerun)
     s = json.loads((out / "eval" / "summary.json").read_text())
     return {k: s[k] for k in ("n_episodes", "n_success", "success_rate", "success_rate_ci95", "median_steps_to_success",
                               "n_non_finite", "n_rigid")} | {"backend": s["backend"], "seeds": seeds,

@@ -111,8 +111,16 @@ class DaggerConfig:
     # setting existed still matches). On gym-pusht's task the teacher is its expert, whose targets are taught as the
     # velocities that reach them (`Task.velocity_of`): a policy acts in velocities on either task.
     task: str | None = None
+    # Physics drawn per episode from its seed, in training's rollouts and in every held-out judgement: (name, (lo,
+    # hi)) scale factors (model/randomize.py), kept in its checked form; None: the scene's own (a resume file from
+    # before this setting existed still matches).
+    randomize: tuple | None = None
 
     def __post_init__(self) -> None:
+        if self.randomize is not None:
+            from mjx_pusht.model.randomize import check
+
+            object.__setattr__(self, "randomize", check(self.randomize, self.the_task.scene(), "--randomize") or None)
         if self.obs_type not in OBS_TYPES:
             raise ConfigError(f"DAgger trains from {', '.join(OBS_TYPES)} observations, not {self.obs_type!r}")
         if self.activation not in ACTIVATIONS:
