@@ -87,8 +87,8 @@ def test_train_randomize_is_checked_before_anything_runs():
 
 
 @pytest.mark.parametrize("args, says", [(("--randomize", "tee_mass=2:1"), "inverted"),
-                                        (("--algo", "ppo", "--backend", "mjx-jax", "--randomize", "kv=0.8:1.2"),
-                                         "--algo ppo does not take it")])
+                                        (("--algo", "ppo", "--backend", "mjx-jax", "--randomize", "kp=0.5:2"),
+                                         "kp means nothing on the chapter task")])
 def test_bad_train_randomize_is_one_line_and_writes_nothing(tmp_path, args, says):
     r = cli("train", "--backend", "cpu", "--no-rerun", *args, "--out", str(tmp_path / "out"))
     assert r.returncode != 0 and says in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr

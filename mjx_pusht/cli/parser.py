@@ -270,7 +270,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--max-samples", type=_int_at_least(1, 1 << 30, " samples"), default=None,
                    help="DAgger: dataset ring size (default 8,000,000)")
     _task_args(t, "start distribution of the chapter task trained and judged on (default task)")
-    randomize_arg(t)  # DAgger: its rollouts and every held-out judgement at each episode's drawn physics
+    randomize_arg(t)  # training's episodes and every held-out judgement at each episode's drawn physics
     t.add_argument("--eval-envs", type=_worlds, default=None,
                    help="held-out task seeds judged after every iteration (default 4096; DAgger on cpu 64)")
     t.add_argument("--max-steps", type=_steps, default=300,

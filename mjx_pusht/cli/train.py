@@ -49,9 +49,6 @@ def cmd_train(args) -> int:
     task = get_task(args.task)
     if args.algo == "ppo" and task.name != "chapter":
         raise TrainError(f"--algo ppo trains on the chapter task; --task {task.name} is DAgger's so far")
-    if args.algo == "ppo" and args.randomize:
-        raise TrainError("--randomize trains DAgger (its rollouts and held-out judgements at each episode's drawn "
-                         "physics); --algo ppo does not take it yet")
     if args.algo == "dagger" and args.teacher is None and task.name != "chapter":
         args.teacher = "expert"  # the paced teacher is the chapter expert's
     args.reset = task.check_reset(args.reset)
@@ -118,7 +115,8 @@ def _cmd_ppo(args, name: str, why: str) -> int:
     cfg = PPOConfig(obs_type=args.obs, envs=args.envs, timesteps=args.timesteps, evals=args.iterations,
                     hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
                     eval_envs=args.eval_envs, seed=args.seed, reset=args.reset, act=args.ppo_act,
-                    max_grad_norm=args.max_grad_norm, lr_schedule=args.lr_schedule, max_steps=args.max_steps)
+                    max_grad_norm=args.max_grad_norm, lr_schedule=args.lr_schedule, max_steps=args.max_steps,
+                    randomize=args.randomize)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)
     _restart(out, args)
     _check_rerun(args)

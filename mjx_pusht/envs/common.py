@@ -70,10 +70,12 @@ def warn_broken(info: dict) -> None:
 
 
 def functional(backend: str, obs_type: str, action_type: str, observation_size: int, reset_kind: str,
-               max_episode_steps: int | None, frame_skip: int, threads: int = 1, variant: str = "chapter") -> PushTEnv:
+               max_episode_steps: int | None, frame_skip: int, threads: int = 1, variant: str = "chapter",
+               randomize=None) -> PushTEnv:
     """The functional env behind the gymnasium envs; stepped in place (a gymnasium env keeps no old states).
     The gym-pusht variant's episodes run as gym-pusht's do: a start on the goal is scored by the first step.
-    `max_episode_steps` None: no limit of the env's own (gymnasium's TimeLimit truncates)."""
+    `max_episode_steps` None: no limit of the env's own (gymnasium's TimeLimit truncates). `randomize`: physics drawn
+    per episode from its seed (model/randomize.py), its values in info["physics"] (envs/physics.info)."""
     from mjx_pusht.model.scene import SceneSpec
 
     limit = NEVER if max_episode_steps is None else validate.positive_int("max_episode_steps", max_episode_steps)
@@ -82,7 +84,7 @@ def functional(backend: str, obs_type: str, action_type: str, observation_size: 
                     episode=Episode(frame_skip=validate.positive_int("frame_skip", frame_skip), max_steps=limit,
                                     end_covered_start=variant == "chapter"),
                     scene=SceneSpec(variant=variant), threads=threads, keep_states=False,
-                    keypoints=obs_type == "keypoints")
+                    keypoints=obs_type == "keypoints", randomize=randomize)
 
 
 class OneWorld:

@@ -15,6 +15,9 @@ this file only converts units at the boundary (`gym_view`). A single env is MuJo
 env is `gym.PushTVectorEnv` (the batch, device autoreset, the full vector API), handing out
 NumPy by default, as a gym-pusht loop expects (`array_type="torch"` or `"jax"` to stay on the GPU).
 What still differs from pymunk's physics, measured, is docs/dropin-physics.md.
+
+Beyond gym-pusht: `randomize={"kp": (0.8, 1.2), "kv": (0.8, 1.2)}` draws each episode's PD gains from its seed
+(scale factors on gym-pusht's KP and KV, model/randomize.py), their values in info["physics"], as PushT-v0 does.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import numpy as np
 
 from mjx_pusht import validate
 from mjx_pusht.envs import gym as base  # first: says which extra brings gymnasium if it is missing
+from mjx_pusht.envs import physics
 from mjx_pusht.envs.common import OneWorld, Pictures, functional, warn_broken
 from mjx_pusht.envs.vector import PushTVectorEnv
 from mjx_pusht.errors import ConfigError
@@ -221,7 +225,7 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
 
     def __init__(self, obs_type: str = "state", render_mode: str | None = "rgb_array", block_cog=None, damping=None,
                  observation_width: int = 96, observation_height: int = 96, visualization_width: int = 680,
-                 visualization_height: int = 680):
+                 visualization_height: int = 680, randomize=None):
         _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping, human=True)
         validate.image_size(visualization_width, "visualization_width")
         validate.image_size(visualization_height, "visualization_height")
@@ -236,8 +240,8 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         self.k_p, self.k_v, self.control_hz, self.dt = frame.KP, frame.KV, 10, 0.01  # as gym-pusht names them
         self.success_threshold = SUCCESS_COVERAGE
         self._env = functional("cpu", obs_type, "target", observation_width, "gym-pusht", None, 10,
-                               variant="gym-pusht")
-        self._state, self._last_action = None, None
+                               variant="gym-pusht", randomize=randomize)
+        self._state, self._last_action, self._seed = None, None, -1
         self._open_window()
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -250,7 +254,10 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
             r = self.np_random
             start = frame.legacy_state_to_world([r.integers(50, 450), r.integers(50, 450), r.integers(100, 400),
                                                  r.integers(100, 400), r.uniform(-np.pi, np.pi)])
-        self._state = self._env.reset_to(start, [0 if seed is None else seed])
+        # the episode's seed, which draws its physics (randomize): the one given, else the one after the last episode's
+        # (the starts come from the generator, as gym-pusht's: drawing a seed there would change them)
+        self._seed = seed if seed is not None else (self._seed + 1) % (validate.SEED_MAX + 1)
+        self._state = self._env.reset_to(start, [self._seed])
         self._last_action = None
         obs, info = self._view()
         info["is_success"] = False
@@ -276,7 +283,7 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
                 "finite": bool(m["finite"][0]), "contained": bool(m["contained"][0])}
         if not (info["finite"] and info["contained"]):
             warn_broken(info)
-        return obs, info
+        return obs, info | physics.info(self._env, None if s.physics is None else s.physics[0])
 
     def render(self):
         """rgb_array: the picture (with gym-pusht's cross at the last target); human: shown in the window."""
@@ -298,13 +305,13 @@ class GymPushTVectorEnv(PushTVectorEnv):
                  block_cog=None, damping=None, observation_width: int = 96, observation_height: int = 96,
                  visualization_width: int = 680, visualization_height: int = 680, max_episode_steps: int = 300,
                  backend: str = "auto", autoreset_mode="next_step", array_type: str | None = "numpy",
-                 threads: int | None = None, depth: int = 8):
+                 threads: int | None = None, depth: int = 8, randomize=None):
         _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping)
         self.observation_width, self.observation_height = observation_width, observation_height
         self.visualization_width, self.visualization_height = visualization_width, visualization_height
         super().__init__(num_envs, backend, obs_type, "target", render_mode, observation_width, visualization_width,
                          "gym-pusht", max_episode_steps, 10, autoreset_mode, threads, array_type, depth,
-                         variant="gym-pusht")
+                         variant="gym-pusht", randomize=randomize)
 
     @staticmethod
     def _check_args(obs_type, action_type, observation_size):

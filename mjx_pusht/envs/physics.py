@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from mjx_pusht import validate
+from mjx_pusht.model.params import CURRENT
 from mjx_pusht.model.randomize import factors, row_models, values
 
 
@@ -34,3 +35,15 @@ def drawn_values(env, state) -> dict:
     """Each episode's drawn physics as the parameters' own values (kg, gains), by name; {} without `randomize`."""
     f = state.physics
     return {} if f is None else values(env.model, env.scenario.randomize, np.asarray(f, np.float64))
+
+
+def info(env, physics, xp=np) -> dict:
+    """What every env built on this one adds to its `info` (gymnasium single and vector, the drop-in, Brax):
+    {"physics": {name: value}}, the episodes' drawn values in the parameters' own units, the same numbers as
+    `drawn_values` and eval's param_ columns (factor x the scene's own), in `xp` (traced inside a jitted view);
+    {} without `randomize`, so an env asked for nothing gives the info it always gave."""
+    if physics is None:
+        return {}
+    own = [CURRENT[name](env.model) for name, _ in env.scenario.randomize]
+    f = physics if xp is not np else np.asarray(physics, np.float64)
+    return {"physics": {name: f[..., j] * own[j] for j, (name, _) in enumerate(env.scenario.randomize)}}

@@ -30,6 +30,9 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGE, OBS_STATE
 
 import mjx_pusht  # noqa: F401 - registers mjx_pusht/PushT-gym-pusht-v0 with gymnasium
+from mjx_pusht.model.randomize import check as check_randomize
+from mjx_pusht.model.randomize import parse as parse_randomize
+from mjx_pusht.model.scene import SceneSpec
 
 ENV_TYPE = "mjx_pusht"
 GYM_ID = "mjx_pusht/PushT-gym-pusht-v0"
@@ -97,6 +100,9 @@ class MjxPushtEnv(EnvConfig):
     # auto: the drop-in's batch where jax sees a GPU, LeRobot's SyncVectorEnv of MuJoCo C envs elsewhere;
     # cpu: always the latter; mjx-warp / mjx-jax: the batch on that backend (Warp's CPU device without a GPU)
     backend: str = "auto"
+    # physics drawn per episode from its seed, as `mjx-pusht eval --randomize`: "kp=0.8:1.2,kv=0.8:1.2" (scale factors
+    # on gym-pusht's PD gains, model/randomize.py); the drawn values in each step's info["physics"]. None: gym-pusht's
+    randomize: str | None = None
     features: dict[str, PolicyFeature] = field(
         default_factory=lambda: {
             ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(2,)),
@@ -117,6 +123,8 @@ class MjxPushtEnv(EnvConfig):
             raise ValueError(f"--env.task for mjx_pusht is {TASK!r} (gym-pusht's PushT on MuJoCo), got {self.task!r}")
         if self.backend not in BACKENDS:
             raise ValueError(f"--env.backend must be one of {', '.join(BACKENDS)}, got {self.backend!r}")
+        if self.randomize is not None:  # refused here, in one line (a ValueError), before LeRobot builds anything
+            check_randomize(parse_randomize(self.randomize), SceneSpec(variant="gym-pusht"), "--env.randomize")
         if self.obs_type == "pixels_agent_pos":
             self.features["pixels"] = PolicyFeature(
                 type=FeatureType.VISUAL, shape=(self.observation_height, self.observation_width, 3)
@@ -144,7 +152,7 @@ class MjxPushtEnv(EnvConfig):
             "observation_width": self.observation_width,
             "observation_height": self.observation_height,
             "max_episode_steps": self.episode_length,
-        }
+        } | ({"randomize": parse_randomize(self.randomize)} if self.randomize is not None else {})
 
     def batch_backend(self) -> str | None:
         """The backend the drop-in's batch runs on, or None for LeRobot's usual vector env of MuJoCo C envs."""
