@@ -119,3 +119,36 @@ def test_on_mjx_the_brax_adapter_and_the_vector_env_report_each_seeds_draw():
     _, info = vec.reset(seed=11)
     for k, v in drawn(CHAPTER, [11, 12], OWN).items():
         np.testing.assert_allclose(np.asarray(info["physics"][k]), v, rtol=1e-6)
+
+
+def test_random_goals_and_drawn_physics_combine_each_seed_drawing_both_as_each_draws_alone(tmp_path):
+    """A seed's goal (task/goals.py) and its physics (model/randomize.py) come from separate hashes of it: asked for
+    together, both are drawn, each equal to its own draw: in the functional env (its worlds' MuJoCo C models carry
+    the mass), in eval's table, and in the drop-in, whose unseeded reset keys both on the next seed."""
+    import pyarrow.parquet as pq
+
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.model import gym_pusht as frame
+    from mjx_pusht.study.evaluate import evaluate
+    from mjx_pusht.task.goals import goal_poses
+
+    seeds = np.arange(3, 7)
+    s = PushTEnv.for_task("chapter", goal="random", randomize=CHAPTER).reset(seeds)
+    np.testing.assert_array_equal(s.obs["goal"], goal_poses(seeds, "chapter"))
+    want = drawn(CHAPTER, seeds, OWN)
+    tee = [m.body("tee").mass[0] for m in s.data.models]  # the welded T is one body of the scene's 0.105 kg
+    np.testing.assert_allclose(tee, want["tee_mass"], rtol=1e-12)
+    rz = {"kp": (0.5, 2.0)}
+    evaluate("expert", seeds, tmp_path / "e", backend="cpu", task="gym-pusht", goal="random", randomize=rz,
+             max_steps=3, rerun=False, progress=False)
+    t = pq.read_table(tmp_path / "e" / "per_episode.parquet").to_pydict()
+    env = gym.make("mjx_pusht/PushT-gym-pusht-v0", goal="random", randomize=rz)
+    np.testing.assert_allclose(np.c_[t["goal_x"], t["goal_y"], t["goal_yaw"]], goal_poses(seeds, "gym-pusht"),
+                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(t["param_kp"], drawn(rz, seeds, _gym_pusht_own(env))["kp"], rtol=1e-12)
+    env.reset(seed=3)
+    for seed in (4, 5):  # no seed given: the next one's goal and physics, not seed 0's every time
+        _, info = env.reset()
+        origin, angle = frame.pose_to_px(goal_poses([seed], "gym-pusht"))
+        np.testing.assert_allclose(info["goal_pose"], [*origin[0], angle[0]], rtol=0, atol=1e-9)
+        assert info["physics"]["kp"] == pytest.approx(drawn(rz, [seed], _gym_pusht_own(env))["kp"][0], rel=1e-12)
