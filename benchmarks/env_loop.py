@@ -3,6 +3,8 @@
     python -m benchmarks.env_loop --envs 4096,16384,65536,131072 [--obs state] [--steps 50] [--json out.json]
     python -m benchmarks.env_loop --envs 4096,16384 --obs pixels
     python -m benchmarks.env_loop --envs 16384 --obs pixels --cases raw,scan_autoreset --ends 10
+    python -m benchmarks.env_loop --envs 16384,65536 --cases scan_autoreset,scan_autoreset_randomized \
+        --randomize tee_mass=0.5:2,tee_damping=0.5:1.5,tee_frictionloss=0.1:2,kv=0.8:1.2   # issue 55
 
 For each N (one process each, so that one size failing to fit is recorded, not fatal), on MJX-Warp:
 - `raw`: the physics alone: a jitted scan of `steps` control steps, each 10 `mjx.step`s of all N
@@ -15,6 +17,9 @@ For each N (one process each, so that one size failing to fit is recorded, not f
   the observation), with pixels rendered in the step for `--obs pixels`, its episodes `--ends` control
   steps long so that every row ends and resets in the timed steps (5 times in 50): the rate with resets
   in it (with the task's 300-step episodes, as before issue 57, 30 timed steps reset nothing);
+- `scan_autoreset_randomized`: the same loop with physics drawn per episode (`PushTEnv(randomize=...)`, the
+  `--randomize` ranges, each reset drawing its episode's from the pool), reported with `fraction_of_fixed`, its
+  rate over `scan_autoreset`'s in the same process (issue 55 asks for at least 0.9);
 - `gym_torch`: `gym.make_vec("mjx_pusht/PushT-v0", num_envs=N, array_type="torch",
   autoreset_mode="same_step")` stepped from Python by a torch policy on the same GPU (observations
   reach torch through DLPack); `gym_torch_next_step` the same in gymnasium's default mode, next_step
@@ -50,11 +55,13 @@ ONE = r"""
 import json, os, subprocess, sys, time
 import numpy as np
 n, steps, obs_kind, cases, ends = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], sys.argv[4].split(","), int(sys.argv[5])
+randomize, env_backend = sys.argv[6], sys.argv[7]
 import jax, jax.numpy as jnp
 import mjx_pusht
 from mujoco import mjx
 from mjx_pusht.envs.functional import PushTEnv
 from mjx_pusht.envs.wrappers import AutoReset
+from mjx_pusht.model.randomize import parse as parse_randomize
 from mjx_pusht.task.episode import Episode
 
 pixels = 96 if obs_kind == "pixels" else 0
@@ -82,7 +89,7 @@ def attempt(name, fn):
         print(json.dumps({name: row[name]}), file=sys.stderr, flush=True)
 
 TDEV = "cuda" if jax.devices()[0].platform == "gpu" else "cpu"  # torch's device: the GPU's, or the CPU in a smoke test
-env = PushTEnv(backend="mjx-warp", pixels=pixels)
+env = PushTEnv(backend=env_backend, pixels=pixels)
 row["graph_mode"] = env.graph_mode or "MJX default"  # the mode the env resolved (MJX_PUSHT_ENV_GRAPH_MODE overrides)
 W = jax.random.normal(jax.random.PRNGKey(0), (5, 2)) * 0.5
 
@@ -126,8 +133,8 @@ def raw_zero_pose():
     jax.block_until_ready(run(d, jax.random.PRNGKey(1)))
     t0 = time.perf_counter(); jax.block_until_ready(run(d, jax.random.PRNGKey(2))); record("raw_zero_pose", time.perf_counter() - t0)
 
-def scan_autoreset(max_steps):
-    e = PushTEnv(backend="mjx-warp", pixels=pixels, episode=Episode(max_steps=max_steps))
+def scan_autoreset(max_steps, name="scan_autoreset", spec=None):
+    e = PushTEnv(backend=env_backend, pixels=pixels, episode=Episode(max_steps=max_steps), randomize=spec)
     ar = AutoReset(e, mode="same_step")
     s = ar.reset(np.arange(n))
     @jax.jit
@@ -142,7 +149,7 @@ def scan_autoreset(max_steps):
     e.check(s2)
     ended = int(np.asarray(s2.info["used"]).sum()) - int(np.asarray(s1.info["used"]).sum())
     # compiles 1: the timed call reused the first call's program (change 13's timed call compiled a second one)
-    record("scan_autoreset", dt, {"episodes_reset": ended, "max_resets_per_row": int(np.asarray(s2.info["used"]).max()),
+    record(name, dt, {"episodes_reset": ended, "max_resets_per_row": int(np.asarray(s2.info["used"]).max()),
                                   "compiles": run._cache_size()})
 
 def two_renders(envs, on):
@@ -222,6 +229,8 @@ def dropin(array_type, max_steps=None, twice=False, follow=False):
 
 for c in cases:
     attempt(c, {"raw": raw, "raw_zero_pose": raw_zero_pose, "scan_autoreset": lambda: scan_autoreset(ends),
+                "scan_autoreset_randomized": lambda: scan_autoreset(ends, "scan_autoreset_randomized",
+                                                                    parse_randomize(randomize)),
                 "gym_torch": lambda: gym_loop("torch"), "gym_torch_next_step": lambda: gym_loop("torch", "next_step"),
                 "gym_numpy": lambda: gym_loop("numpy"), "dropin_numpy": lambda: dropin("numpy"),
                 "dropin_torch": lambda: dropin("torch"), "gym_torch_ends": lambda: gym_loop("torch", max_steps=ends),
@@ -235,6 +244,9 @@ if "raw" in row and "control_steps_per_s" in row["raw"]:
     for c in cases:
         if c != "raw" and "control_steps_per_s" in row.get(c, {}):
             row[c]["fraction_of_raw"] = row[c]["control_steps_per_s"] / row["raw"]["control_steps_per_s"]
+fixed, drawn = row.get("scan_autoreset", {}), row.get("scan_autoreset_randomized", {})
+if "control_steps_per_s" in fixed and "control_steps_per_s" in drawn:
+    drawn["fraction_of_fixed"] = drawn["control_steps_per_s"] / fixed["control_steps_per_s"]
 print(json.dumps(row))
 """
 
@@ -249,12 +261,17 @@ def main(argv=None) -> int:
     p.add_argument("--cases", default=CASES)
     p.add_argument("--ends", type=int, default=10,
                    help="control steps an episode in scan_autoreset and the *_ends cases (default 10: 5 resets a row in 50 steps)")
+    p.add_argument("--randomize", default="tee_mass=0.5:2,tee_damping=0.5:1.5,tee_frictionloss=0.1:2,kv=0.8:1.2",
+                   help="scan_autoreset_randomized's ranges, as mjx-pusht's --randomize (model/randomize.py)")
+    p.add_argument("--backend", default="mjx-warp", choices=["mjx-warp", "mjx-jax"],
+                   help="scan_autoreset's env backend (mjx-jax: a CPU check of the command; the figures are MJX-Warp's)")
     p.add_argument("--json", default=None)
     args = p.parse_args(argv)
     rows = []
     for n in (int(x) for x in args.envs.split(",")):
         t0 = time.perf_counter()
-        r = subprocess.run([sys.executable, "-c", ONE, str(n), str(args.steps), args.obs, args.cases, str(args.ends)],
+        r = subprocess.run([sys.executable, "-c", ONE, str(n), str(args.steps), args.obs, args.cases, str(args.ends),
+                            args.randomize, args.backend],
                            capture_output=True, text=True)
         try:
             row = json.loads(r.stdout.strip().splitlines()[-1])

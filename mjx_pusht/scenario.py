@@ -25,9 +25,12 @@ class Scenario:
     reset: str = "chapter"  # reset.RESETS
     controller: object | None = None  # a controllers.Controller
     episode: object | None = None  # an episode.Episode; None with a controller: the defaults
+    # {name: (lo, hi)} scale factors drawn per episode from its seed (model/randomize.py); kept as (name, (lo, hi))
+    randomize: tuple = ()
 
     def __post_init__(self) -> None:
         from mjx_pusht.model.params import check_params
+        from mjx_pusht.model.randomize import check as check_randomize
         from mjx_pusht.task.episode import Episode
         from mjx_pusht.task.reset import RESETS
 
@@ -36,6 +39,9 @@ class Scenario:
                 raise ConfigError(f"Scenario's {name} must be a {kind.__name__}, got {getattr(self, name)!r}")
         # the CLI's --param goes through the same check (model.params.parse_params)
         object.__setattr__(self, "params", check_params(self.params))
+        object.__setattr__(self, "randomize", check_randomize(self.randomize, self.scene))
+        if self.params and self.randomize:
+            raise ConfigError("a Scenario sweeps a parameter grid or randomises physics per episode, not both")
         if self.episode is not None and not isinstance(self.episode, Episode):
             raise ConfigError(f"Scenario's episode must be an Episode, got {self.episode!r}")
         if self.reset not in RESETS:

@@ -101,3 +101,18 @@ def resolve(name: str) -> tuple[str, str]:
             return "mjx-warp", "auto: a GPU is present and MJX-Warp runs the scene as authored"
         return "cpu", "auto: a GPU is present but warp-lang is not; mjx-jax would change the pusher shape, so cpu"
     return "cpu", "auto: no GPU here; MuJoCo C on every core is the fastest faithful path"
+
+
+def drawn_params(scenario, model, seeds, combos) -> dict | None:
+    """Each row's parameter values, for the per-seed table's param_ columns: its grid combination's, or the
+    physics drawn from its seed (model/randomize.py, as the parameters' own values); None when neither."""
+    import numpy as np
+
+    if scenario.randomize:
+        from mjx_pusht.model.randomize import factors, values
+
+        return values(model, scenario.randomize, factors(scenario.randomize, seeds))
+    if scenario.params:
+        grid = scenario.grid()
+        return {name: np.array([grid[c][name] for c in combos]) for name, _ in scenario.params}
+    return None

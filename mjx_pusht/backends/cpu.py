@@ -23,7 +23,7 @@ from mujoco import rollout as mj_rollout
 
 from mjx_pusht import validate
 from mjx_pusht.backends import actions
-from mjx_pusht.backends.base import Backend
+from mjx_pusht.backends.base import Backend, drawn_params
 from mjx_pusht.backends.results import Rollouts, Trace, from_carry
 from mjx_pusht.model.layout import QposLayout
 from mjx_pusht.model.scene import build_model
@@ -126,6 +126,9 @@ class _Lockstep:
         """This batch with `rows` taken from `other` (a batch of len(rows) worlds): a partial reset."""
         new = self if inplace else self.copy()
         for j, i in enumerate(np.asarray(rows)):
+            if other.models[j] is not new.models[i]:  # a new episode's own physics (randomised): its model too
+                new.models = [*new.models[:i], other.models[j], *new.models[i + 1:]]
+                new._view_cache = None
             mujoco.mj_copyData(new.datas[i], other.models[j], other.datas[j])
             new.qpos[:, i], new.qvel[:, i], new.sens[:, i] = other.qpos[:, j], other.qvel[:, j], other.sens[:, j]
         return new
@@ -288,9 +291,14 @@ def run_cpu(
     combos = np.zeros(len(seeds), np.int64) if combos is None else np.asarray(combos, np.int64)
     from mjx_pusht.model.params import apply, model_warnings
 
-    models = [apply(model, g) for g in grid] if scenario.params else [model]
-    model_bits = np.array([model_warnings(m) for m in models], np.int32)  # a singular model, say
     seeds = np.asarray(seeds, dtype=np.int64)
+    if scenario.randomize:  # a model per row, its physics drawn from its seed (model/randomize.py)
+        from mjx_pusht.model.randomize import factors, row_models as drawn
+
+        models, combos = drawn(model, scenario.randomize, factors(scenario.randomize, seeds)), np.arange(len(seeds))
+    else:
+        models = [apply(model, g) for g in grid] if scenario.params else [model]
+    model_bits = np.array([model_warnings(m) for m in models], np.int32)  # a singular model, say
     nthread = nthread or default_threads()
     layout = QposLayout.of(model)
     controller, episode = scenario.driver()
@@ -311,7 +319,7 @@ def run_cpu(
         for lo in range(0, len(seeds), _CHUNK):
             qpos0 = layout.initial_qpos(model, poses[lo : lo + _CHUNK])
             n = len(qpos0)
-            row_models = [models[c] for c in combos[lo : lo + n]] if scenario.params else model
+            row_models = [models[c] for c in combos[lo : lo + n]] if scenario.params or scenario.randomize else model
             stepper = _Replay(pool, row_models, datas, model, qpos0, table, fs) if table is not None else None
             if stepper is None or stepper.stopped.any():
                 # feedback, or a rollout MuJoCo stopped at a warning: step MjData by MjData, as mj_step
@@ -340,8 +348,7 @@ def run_cpu(
             if trace:
                 traces.append(np.concatenate(frames, axis=1))
     out = Rollouts.concat(parts) if parts else Rollouts.empty()
-    if scenario.params:
-        out.params = {name: np.array([grid[c][name] for c in combos]) for name, _ in scenario.params}
+    out.params = drawn_params(scenario, model, seeds, combos)
     if trace:
         out.trace = Trace(np.concatenate(traces), float(model.opt.timestep), fs)
     return out

@@ -47,8 +47,9 @@ class GymPushtBackend(Backend):
         if scenario.scene.variant != "gym-pusht" or scenario.reset != "gym-pusht" or scenario.controller is None:
             raise BackendError("the gym-pusht backend runs gym-pusht's task only (eval --task gym-pusht): a "
                                "controller's episodes from gym-pusht's starts")
-        if scenario.params:
-            raise BackendError("the gym-pusht backend runs gym-pusht's own physics: --param sweeps MuJoCo's")
+        if scenario.params or scenario.randomize:
+            raise BackendError("the gym-pusht backend runs gym-pusht's own physics: --param and --randomize vary "
+                               "MuJoCo's")
         _, episode = scenario.driver()
         if episode.frame_skip != 10:
             raise BackendError("gym-pusht steps 10 physics steps a control step: --frame-skip 10 only")

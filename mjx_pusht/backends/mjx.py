@@ -21,7 +21,7 @@ import numpy as np
 
 from mjx_pusht import validate
 from mjx_pusht.backends import actions, launch as launching
-from mjx_pusht.backends.base import Backend, BackendError
+from mjx_pusht.backends.base import Backend, BackendError, drawn_params
 from mjx_pusht.backends.grid import ModelGrid
 from mjx_pusht.backends.jax_setup import enable_compilation_cache
 from mjx_pusht.backends.results import Rollouts, Trace, from_carry
@@ -163,7 +163,8 @@ class MjxRunner:
             self.warp_kernels = warp_kernels.precompile(self.model, self.devices)
             self.compile_seconds += self.warp_kernels.get("find_seconds", 0.0) + self.warp_kernels.get("compile_seconds", 0.0)
         self.grid = scenario.grid()
-        self.models = ModelGrid(self.model, self.grid, impl=cfg.impl, device=self.devices[0], graph_mode=cfg.graph_mode)
+        self.models = ModelGrid(self.model, self.grid, impl=cfg.impl, device=self.devices[0],
+                                graph_mode=cfg.graph_mode, randomize=scenario.randomize)
         # x64 is process-wide in JAX: once on, every later runner computes in float64 too
         self.dtype = np.float64 if jax.config.jax_enable_x64 else np.float32
 
@@ -181,7 +182,7 @@ class MjxRunner:
         return mjx.make_data(self.model, impl="jax", device=device)
 
     def _build(self, batch: int, trace: bool):
-        """Compile the rollout for one batch shape; returns launch(qpos0, key, combo) -> host arrays.
+        """Compile the rollout for one batch shape; returns launch(qpos0, key, combo, drawn) -> host arrays.
 
         A scan over control steps (the controller inside the compiled program, no host round
         trip), each `task.episode.control_step` over `frame_skip` physics steps.
@@ -201,8 +202,8 @@ class MjxRunner:
             qs0 = jnp.zeros((episode.physics_steps, model.nq), qpos0.dtype) if trace else None
             return (d0.replace(qpos=qpos0), jnp.zeros((), jnp.int32), qs0), carry
 
-        def advance(leaves, combo, key, sim, carry, k, image=None):
-            physics = physics_for(grid.row(leaves, combo), fs, settle_step, layout, warp)
+        def advance(leaves, combo, drawn, key, sim, carry, k, image=None):
+            physics = physics_for(grid.row(leaves, combo, drawn), fs, settle_step, layout, warp)
             action, carry = act(carry, sim[0].qpos, k, key, controller, layout, jnp, image)
             if check:
                 action, bad = actions.record_update(carry["bad_action"], action, ~carry["ep"]["done"], k, jnp)
@@ -215,15 +216,13 @@ class MjxRunner:
             _, ovf, qs = sim
             return carry, ovf, (qs if trace else jnp.zeros((0, model.nq), sim[0].qpos.dtype))
 
-        def one_seed(leaves, d0, qpos0, key, combo):  # vmapped over the batch: each world's scan
-            def step(outer, k):
-                return advance(leaves, combo, key, *outer, k), None
-
+        def one_seed(leaves, d0, qpos0, key, combo, drawn):  # vmapped over the batch: each world's scan
+            step = lambda outer, k: (advance(leaves, combo, drawn, key, *outer, k), None)  # noqa: E731
             outer, _ = jax.lax.scan(step, start(d0, qpos0, key), jnp.arange(episode.max_steps))
             return finish(*outer)
 
         if not controller.pixels:
-            batched = jax.vmap(one_seed, in_axes=(None, None, 0, 0, 0))
+            batched = jax.vmap(one_seed, in_axes=(None, None, 0, 0, 0, 0))
         else:
             # A controller that looks: MJX-Warp's ray tracer renders the batch each control step. Its call is one
             # for the whole batch (custom_vmap): traced inside a vmapped scan's body it would be traced unbatched
@@ -235,11 +234,11 @@ class MjxRunner:
                                   "use --backend mjx-warp on one device (or cpu)")
             renderer = self._renderers[batch] = WarpRenderer(model, batch, controller.pixels)
 
-            def batched(leaves, d0, qpos0, key, combo):
+            def batched(leaves, d0, qpos0, key, combo, drawn):
                 def step(outer, k):
                     image = jax.vmap(renderer)(outer[0][0])
-                    return jax.vmap(advance, in_axes=(None, 0, 0, 0, 0, None, 0))(leaves, combo, key, *outer, k,
-                                                                                   image), None
+                    return jax.vmap(advance, in_axes=(None, 0, 0, 0, 0, 0, None, 0))(leaves, combo, drawn, key, *outer,
+                                                                                      k, image), None
 
                 outer = jax.vmap(start, in_axes=(None, 0, 0))(d0, qpos0, key)
                 outer, _ = jax.lax.scan(step, outer, jnp.arange(episode.max_steps))
@@ -249,11 +248,11 @@ class MjxRunner:
             raise BackendError(f"a batch of {batch} does not divide over {n_dev} devices")
         per_dev = batch // n_dev
         if warp and n_dev > 1:
-            launch, seconds = launching.per_device(batched, self.devices, grid.leaves_on,
-                                                   lambda dev, n: self.initial_data(n, dev), per_dev, model.nq, self.dtype)
+            launch, seconds = launching.per_device(batched, self.devices, grid.leaves_on, lambda dev, n: self.initial_data(
+                n, dev), per_dev, model.nq, self.dtype, grid.n_drawn)
         else:
-            launch, seconds = launching.one_program(batched, self.devices, grid.leaves_on(),
-                                                    self.initial_data(per_dev, self.devices[0]), batch, model.nq, self.dtype)
+            launch, seconds = launching.one_program(batched, self.devices, grid.leaves_on(), self.initial_data(
+                per_dev, self.devices[0]), batch, model.nq, self.dtype, grid.n_drawn)
         self.compile_seconds += seconds
         return launch
 
@@ -283,7 +282,8 @@ class MjxRunner:
         combos = np.zeros(n, np.int64) if combos is None else np.asarray(combos, np.int64)
         combo = np.concatenate([combos, np.repeat(combos[-1:], batch - n)]).astype(np.int32)
         qpos0 = np.asarray(qpos0, self.dtype)
-        future = _device_thread().submit(lambda: launch(jnp.asarray(qpos0), jnp.asarray(rng_key), jnp.asarray(combo)))
+        drawn = jnp.asarray(self.models.factors(np.concatenate([seeds, np.repeat(seeds[-1:], batch - n)])), self.dtype)
+        future = _device_thread().submit(lambda: launch(*map(jnp.asarray, (qpos0, rng_key, combo)), drawn))
         return Pending(seeds, poses, combos, qpos0, batch, trace, future)
 
     def collect(self, p: "Pending") -> Rollouts:
@@ -302,8 +302,7 @@ class MjxRunner:
         q0 = np.asarray(qpos0, np.float64)[:n]
         out = from_carry(seeds, poses, self.layout.pusher_xy(q0), carry)
         out.warnings = self.models.warnings[combos]  # MJX raises none of its own; a singular model is still one
-        if self.scenario.params:
-            out.params = {name: np.array([self.grid[c][name] for c in combos]) for name, _ in self.scenario.params}
+        out.params = drawn_params(self.scenario, self.model, seeds, combos)
         if trace:
             out.trace = Trace(np.concatenate([q0[:, None], np.asarray(qs, np.float64)[:n]], axis=1),
                               float(self.model.opt.timestep), self.scenario.driver()[1].frame_skip)

@@ -1,5 +1,5 @@
 """`mjx-pusht eval`: the command line of `study.evaluate.evaluate` (a controller's episodes on many start
-states): --param parsed, Ctrl-C an exit status of 130."""
+states): --param parsed (--randomize by its flag's type), Ctrl-C an exit status of 130."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ def cmd_eval(args) -> int:
         evaluate(args.controller, seeds, args.out, backend=args.backend, action=args.action, task=args.task,
                  reset=args.reset, success_threshold=args.success_threshold, goal=args.goal,
                  break_it=args.break_it, max_steps=args.max_steps, frame_skip=args.frame_skip, params=params,
+                 randomize=args.randomize,
                  chunk=args.chunk, resume=args.resume, replace=args.replace, progress=args.progress,
                  record=args.record, rerun=args.rerun, video=args.video, video_episodes=args.video_episodes,
                  video_size=args.video_size, share=args.share_out)

@@ -140,8 +140,28 @@ def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str)
     p.add_argument("--no-rerun", dest="rerun", action="store_false", help=f"skip {name}.rrd")
     p.add_argument("--no-progress", dest="progress", action="store_false")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
-                   help="sweep a physical parameter as a grid: kv, tee_damping, tee_frictionloss, tee_mass; "
+                   help="sweep a physical parameter as a grid: kv, kp (gym-pusht), tee_damping, tee_frictionloss, tee_mass; "
                         "VALUES is a,b,c, lo:hi:n (evenly spaced) or ~lo:hi:n (n random draws) (repeatable)")
+    randomize_arg(p)
+
+
+def _randomize(text: str) -> dict:
+    """An argparse type: --randomize's NAME=lo:hi,... (model/randomize.parse), its error one line."""
+    from mjx_pusht.model.params import ParamError
+    from mjx_pusht.model.randomize import parse
+
+    try:
+        return parse(text)
+    except ParamError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def randomize_arg(p: argparse.ArgumentParser) -> None:
+    """--randomize: physics drawn per episode from its seed (eval, sweep, train)."""
+    p.add_argument("--randomize", type=_randomize, default=None, metavar="NAME=LO:HI,...",
+                   help="draw physics per episode from its seed: scale factors on the task's own values, uniform in "
+                        "[LO, HI] (LO = HI: fixed). chapter: tee_mass, tee_damping, tee_frictionloss, kv; gym-pusht: "
+                        "kp, kv (e.g. tee_mass=0.5:2,kv=0.8:1.2)")
 
 
 def _task_args(p: argparse.ArgumentParser, reset_help: str) -> None:
@@ -273,6 +293,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--max-samples", type=_int_at_least(1, 1 << 30, " samples"), default=None,
                    help="DAgger: dataset ring size (default 8,000,000)")
     _task_args(t, "start distribution of the chapter task trained and judged on (default task)")
+    randomize_arg(t)  # training's episodes and every held-out judgement at each episode's drawn physics
     t.add_argument("--eval-envs", type=_worlds, default=None,
                    help="held-out task seeds judged after every iteration (default 4096; DAgger on cpu 64)")
     t.add_argument("--max-steps", type=_steps, default=300,

@@ -27,7 +27,9 @@ def cmd_sweep(args) -> int:
     name, why = resolve(args.backend)
     schedule = Schedule(nudge_steps=args.steps)
     config = {"backend": name, "break_it": args.break_it, "steps": args.steps, "params": [[n, list(v)] for n, v in params]}
-    scenario = Scenario(SceneSpec(args.break_it), schedule, params)
+    scenario = Scenario(SceneSpec(args.break_it), schedule, params, randomize=args.randomize)
+    if scenario.randomize:  # an unrandomised sweep's config (and so its fingerprint) stays as it was
+        config["randomize"] = [[n, list(r)] for n, r in scenario.randomize]
     if processes.many:  # one sweep, one table: every process must have been given the same one
         from mjx_pusht.study.sweep import fingerprint, rows_for
 

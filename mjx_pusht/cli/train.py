@@ -75,14 +75,17 @@ def cmd_train(args) -> int:
                        late_fits=args.late_fits, first_fits=args.first_fits, max_grad_norm=args.max_grad_norm,
                        action_eps=args.action_eps,
                        max_steps=args.max_steps, task=None if task.name == "chapter" else task.name,
-                       success_threshold=args.success_threshold, goal=None if args.goal == "fixed" else args.goal)
+                       success_threshold=args.success_threshold, goal=None if args.goal == "fixed" else args.goal,
+                       randomize=args.randomize)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
     banner = Banner("train")
     print(f"backend: {name} ({why}); DAgger from {cfg.obs_type} on the {task.name} task: {cfg.envs} {cfg.reset} "
           f"episodes an iteration, "
-          f"{cfg.iterations} iterations, held-out seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
+          f"{cfg.iterations} iterations, held-out seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}"
+          + ("; physics drawn per episode: " + ", ".join(f"{n} x{lo:g}..{hi:g}" for n, (lo, hi) in cfg.randomize)
+             if cfg.randomize else ""))
     from mjx_pusht.train.run import train_dagger
 
     summary = train_dagger(cfg, name, out, resume=args.resume, minutes=args.minutes, progress=args.progress,
@@ -123,7 +126,7 @@ def _cmd_ppo(args, name: str, why: str) -> int:
                     hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
                     eval_envs=args.eval_envs, seed=args.seed, reset=args.reset, act=args.ppo_act,
                     max_grad_norm=args.max_grad_norm, lr_schedule=args.lr_schedule, max_steps=args.max_steps,
-                    success_threshold=args.success_threshold)
+                    success_threshold=args.success_threshold, randomize=args.randomize)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)
     _restart(out, args)
     _check_rerun(args)
@@ -175,7 +178,7 @@ def _judge(args, backend: str, out: Path, summary: dict) -> dict:
     evaluate(f"policy:{out / 'policy.msgpack'}", seeds, out / "eval", backend=backend,
              task=summary["held_out"].get("task", "chapter"), reset=summary["held_out"]["reset"],
              max_steps=summary["held_out"]["max_steps"], success_threshold=summary["held_out"]["success_coverage"],
-             goal=summary["held_out"].get("goal", "fixed"),
+             goal=summary["held_out"].get("goal", "fixed"), randomize=summary["held_out"].get("randomize"),
              record=args.record, progress=args.progress, rerun=args.rerun)
     s = json.loads((out / "eval" / "summary.json").read_text())
     return {k: s[k] for k in ("n_episodes", "n_success", "success_rate", "success_rate_ci95", "median_steps_to_success",

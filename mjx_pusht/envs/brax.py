@@ -11,9 +11,11 @@ batches them). The physics state (`State.pipeline_state`) is the functional env'
 Start poses come from a table drawn ahead on the host (task seeds `first_seed` ..
 `first_seed + table - 1`, reset.py), held on the device; `reset(rng)` picks a row of it.
 `info["seed"]` says which seed an episode started from, so any episode can be replayed by
-`eval`. Brax's own AutoResetWrapper restarts a done env from that env's *first* state (every
-episode of an env then starts the same); `wrap_for_training` is the same wrapper stack with a
-fresh start from the table on every reset instead: pass it as `ppo.train(..., wrap_env_fn=...)`.
+`eval`. `randomize={name: (lo, hi)}` draws each table seed's physics as `eval --randomize` draws it
+(model/randomize.py; held on the device beside the starts), its values in `info["physics"]`.
+Brax's own AutoResetWrapper restarts a done env from that env's *first* state (every episode of an
+env then starts the same); `wrap_for_training` is the same wrapper stack with a fresh start from the
+table on every reset instead: pass it as `ppo.train(..., wrap_env_fn=...)`.
 
 Episode ends reach Brax's trainer as the task defines them: success is a termination (no value
 after it) and running out of control steps a truncation (`info["truncation"]`, which Brax's GAE
@@ -42,6 +44,7 @@ with requires("the Brax adapter", "brax"):  # optional: say what to install, in 
 
 from mjx_pusht import validate
 from mjx_pusht.backends import actions as action_check
+from mjx_pusht.envs import physics as per_episode
 from mjx_pusht.envs.functional import PushTEnv
 from mjx_pusht.errors import ConfigError
 
@@ -74,7 +77,7 @@ class BraxPushT(Env):
 
     def __init__(self, backend: str = "mjx-warp", obs_type: str = "state", reset_kind: str = "task",
                  episode: Episode = Episode(), max_worlds: int = 4096, table: int = 65536, first_seed: int = 0,
-                 reward_fn=None, starts: np.ndarray | None = None):
+                 reward_fn=None, starts: np.ndarray | None = None, randomize=None):
         """`starts`: a (table, 5) array of starts (tee x, y, yaw, pusher x, y) to draw from instead of the task
         seeds' own (row i is still keyed and reported as seed `first_seed + i`)."""
         if obs_type not in OBS_TYPES:
@@ -84,7 +87,7 @@ class BraxPushT(Env):
         max_worlds, self.table = validate.positive_int("max_worlds", max_worlds), validate.positive_int("table", table)
         self.first_seed = validate.seed(first_seed, "first_seed")
         validate.seed(self.first_seed + self.table - 1, "first_seed + table - 1 (the table's last seed)")
-        self.env = PushTEnv(backend=backend, reset_kind=reset_kind, episode=episode)
+        self.env = PushTEnv(backend=backend, reset_kind=reset_kind, episode=episode, randomize=randomize)
         self.obs_type, self.reward_fn = obs_type, reward_fn
         seeds = np.arange(self.first_seed, self.first_seed + self.table, dtype=np.int64)
         if starts is None:
@@ -96,6 +99,8 @@ class BraxPushT(Env):
         qpos = self.env.layout.initial_qpos(self.env.model, np.asarray(starts, np.float64))
         self._qpos = jnp.asarray(qpos, self.env.runner.dtype)
         self._keys = jnp.asarray(seed_key(seeds))
+        f = per_episode.draw(self.env, seeds)  # each table seed's physics factors (None: the scene's own)
+        self._physics = None if f is None else jnp.asarray(f, self.env.runner.dtype)
         self._d0 = self.env.template(int(max_worlds))
 
     def _brax(self, s, reward, pipeline_info: dict, metrics: dict | None = None) -> State:
@@ -113,8 +118,10 @@ class BraxPushT(Env):
 
     def reset(self, rng: jax.Array) -> State:
         i = jax.random.randint(rng, (), 0, self.table)
-        s = self.env.fresh_one(self._d0, self._qpos[i], self._keys[i])
-        info = {"seed": self.first_seed + i, "bad_action": action_check.record_init((), s.reward.dtype, jnp)}
+        s = self.env.fresh_one(self._d0, self._qpos[i], self._keys[i],
+                               physics=None if self._physics is None else self._physics[i])
+        info = {"seed": self.first_seed + i, "bad_action": action_check.record_init((), s.reward.dtype, jnp),
+                **per_episode.info(self.env, s.physics, jnp)}
         return self._brax(s, jnp.zeros((), s.reward.dtype), info)
 
     def step(self, state: State, action: jax.Array) -> State:
@@ -189,6 +196,8 @@ class FreshStartAutoReset(brax_training.Wrapper):
         data = jax.vmap(lambda d, f, x: x.where(d > 0, f))(done, fresh.pipeline_state.data, pipeline.data)
         info = {**state.info, "reset_key": keys[:, 1], "truncation": truncation,
                 "seed": jnp.where(done > 0, fresh.info["seed"], state.info["seed"])}
+        if "physics" in info:  # the drawn physics of the episode each env now runs
+            info["physics"] = jax.tree.map(where_done, fresh.info["physics"], state.info["physics"])
         return state.replace(pipeline_state=merged._replace(data=data), obs=where_done(fresh.obs, state.obs),
                              info=info)
 

@@ -70,11 +70,13 @@ def warn_broken(info: dict) -> None:
 
 def functional(backend: str, obs_type: str, action_type: str, observation_size: int, reset_kind: str,
                max_episode_steps: int | None, frame_skip: int, threads: int = 1, variant: str = "chapter",
-               success_threshold: float | None = None, goal: str = "fixed") -> PushTEnv:
+               success_threshold: float | None = None, goal: str = "fixed", randomize=None) -> PushTEnv:
     """The functional env behind the gymnasium envs; stepped in place (a gymnasium env keeps no old states).
     Its episodes are the variant's task's (task/tasks.py): the gym-pusht variant's run as gym-pusht's do (a start
     on the goal is scored by the first step), and success is at the task's coverage unless `success_threshold`.
-    `max_episode_steps` None: no limit of the env's own (gymnasium's TimeLimit truncates). `goal`: task/goals.GOALS."""
+    `max_episode_steps` None: no limit of the env's own (gymnasium's TimeLimit truncates). `goal`: task/goals.GOALS.
+    `randomize`: physics drawn per episode from its seed (model/randomize.py), its values in info["physics"]
+    (envs/physics.info)."""
     from mjx_pusht.task.tasks import get
 
     limit = NEVER if max_episode_steps is None else validate.positive_int("max_episode_steps", max_episode_steps)
@@ -83,7 +85,7 @@ def functional(backend: str, obs_type: str, action_type: str, observation_size: 
                     pixels=observation_size if obs_type.startswith("pixels") else 0,
                     episode=task.episode(limit, validate.positive_int("frame_skip", frame_skip), success_threshold),
                     scene=task.scene(), threads=threads, keep_states=False,
-                    keypoints=obs_type == "keypoints", goal=goal)
+                    keypoints=obs_type == "keypoints", goal=goal, randomize=randomize)
 
 
 class OneWorld:

@@ -39,6 +39,7 @@ from mjx_pusht.task.episode import (
     begin,
     control_step,
 )
+from mjx_pusht.envs import physics as per_episode
 from mjx_pusht.envs.starts import START_HI, START_LO, clear_of_tee, episode_with_goal
 from mjx_pusht.task.reset import start_poses
 from mjx_pusht.task.rules import ACTION_TYPES, observe
@@ -57,6 +58,7 @@ class State(NamedTuple):
     key: Any  # (N, 2) uint32 seed words
     dropped: Any = None  # (N,) int32 MJX-Warp overflow bits since reset (0: nothing dropped); None on cpu/mjx-jax
     info: Any = None  # wrappers' own arrays (wrappers.AutoReset: the start pool, the ended episodes' outcome)
+    physics: Any = None  # (N, k) each episode's physics factors, drawn from its seed (`randomize`); None: the scene's
 
     @property
     def metrics(self) -> dict:
@@ -99,6 +101,7 @@ class PushTEnv:
     # step's inputs into buffers of its own and replays one captured graph), the env's measured best
     # (notebook change 13); "WARP" is MJX's default, which the sweep keeps
     graph_mode: str | None = None
+    randomize: Any = None  # {name: (lo, hi)} scale factors drawn per episode from its seed (model/randomize.py)
 
     def __post_init__(self) -> None:
         from mjx_pusht.backends.base import BackendError
@@ -113,7 +116,8 @@ class PushTEnv:
         if self.scene.variant == "gym-pusht" and self.reset_kind == "task":
             self.reset_kind = "gym-pusht"  # the variant's own reset, unless another is asked for
         self._ctrl = _Stateless(action_type=self.action_type)
-        self.scenario = Scenario(self.scene, reset=self.reset_kind, controller=self._ctrl, episode=self.episode)
+        self.scenario = Scenario(self.scene, reset=self.reset_kind, controller=self._ctrl, episode=self.episode,
+                                 randomize=self.randomize)
         self._settle = self.scenario.schedule.settle_steps - 1
         if self.backend == "cpu":
             from mjx_pusht.backends.cpu import cpu_model
@@ -204,14 +208,16 @@ class PushTEnv:
         seeds = np.zeros(len(starts), np.int64) if seeds is None else validate.seed_array(seeds)
         if len(seeds) != len(starts):
             raise ConfigError(f"seeds: {len(seeds)} seeds for {len(starts)} start states")
-        qpos0 = self.layout.initial_qpos(self.model, starts)
-        key = seed_key(seeds)
+        qpos0, key, f = self.layout.initial_qpos(self.model, starts), seed_key(seeds), per_episode.draw(self, seeds)
         if self.backend == "cpu":
             from mjx_pusht.backends.cpu import _Lockstep
 
-            data = _Lockstep(self.model, self.model, qpos0, self.episode.frame_skip, self.threads)
-            return self._state(data, begin(self.layout, qpos0, key, self._ctrl, self.episode, np), qpos0, key, 0)
-        return self._reset_mjx(qpos0, key)
+            data = _Lockstep(per_episode.cpu_models(self, f), self.model, qpos0, self.episode.frame_skip, self.threads)
+            return self._state(data, begin(self.layout, qpos0, key, self._ctrl, self.episode, np), qpos0, key, 0, f)
+        import jax.numpy as jnp
+
+        n, dt, f = len(qpos0), self.runner.dtype, f if f is None else f.astype(self.runner.dtype)
+        return self._batch_fns(n)[1](self.template(n), jnp.asarray(qpos0, dt), jnp.asarray(key), f)
 
     def given_starts(self, starts) -> np.ndarray:
         """A user's starts, checked as `_starts` checks any, and the pusher clear of the T (`clear_of_tee`)."""
@@ -229,33 +235,26 @@ class PushTEnv:
             return a
         return validate.starts(a, len(a), START_LO, START_HI)
 
-    def _reset_mjx(self, qpos0, key) -> State:
-        import jax.numpy as jnp
-
-        n = len(qpos0)
-        q = jnp.asarray(qpos0, self.runner.dtype)
-        return self._batch_fns(n)[1](self.template(n), q, jnp.asarray(key))
-
     def template(self, n: int):
         """The fresh mjx.Data every episode of an `n`-world batch starts from (MJX-Warp sizes its buffers by n)."""
         if n not in self._templates:
             self._templates[n] = self.runner.initial_data(n)
         return self._templates[n]
 
-    def fresh_one(self, d0, qpos, key, coverage0=None) -> State:
+    def fresh_one(self, d0, qpos, key, coverage0=None, physics=None) -> State:
         """One world's new episode from `qpos` (pure; no pixels: `with_pixels` adds them). `coverage0`, the
-        start's coverage if known, spares the polygon clipping (the costly part of a reset)."""
+        start's coverage if known, spares the polygon clipping (the costly part of a reset). `physics`: its factors."""
         import jax.numpy as jnp
 
         carry = begin(self.layout, qpos, key, self._ctrl, self.episode, jnp, coverage0)
-        return self._state(d0.replace(qpos=qpos), carry, qpos, key, jnp.zeros((), jnp.int32), pixels=False)
+        return self._state(d0.replace(qpos=qpos), carry, qpos, key, jnp.zeros((), jnp.int32), physics, pixels=False)
 
-    def _reset_batch(self, d0, q, k) -> State:
+    def _reset_batch(self, d0, q, k, f) -> State:
         import jax
 
-        return jax.vmap(lambda qp, kk: self.with_pixels(self.fresh_one(d0, qp, kk)))(q, k)
+        return jax.vmap(lambda qp, kk, ff: self.with_pixels(self.fresh_one(d0, qp, kk, physics=ff)))(q, k, f)
 
-    def _state(self, data, carry, qpos, key, step, pixels=True) -> State:
+    def _state(self, data, carry, qpos, key, step, physics=None, pixels=True) -> State:
         xp = self._xp
         ep = carry["ep"]
         obs = self._observe(qpos, data, pixels, goal=carry.get("goal"))
@@ -263,7 +262,7 @@ class PushTEnv:
         # an episode that starts covered is terminated at reset, before any step
         dropped = xp.zeros(n, dtype=xp.int32) if self.backend == "mjx-warp" else None
         return State(data, carry, obs, xp.zeros(n, dtype=qpos.dtype), ep["done"] & ep["success"],
-                     xp.zeros(n, dtype=bool), xp.zeros(n, dtype=xp.int32) + step, key, dropped)
+                     xp.zeros(n, dtype=bool), xp.zeros(n, dtype=xp.int32) + step, key, dropped, None, physics)
 
     # -- step -------------------------------------------------------------------------------------
     def step_one(self, state: State, action) -> State:
@@ -291,10 +290,11 @@ class PushTEnv:
 
         from mjx_pusht.backends.mjx import physics_for
 
-        physics = physics_for(self._mx, self.episode.frame_skip, self._settle, self.layout, self.backend == "mjx-warp")
+        mx = per_episode.world_model(self, state.physics)
+        step = physics_for(mx, self.episode.frame_skip, self._settle, self.layout, self.backend == "mjx-warp")
         sim = (state.data, jnp.zeros((), jnp.int32), None)
         qpos, carry, (d, ovf, _) = control_step(sim, state.carry, state.data.qpos, state.step, action,
-                                                self.action_type, physics, self.layout, self.episode, jnp)
+                                                self.action_type, step, self.layout, self.episode, jnp)
         new = self._after(state, d, carry, jnp, pixels=False)
         return new if state.dropped is None else new._replace(dropped=state.dropped | ovf)
 
@@ -313,7 +313,8 @@ class PushTEnv:
         truncated = ~terminated & (step >= self.episode.max_steps)
         carry = {**carry, "ep": {**ep, "done": ep["done"] | truncated}}
         obs = self._observe(qpos, data, pixels, qvel, carry.get("goal"))
-        return State(data, carry, obs, reward, terminated, truncated, step, state.key, state.dropped, state.info)
+        return State(data, carry, obs, reward, terminated, truncated, step, state.key, state.dropped, state.info,
+                     state.physics)
 
     def _observe(self, qpos, data, pixels=True, qvel=None, goal=None):
         # a random goal's pose beside the T's (a fixed goal is the origin, never observed)

@@ -26,7 +26,10 @@ Where this differs from gym-pusht (and how to convert):
   agent_pos}; `goal="random"`: a goal pose per episode from its seed (task/goals.py), its (x, y, yaw)
   after the state and its T's 16 keypoints after the T's, `info["goal_pose"]`, reward and success toward
   it; `options={"reset_to_state": [tee x, y, yaw, pusher x, y]}` starts from a given
-  state (the order `reset.start_poses` uses); reset options this env does not use are ignored.
+  state (the order `reset.start_poses` uses); reset options this env does not use are ignored;
+- `randomize={"tee_mass": (0.5, 2.0), "kv": (0.8, 1.2)}` draws each episode's physics from its seed (scale
+  factors on the task's own values, model/randomize.py: the same draw as `eval --randomize` for that seed);
+  info["physics"] = {name: value} holds the drawn values (kg, gains). Nothing asked for: no such key.
 
 The single env runs on NumPy and MuJoCo C only (no JAX), so it can be forked.
 """
@@ -43,6 +46,7 @@ with requires("the gymnasium environments", "gym"):  # the extra is optional: sa
     import gymnasium as gym
 
 from mjx_pusht import validate
+from mjx_pusht.envs import physics
 from mjx_pusht.envs.common import (
     OneWorld,
     Pictures,
@@ -86,14 +90,14 @@ class PushTGymEnv(OneWorld, Pictures, gym.Env):
     def __init__(self, obs_type: str = "state", action_type: str = "velocity", render_mode: str | None = None,
                  observation_size: int = IMAGE_SIZE, render_size: int = 512, reset_kind: str = "task",
                  max_episode_steps: int | None = None, frame_skip: int = 10,
-                 success_threshold: float | None = None, goal: str = "fixed"):
+                 success_threshold: float | None = None, goal: str = "fixed", randomize=None):
         check_kwargs(obs_type, action_type, observation_size)
         self.render_mode = validate.render_mode(render_mode, human=True)
         self.obs_type, self.action_type = obs_type, action_type
         self.render_size = validate.image_size(render_size, "render_size")
         self._env = functional("cpu", obs_type, action_type, observation_size, reset_kind,
                                validate.episode_limit(max_episode_steps), frame_skip,
-                               success_threshold=success_threshold, goal=goal)
+                               success_threshold=success_threshold, goal=goal, randomize=randomize)
         self.observation_space, self.action_space = single_spaces(obs_type, action_type, observation_size, np.float64,
                                                                   goal != "fixed")
         self._low, self._high = action_bounds(action_type)
@@ -154,7 +158,7 @@ class PushTGymEnv(OneWorld, Pictures, gym.Env):
             info["goal_pose"] = s.obs["goal"][0].copy()
         if not (info["finite"] and info["contained"]):
             warn_broken(info)
-        return info
+        return info | physics.info(self._env, None if s.physics is None else s.physics[0])
 
     def render(self):
         """rgb_array: the picture; human: shown in the window (None); no render_mode: None."""

@@ -16,6 +16,9 @@ this file only converts units at the boundary (`gym_view`). A single env is MuJo
 env is `gym.PushTVectorEnv` (the batch, device autoreset, the full vector API), handing out
 NumPy by default, as a gym-pusht loop expects (`array_type="torch"` or `"jax"` to stay on the GPU).
 What still differs from pymunk's physics, measured, is docs/dropin-physics.md.
+
+Beyond gym-pusht: `randomize={"kp": (0.8, 1.2), "kv": (0.8, 1.2)}` draws each episode's PD gains from its seed
+(scale factors on gym-pusht's KP and KV, model/randomize.py), their values in info["physics"], as PushT-v0 does.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ import numpy as np
 
 from mjx_pusht import validate
 from mjx_pusht.envs import gym as base  # first: says which extra brings gymnasium if it is missing
+from mjx_pusht.envs import physics
 from mjx_pusht.envs.common import OneWorld, Pictures, functional, warn_broken
 from mjx_pusht.envs.vector import PushTVectorEnv
 from mjx_pusht.errors import ConfigError
@@ -238,7 +242,7 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
     def __init__(self, obs_type: str = "state", render_mode: str | None = "rgb_array", block_cog=None, damping=None,
                  observation_width: int = 96, observation_height: int = 96, visualization_width: int = 680,
                  visualization_height: int = 680, success_threshold: float | None = None, reset_kind: str = "gym-pusht",
-                 goal: str = "fixed"):
+                 goal: str = "fixed", randomize=None):
         _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping, human=True)
         validate.choice("reset_kind", reset_kind, get_task("gym-pusht").resets + get_task("gym-pusht-easy").resets)
         validate.image_size(visualization_width, "visualization_width")
@@ -254,8 +258,8 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
                                                                      goal=goal != "fixed")
         self.k_p, self.k_v, self.control_hz, self.dt = frame.KP, frame.KV, 10, 0.01  # as gym-pusht names them
         self._env = functional("cpu", obs_type, "target", observation_width, reset_kind, None, 10,
-                               variant="gym-pusht", success_threshold=success_threshold, goal=goal)
-        self._state, self._last_action = None, None
+                               variant="gym-pusht", success_threshold=success_threshold, goal=goal, randomize=randomize)
+        self._state, self._last_action, self._seed = None, None, -1
         self._open_window()
 
     @property
@@ -281,7 +285,11 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         else:  # another start distribution (`easy`): the seed's start, as the functional env's (PushT-v0's rule)
             seed = seed if seed is not None else int(self.np_random.integers(SEED_MAX))
             start = start_poses([seed], reset=self._env.reset_kind)
-        self._state = self._env.reset_to(start, [0 if seed is None else seed])
+        # the episode's seed, which draws its physics (randomize) and its goal (goal="random"): the one given, else
+        # the one after the last episode's (gym-pusht's starts come from the generator: drawing a seed there would
+        # change them)
+        self._seed = seed if seed is not None else (self._seed + 1) % (SEED_MAX + 1)
+        self._state = self._env.reset_to(start, [self._seed])
         self._last_action = None
         obs, info = self._view()
         info["is_success"] = False
@@ -312,7 +320,7 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
                 "finite": bool(m["finite"][0]), "contained": bool(m["contained"][0])}
         if not (info["finite"] and info["contained"]):
             warn_broken(info)
-        return obs, info
+        return obs, info | physics.info(self._env, None if s.physics is None else s.physics[0])
 
     def render(self):
         """rgb_array: the picture (with gym-pusht's cross at the last target); human: shown in the window."""
@@ -335,14 +343,14 @@ class GymPushTVectorEnv(PushTVectorEnv):
                  visualization_width: int = 680, visualization_height: int = 680, max_episode_steps: int = 300,
                  backend: str = "auto", autoreset_mode="next_step", array_type: str | None = "numpy",
                  threads: int | None = None, depth: int = 8, success_threshold: float | None = None,
-                 reset_kind: str = "gym-pusht", goal: str = "fixed"):
+                 reset_kind: str = "gym-pusht", goal: str = "fixed", randomize=None):
         _check_kwargs(obs_type, observation_width, observation_height, render_mode, block_cog, damping)
         self.observation_width, self.observation_height = observation_width, observation_height
         self.visualization_width, self.visualization_height = visualization_width, visualization_height
         validate.choice("reset_kind", reset_kind, get_task("gym-pusht").resets + get_task("gym-pusht-easy").resets)
         super().__init__(num_envs, backend, obs_type, "target", render_mode, observation_width, visualization_width,
                          reset_kind, max_episode_steps, 10, autoreset_mode, threads, array_type, depth,
-                         variant="gym-pusht", success_threshold=success_threshold, goal=goal)
+                         variant="gym-pusht", success_threshold=success_threshold, goal=goal, randomize=randomize)
 
     @staticmethod
     def _check_args(obs_type, action_type, observation_size):

@@ -13,6 +13,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from mjx_pusht import validate
+from mjx_pusht.envs import physics
 from mjx_pusht.envs.common import (
     Pictures,
     action_bounds,
@@ -56,6 +57,9 @@ class PushTVectorEnv(Pictures, VectorEnv):
     the three. Physics gone wrong is checked on the device and raised or warned about at least
     every `depth` // 2 steps (every step with NumPy output): a dropped contact (BufferOverflow),
     a non-finite or escaped world (RuntimeWarning).
+
+    `randomize`: physics drawn per episode from its seed, as the single env's (model/randomize.py); each env's
+    drawn values are in info["physics"] = {name: (num_envs,) values, "_name": mask}, with info["_physics"].
     """
 
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -65,7 +69,8 @@ class PushTVectorEnv(Pictures, VectorEnv):
                  render_size: int = 512, reset_kind: str = "task", max_episode_steps: int = 300,
                  frame_skip: int = 10, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
                  threads: int | None = None, array_type: str | None = None, depth: int = 8,
-                 variant: str = "chapter", success_threshold: float | None = None, goal: str = "fixed"):
+                 variant: str = "chapter", success_threshold: float | None = None, goal: str = "fixed",
+                 randomize=None):
         from mjx_pusht.backends.base import resolve
         from mjx_pusht.backends.cpu import default_threads
         from mjx_pusht.envs.wrappers import AutoReset, StartPool
@@ -90,7 +95,7 @@ class PushTVectorEnv(Pictures, VectorEnv):
         self.render_size = render_size
         threads = validate.threads(threads) or (min(default_threads(), max(1, self.num_envs // 64)) if self.backend == "cpu" else 1)
         self._env = functional(self.backend, obs_type, action_type, observation_size, reset_kind,
-                                max_episode_steps, frame_skip, threads, variant, success_threshold, goal)
+                                max_episode_steps, frame_skip, threads, variant, success_threshold, goal, randomize)
         self._dtype = np.float64 if self.backend == "cpu" else np.dtype(self._env.runner.dtype)
         self.single_observation_space, self.single_action_space = self._single_spaces(
             obs_type, action_type, observation_size, self._dtype, goal != "fixed")
@@ -251,6 +256,8 @@ class PushTVectorEnv(Pictures, VectorEnv):
         m = state.metrics
         flat = {"obs": state.obs, "reward": state.reward, "terminated": state.terminated,
                 "truncated": state.truncated, "step": state.step, **{k: m[k] for k in _METRICS}}
+        if state.physics is not None:
+            flat["physics"] = state.physics
         obs, reward, terminated, truncated, info = self._arrays(flat)
         if self.array_type == "numpy":
             warn_broken(info)
@@ -263,11 +270,12 @@ class PushTVectorEnv(Pictures, VectorEnv):
             {"pixels"} if self.obs_type.startswith("pixels") else set())
         flat = {**flat, "obs": {k: v for k, v in flat["obs"].items() if k in keys}}
         if self.array_type == "numpy":  # MuJoCo C's arrays are on the host already: no JAX on the cpu path
-            return self._view(flat if self.backend == "cpu" else hand_off(flat, "numpy"), np)
+            flat = flat if self.backend == "cpu" else hand_off(flat, "numpy")
+            return self._with_physics(self._view(flat, np), flat, np)
         if self._view_jit is None:
             import jax
 
-            self._view_jit = jax.jit(lambda f: self._view(f, _jnp()))
+            self._view_jit = jax.jit(lambda f: self._with_physics(self._view(f, _jnp()), f, _jnp()))
         out = self._view_jit(flat)
         return hand_off(out, "torch") if self.array_type == "torch" else out
 
@@ -299,6 +307,18 @@ class PushTVectorEnv(Pictures, VectorEnv):
         else:
             out = (obs, flat["reward"], flat["terminated"], flat["truncated"])
         return out + (info | {f"_{k}": every for k in info},)
+
+    def _with_physics(self, out: tuple, flat: dict, xp) -> tuple:
+        """`_view`'s outputs with each env's drawn physics in info["physics"] (envs/physics.info), masked as
+        gymnasium's SyncVectorEnv masks a dict info; unchanged without `randomize`."""
+        drawn = physics.info(self._env, flat.get("physics"), xp)
+        if not drawn:
+            return out
+        every = xp.ones(self.num_envs, dtype=bool)
+        values = drawn["physics"]
+        if xp is np:  # the host's convention, as the other infos
+            values = {k: np.asarray(v, np.float64) for k, v in values.items()}
+        return out[:4] + ({**out[4], "physics": values | {f"_{k}": every for k in values}, "_physics": every},)
 
     def render(self):
         """One picture per environment, as a tuple (gymnasium's convention), drawn on the CPU renderer:

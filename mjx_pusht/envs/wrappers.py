@@ -38,6 +38,7 @@ from __future__ import annotations
 import numpy as np
 
 from mjx_pusht import validate
+from mjx_pusht.envs import physics as per_episode
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.controllers import seed_key
 from mjx_pusht.task.goals import draw
@@ -59,6 +60,8 @@ class StartPool:
         self.qpos = np.zeros((self.depth, self.n, env.model.nq), np.float64)
         self.keys = np.zeros((self.depth, self.n, 2), np.uint32)
         self.coverage = np.zeros((self.depth, self.n), np.float64)  # each start's coverage, computed here once
+        k = len(env.scenario.randomize)  # each episode's physics factors, drawn from its seed (envs/physics.py)
+        self.physics = np.zeros((self.depth, self.n, k), np.float64) if k else None
         self.dirty = np.ones((self.depth, self.n), bool)  # slots whose start has no image rendered yet
         self.pixels = None  # AutoReset's image pool: each slot's first image, on the device (final_pixels)
         self.filled = np.zeros(self.n, np.int64)  # entries drawn per row (sequence numbers < filled exist)
@@ -97,13 +100,16 @@ class StartPool:
         # against each episode's goal, which its reset draws from its key (task/goals.py)
         self.coverage[slot, row] = coverage(tee) if goal is None else coverage(tee, draw(keys, goal, np.float64))
         self.keys[slot, row] = keys
+        if self.physics is not None:
+            self.physics[slot, row] = per_episode.draw(self.env, seeds)
         self.dirty[slot, row] = True
         self.filled[rows] = self.used[rows] + self.depth
         return True
 
     def arrays(self, xp, dtype) -> dict:
-        return {"pool_qpos": xp.asarray(self.qpos.astype(dtype)), "pool_key": xp.asarray(self.keys),
-                "pool_coverage": xp.asarray(self.coverage.astype(dtype))}
+        out = {"pool_qpos": xp.asarray(self.qpos.astype(dtype)), "pool_key": xp.asarray(self.keys),
+               "pool_coverage": xp.asarray(self.coverage.astype(dtype))}
+        return out if self.physics is None else out | {"pool_physics": xp.asarray(self.physics.astype(dtype))}
 
 
 class AutoReset:
@@ -225,8 +231,9 @@ class AutoReset:
         used = info["used"]
         slot = used % self.depth
         rows = xp.arange(used.shape[0])
+        physics = info["pool_physics"][slot, rows] if "pool_physics" in info else None
         return (info["pool_qpos"][slot, rows], info["pool_key"][slot, rows], info["pool_coverage"][slot, rows],
-                used + ended.astype(used.dtype))
+                physics, used + ended.astype(used.dtype))
 
     def _final(self, stepped):
         """What the ended episode was: obs (image only if asked), metrics and step count."""
@@ -244,8 +251,8 @@ class AutoReset:
         else:  # next_step: the rows that ended last step start now, in place of this step; a start on the goal
             # (terminated at reset, step 0) first reports its end in this step, as the env's own step does
             ended = (state.terminated | state.truncated) & (state.step > 0)
-        q, k, cov, used = self._slot(info, ended, jnp)
-        fresh = jax.vmap(lambda qp, kk, c: env.fresh_one(d0, qp, kk, c))(q, k, cov)
+        q, k, cov, f, used = self._slot(info, ended, jnp)
+        fresh = jax.vmap(lambda qp, kk, c, ff: env.fresh_one(d0, qp, kk, c, ff))(q, k, cov, f)
         out = jax.vmap(_merge)(ended, fresh, stepped)
         new_info, pooled = dict(info), images is not None and self.mode == "same_step"
         if self.mode == "same_step":

@@ -22,10 +22,24 @@ def _tee_dofs(m: mujoco.MjModel) -> list[int]:
     return [int(m.joint(n).dofadr[0]) for n in ("tee_x", "tee_y")]
 
 
+def _velocity_servos(m: mujoco.MjModel) -> bool:
+    # a velocity servo has no position term (bias -kp on qpos); gym-pusht's position servos do
+    return not m.actuator_biasprm[:, 1].any()
+
+
 def _kv(m: mujoco.MjModel, v: float) -> None:
-    # a velocity servo is gain kv on ctrl and bias -kv on joint velocity
-    m.actuator_gainprm[:, 0] = v
+    # a velocity servo is gain kv on ctrl and bias -kv on joint velocity; a position servo's kv is its bias alone
+    if _velocity_servos(m):
+        m.actuator_gainprm[:, 0] = v
     m.actuator_biasprm[:, 2] = -v
+
+
+def _kp(m: mujoco.MjModel, v: float) -> None:
+    # a position servo is gain kp on ctrl (the target) and bias -kp on the joint's position
+    if _velocity_servos(m):
+        raise ParamError("kp: this scene's pusher is on velocity servos, which have no position gain (use kv)")
+    m.actuator_gainprm[:, 0] = v
+    m.actuator_biasprm[:, 1] = -v
 
 
 def _tee_damping(m: mujoco.MjModel, v: float) -> None:
@@ -45,11 +59,25 @@ def _tee_mass(m: mujoco.MjModel, v: float) -> None:
         m.body_inertia[b] *= v / total
 
 
+def _tee_mass_of(m: mujoco.MjModel) -> float:
+    return float(sum(m.body_mass[i] for i in range(m.nbody) if m.body(i).name in ("tee", "tee_stem_body")))
+
+
 PARAMS: dict[str, tuple[Callable[[mujoco.MjModel, float], None], str]] = {
-    "kv": (_kv, "pusher velocity-servo gain (chapter: 20)"),
+    "kv": (_kv, "pusher servo velocity gain (chapter: 20; gym-pusht: its PD law's KV x the agent's mass, 2e7)"),
+    "kp": (_kp, "pusher position-servo gain (gym-pusht's only: its PD law's KP x the agent's mass, 1e8)"),
     "tee_damping": (_tee_damping, "tee x/y joint damping (chapter: 4)"),
     "tee_frictionloss": (_tee_frictionloss, "tee x/y joint frictionloss (chapter: 1.2)"),
     "tee_mass": (_tee_mass, "tee total mass in kg (chapter: 0.105)"),
+}
+
+# each parameter's value in a model (the scene's own, before any edit): what randomize.py's scale factors multiply
+CURRENT: dict[str, Callable[[mujoco.MjModel], float]] = {
+    "kv": lambda m: float(-m.actuator_biasprm[0, 2]),
+    "kp": lambda m: float(-m.actuator_biasprm[0, 1]),
+    "tee_damping": lambda m: float(m.dof_damping[_tee_dofs(m)[0]]),
+    "tee_frictionloss": lambda m: float(m.dof_frictionloss[_tee_dofs(m)[0]]),
+    "tee_mass": _tee_mass_of,
 }
 
 MAX_VAL = 1e10  # MuJoCo's mjMAXVAL: a number past it is, to MuJoCo, a diverged state
@@ -66,6 +94,7 @@ MAX_VAL = 1e10  # MuJoCo's mjMAXVAL: a number past it is, to MuJoCo, a diverged 
 #   and 1e300 kg left it outside the south wall. Between 10 g and 1e8 kg the pusher moves the T or is stopped.
 BOUNDS: dict[str, tuple[float, float, bool]] = {
     "kv": (0.0, MAX_VAL, False),
+    "kp": (0.0, MAX_VAL, True),  # a position servo's stiffness: 0 is no servo; negative drives it away
     "tee_damping": (0.0, MAX_VAL, False),
     "tee_frictionloss": (0.0, MAX_VAL, False),
     "tee_mass": (1e-2, 1e8, False),

@@ -80,7 +80,7 @@ def _cpu_scenario(backend):
     from mjx_pusht.scenario import Scenario
 
     sc = backend.scenario
-    return Scenario(backend.simulated_scene, sc.schedule, sc.params, sc.reset, sc.controller, sc.episode)
+    return Scenario(backend.simulated_scene, sc.schedule, sc.params, sc.reset, sc.controller, sc.episode, sc.randomize)
 
 
 class Audit:

@@ -12,14 +12,17 @@ import numpy as np
 
 def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str | None = None, task: str = "chapter",
              reset: str | None = None, success_threshold: float | None = None, goal: str = "fixed",
-             break_it: str = "none", max_steps: int = 300, frame_skip: int = 10, params=(), chunk: int | None = None,
+             break_it: str = "none", max_steps: int = 300, frame_skip: int = 10, params=(), randomize=None,
+             chunk: int | None = None,
              resume: bool = False, replace: bool = False, progress: bool = True, record: int = 4, rerun: bool = True,
              video: Path | None = None, video_episodes: int = 16, video_size: int = 128, share: bool = False) -> dict:
     """Run `controller` (a `task.controllers.load` spec: `expert`, `policy:PATH`, ...) for an episode from each
     seed's start state (`seeds`: an array, or a spec such as "512" or "A:B") on `backend`, into `out`; returns
     the summary (also written as summary.json). `task`: task/tasks.TASKS (`expert` is its expert; `reset` None:
     its default starts; `success_threshold` None: its own success coverage; `goal`: "fixed", or "random", a goal
-    per episode from its seed, toward which a controller of the fixed goal acts from the goal's frame). `params`: (name, values) pairs swept as a grid.
+    per episode from its seed, toward which a controller of the fixed goal acts from the goal's frame). `params`:
+    (name, values) pairs swept as a grid. `randomize`: {name: (lo, hi)} scale factors drawn per episode from its
+    seed (model/randomize.py); the drawn values are the table's param_ columns.
 
     Bad input (a controller that cannot load, a video name without an encoder) fails before anything is
     written. Interrupted, the finished chunks stay in `out` (finished with `resume=True`) and the
@@ -53,7 +56,10 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
               "task": task, "reset": reset, "success_threshold": episode.success, "goal": goal, "break_it": break_it, "max_steps": max_steps,
               "frame_skip": frame_skip, "params": [[n, list(v)] for n, v in params],
               "controller_sha256": policy_sha256(spec)}
-    scenario = Scenario(the_task.scene(break_it), params=params, reset=reset, controller=controller, episode=episode)
+    scenario = Scenario(the_task.scene(break_it), params=params, reset=reset, controller=controller, episode=episode,
+                        randomize=randomize)
+    if scenario.randomize:  # an unrandomised run's config (and so its fingerprint) stays as it was
+        config["randomize"] = [[n, list(r)] for n, r in scenario.randomize]
     reads = [spec.removeprefix("policy:")] if spec.startswith("policy:") else []  # never replaced by this run
     row_seeds, combos, out, banner, clock, backend = start_batch("eval", out, seeds, name, why, config, scenario,
                                                                  replace=replace, resume=resume, reads=reads,

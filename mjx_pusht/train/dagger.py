@@ -125,8 +125,16 @@ class DaggerConfig:
     # students) is as large as those nudges, and a student answering 0 there stands still short of success for the
     # rest of the episode: 20 of 27 failures on 256 held-out starts of an H100 student at 91% (notebook lead10).
     action_eps: float | None = None
+    # Physics drawn per episode from its seed, in training's rollouts and in every held-out judgement: (name, (lo,
+    # hi)) scale factors (model/randomize.py), kept in its checked form; None: the scene's own (a resume file from
+    # before this setting existed still matches).
+    randomize: tuple | None = None
 
     def __post_init__(self) -> None:
+        if self.randomize is not None:
+            from mjx_pusht.model.randomize import check
+
+            object.__setattr__(self, "randomize", check(self.randomize, self.the_task.scene(), "--randomize") or None)
         if self.obs_type not in OBS_TYPES:
             raise ConfigError(f"DAgger trains from {', '.join(OBS_TYPES)} observations, not {self.obs_type!r}")
         if self.activation not in ACTIVATIONS:

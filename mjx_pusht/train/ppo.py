@@ -81,8 +81,16 @@ class PPOConfig:
     max_grad_norm: float | None = 1.0
     lr_schedule: str | None = None  # "adaptive-kl": Brax's ADAPTIVE_KL, the rate /1.5 or x1.5 toward desired_kl 0.01
     success_threshold: float | None = None  # the coverage an episode succeeds at; None: the chapter task's (0.95)
+    # Physics drawn per episode from its seed in training (the Brax adapter's table) and every judgement, as DAgger's
+    # (DaggerConfig.randomize); None: the scene's own (a resume file from before this setting existed still matches)
+    randomize: tuple | None = None
 
     def __post_init__(self) -> None:
+        if self.randomize is not None:
+            from mjx_pusht.model.randomize import check
+            from mjx_pusht.model.scene import SceneSpec
+
+            object.__setattr__(self, "randomize", check(self.randomize, SceneSpec(), "--randomize") or None)
         if self.act not in PPO_ACTS:
             raise ConfigError(f"PPO acts with its Gaussian's {' or '.join(PPO_ACTS)}, not {self.act!r}")
         if self.obs_type not in ("state", "keypoints"):
@@ -246,8 +254,9 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
                          "judgements; raise --timesteps and --iterations to go on")
     episode = cfg.episode()
     env = BraxPushT(backend=backend, obs_type=cfg.obs_type, reset_kind=cfg.reset, episode=episode,
-                    max_worlds=max(cfg.envs, 128), table=TABLE, reward_fn=training_reward)
-    judge_env = PushTEnv(backend=backend, reset_kind=cfg.reset, episode=episode, keep_states=False)
+                    max_worlds=max(cfg.envs, 128), table=TABLE, reward_fn=training_reward, randomize=cfg.randomize)
+    judge_env = PushTEnv(backend=backend, reset_kind=cfg.reset, episode=episode, keep_states=False,
+                         randomize=cfg.randomize)
     judge = _judge(judge_env, cfg)
     ckpt.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter() - (curve[-1]["wall_seconds"] if curve else 0.0)

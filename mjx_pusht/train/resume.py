@@ -35,8 +35,9 @@ class TrainError(MjxPushtError, ValueError):
 
 
 def config_dict(cfg) -> dict:
-    """A method's config (DaggerConfig, PPOConfig) as JSON-ready values: what checkpoints and --resume compare."""
-    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(cfg).items()}
+    """A method's config (DaggerConfig, PPOConfig) as JSON-ready values: what checkpoints and --resume compare.
+    Nested tuples (a `randomize`'s ranges) become lists too, as a checkpoint reads them back."""
+    return json.loads(json.dumps(dataclasses.asdict(cfg)))
 
 
 def checkpoint(path, cfg, learner, iteration, env_steps, curve, writer=None):

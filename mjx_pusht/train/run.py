@@ -206,7 +206,8 @@ class Budget:
 
 
 def dagger_env(cfg, backend: str):
-    """The env DAgger's rollouts step: `cfg`'s starts, episode length and observations on `backend`."""
+    """The env DAgger's rollouts step: `cfg`'s starts, episode length, observations and drawn physics on `backend`
+    (the held-out judgement rides in the same rollouts, so it is at the held-out seeds' own draws)."""
     from mjx_pusht.backends.base import has_gpu
     from mjx_pusht.backends.cpu import default_threads
     from mjx_pusht.envs.functional import PushTEnv
@@ -218,7 +219,7 @@ def dagger_env(cfg, backend: str):
     task = cfg.the_task
     return PushTEnv(backend=backend, reset_kind=cfg.reset, action_type=task.action_type, scene=task.scene(),
                     episode=cfg.episode(), threads=default_threads(), keep_states=False,
-                    pixels=cfg.image, graph_mode=graph_mode)
+                    pixels=cfg.image, graph_mode=graph_mode, randomize=cfg.randomize)
 
 
 def non_finite(outcome: dict, seeds: np.ndarray, *arrays) -> str | None:

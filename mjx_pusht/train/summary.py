@@ -29,7 +29,8 @@ def write_summary(cfg, backend, out: Path, curve, rerun: bool = True, method: st
         "held_out": {"seeds": f"{cfg.held_out_seeds()[0]}:{cfg.held_out_seeds()[-1] + 1}", "reset": cfg.reset,
                      "task": getattr(cfg, "task", None) or "chapter",
                      "success_coverage": cfg.episode().success, "max_steps": cfg.max_steps,
-                     "goal": getattr(cfg, "goal", None) or "fixed"},
+                     "goal": getattr(cfg, "goal", None) or "fixed"}
+        | ({"randomize": config_dict(cfg)["randomize"]} if getattr(cfg, "randomize", None) else {}),
         # the trainer's own judgement of the kept policy (its jitted rollout, in its batch); `train` adds eval's
         # (held_out_success), the number to report: the same policy and seeds in eval's episode programs, equal on
         # the CPU and parting on a GPU only where float32 rounding turns a contact-rich episode (notebook change 24)

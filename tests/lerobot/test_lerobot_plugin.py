@@ -79,3 +79,22 @@ def test_elsewhere_create_envs_is_lerobots_usual_vector_env_and_a_seed_starts_th
     assert np.array_equal(obs["agent_pos"][1:], agent)
     assert vec.call("task")[0] == "PushT-gym-pusht-v0"
     vec.close()
+
+
+def test_env_randomize_reaches_the_drop_in_and_a_bad_range_is_refused_at_the_config(registered):
+    """`--env.randomize` is `eval --randomize`'s text; the envs LeRobot builds draw each episode's gains from its seed
+    (info["physics"]); nothing asked for, gym_kwargs are LeRobot's PushtEnv's as before."""
+    from mjx_pusht.model.params import CURRENT
+    from mjx_pusht.model.randomize import factors
+
+    assert "randomize" not in registered().gym_kwargs
+    cfg = make_env_config("mjx_pusht", observation_height=96, observation_width=96, backend="cpu",
+                          obs_type="environment_state_agent_pos", randomize="kv=0.5:2")
+    assert cfg.gym_kwargs["randomize"] == {"kv": (0.5, 2.0)}
+    vec = cfg.create_envs(2)["mjx_pusht"][0]
+    _, info = vec.reset(seed=SEEDS)
+    own = CURRENT["kv"](vec.envs[0].unwrapped._env.model)
+    np.testing.assert_array_equal(info["physics"]["kv"], factors((("kv", (0.5, 2.0)),), SEEDS)[:, 0] * own)
+    vec.close()
+    with pytest.raises(ValueError, match="tee_mass means nothing on the gym-pusht task"):
+        make_env_config("mjx_pusht", randomize="tee_mass=0.5:2")

@@ -30,6 +30,9 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGE, OBS_STATE
 
 import mjx_pusht  # noqa: F401 - registers mjx_pusht/PushT-gym-pusht-v0 with gymnasium
+from mjx_pusht.model.randomize import check as check_randomize
+from mjx_pusht.model.randomize import parse as parse_randomize
+from mjx_pusht.model.scene import SceneSpec
 
 ENV_TYPE = "mjx_pusht"
 GYM_ID = "mjx_pusht/PushT-gym-pusht-v0"
@@ -103,6 +106,9 @@ class MjxPushtEnv(EnvConfig):
     # fixed (gym-pusht's goal) or random: a goal pose per episode from its seed, after the block's in the state and
     # environment_state observations (gym-pusht#17); pixel observations take the fixed goal only, so far
     goal: str = "fixed"
+    # physics drawn per episode from its seed, as `mjx-pusht eval --randomize`: "kp=0.8:1.2,kv=0.8:1.2" (scale factors
+    # on gym-pusht's PD gains, model/randomize.py); the drawn values in each step's info["physics"]. None: gym-pusht's
+    randomize: str | None = None
     features: dict[str, PolicyFeature] = field(
         default_factory=lambda: {
             ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(2,)),
@@ -128,6 +134,8 @@ class MjxPushtEnv(EnvConfig):
 
         fraction("--env.success_threshold", self.success_threshold)  # a ConfigError (a ValueError): one line
         check(self.goal)
+        if self.randomize is not None:  # refused here, in one line (a ValueError), before LeRobot builds anything
+            check_randomize(parse_randomize(self.randomize), SceneSpec(variant="gym-pusht"), "--env.randomize")
         if self.obs_type == "pixels_agent_pos":
             self.features["pixels"] = PolicyFeature(
                 type=FeatureType.VISUAL, shape=(self.observation_height, self.observation_width, 3)
@@ -159,7 +167,7 @@ class MjxPushtEnv(EnvConfig):
             "max_episode_steps": self.episode_length,
             "success_threshold": self.success_threshold,
             "goal": self.goal,
-        }
+        } | ({"randomize": parse_randomize(self.randomize)} if self.randomize is not None else {})
 
     def batch_backend(self) -> str | None:
         """The backend the drop-in's batch runs on, or None for LeRobot's usual vector env of MuJoCo C envs."""
