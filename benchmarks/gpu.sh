@@ -129,6 +129,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # session like train-pixels, then `watch-seeds`. A machine is held at most 30 minutes, so give each hold
           # what fits: ppo 2 seeds (~11.5 min each), dagger-state 4 (~5.7), dagger-pixels 1 (~22); aggregate the
           # holds' copied-back runs here with `python -m benchmarks.train_seeds --collect DIR... --out DIR`.
+          # EXTRA: more train flags as they are (issue 55: "--goal random", "--randomize kp=0.5:2,kv=0.5:2").
           # ACTION_EPS (DAgger): --action-eps, the actions' loss relative to each label's size above it (m/s).
           # LATE_FITS (DAgger): --late-fits, fits an iteration once the expert's share is at most 1%.
           # FIRST_FITS (DAgger): --first-fits, initialisations of the first fit, the lowest loss kept (notebook lead5;
@@ -145,6 +146,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           dagger="$dagger_fit ${LATE_FITS:+--late-fits $LATE_FITS} ${ACTION_EPS:+--action-eps $ACTION_EPS}"
           # TASK (default chapter, from its task starts): gym-pusht trains on gym-pusht's task; MINUTES: dagger-state's
           task="--reset task"; [ -n "${TASK:-}" ] && task="--task $TASK"
+          task="$task ${EXTRA:-}"
           case "$RECIPE" in
             ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes 10 \
               ${MAX_GRAD_NORM:+--max-grad-norm $MAX_GRAD_NORM} ${LR_SCHEDULE:+--lr-schedule $LR_SCHEDULE}" ;;
@@ -162,6 +164,19 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
             --goal "${GOAL:-0.9}" -- --backend mjx-warp $task $args --keep best --no-progress --no-rerun \
             --record 0 > "$run.log" 2>&1 < /dev/null &)
           sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
+  issue55) # issue 55 in one hold, one after another in the background (watch with watch-seeds NAMES="goals rand"):
+          # DAgger from state on gym-pusht's task with a goal per episode, then with kp and kv drawn per episode (10
+          # minutes each, seed 0), then the env loop's steps/s with goals and drawn physics beside the fixed ones
+          cat > "$HOME/issue55.sh" <<EOS
+cd "$PWD"
+TASK=gym-pusht MINUTES=10 RECIPE=dagger-state SEEDS=0 NAME=goals EXTRA="--goal random" WAIT=1 bash benchmarks/gpu.sh train-seeds $tier
+while kill -0 \$(cat $HOME/runs/seeds-goals.pid) 2>/dev/null; do sleep 5; done
+TASK=gym-pusht MINUTES=10 RECIPE=dagger-state SEEDS=0 NAME=rand EXTRA="--randomize kp=0.5:2,kv=0.5:2" WAIT=1 bash benchmarks/gpu.sh train-seeds $tier
+while kill -0 \$(cat $HOME/runs/seeds-rand.pid) 2>/dev/null; do sleep 5; done
+python3 -m benchmarks.env_loop --envs 16384,65536 --cases scan_autoreset,scan_autoreset_randomized,scan_autoreset_goals,scan_autoreset_goals_randomized --json $HOME/runs/$tier-env-loop-goals-randomized.json > $HOME/runs/env-loop.log 2>&1
+EOS
+          setsid nohup bash "$HOME/issue55.sh" > "$HOME/issue55.log" 2>&1 < /dev/null &
+          sleep 30; cp "$HOME/issue55.log" "$OUT/" ;;
   watch-seeds) # wait up to WAIT seconds (default 570) for train-seeds' runs NAMES (default RECIPE; space-separated),
           # then copy back what they have: one tar a run (logs, curves, summaries; not the resume checkpoints' dataset
           # rings, 2.2 GB a state run, which made the tar too big to come back) and each finished seed's policy
