@@ -170,7 +170,7 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp
     assert (out / "policy.msgpack").read_bytes() == kept.read_bytes()
     for name in ("policy.msgpack", "checkpoints/policy_000.msgpack", "checkpoints/policy_001.msgpack", "curve.png"):
         assert (out / name).is_file(), name
-    assert _moved(out) > 1e-3  # 256 Adam steps at 3e-4 move the layers (see the --max-grad-norm test)
+    assert _moved(out) > 1e-3  # 256 Adam steps at 3e-4, clipped at 1.0 by Brax's own optimiser, move the layers
     # the trainer's judge (its own jitted scan) and `eval --controller policy:...` (the backend's episode
     # machinery) on the same held-out seeds: MJX-JAX on the CPU is deterministic, so they agree
     rows = pq.read_table(out / "eval" / "per_episode.parquet").to_pydict()
@@ -200,19 +200,35 @@ def _moved(out) -> float:
     return max(float(np.max(np.abs(a - b))) for a, b in zip(jax_leaves(first), jax_leaves(second)))
 
 
-@pytest.mark.slow
-def test_ppo_max_grad_norm_and_adaptive_kl_reach_braxs_optimiser(tmp_path):
-    """--max-grad-norm clips the gradient before Adam in Brax's own trainer: clipped to 1e-12, each of the run's 256
-    Adam steps moves a weight by at most lr |g| / (|g| + 1e-8) <= 1e-2 x 1e-4 (ADAPTIVE_KL's highest rate), so the
-    network stays within 2.6e-4 of its start, where the same run unclipped moves it by more than 1e-3 (the test
-    above)."""
-    pytest.importorskip("brax")
-    out = tmp_path / "ppo"
-    r = cli("train", "--algo", "ppo", "--backend", "mjx-jax", "--envs", "8", "--batch", "8", "--timesteps", "10240",
-            "--iterations", "1", "--eval-envs", "4", "--hidden", "32,32", "--no-rerun", "--record", "0", "--no-progress",
-            "--out", str(out), "--max-grad-norm", "1e-12", "--lr-schedule", "adaptive-kl", "--max-steps", "50")
-    assert r.returncode == 0, r.stderr
-    config = json.loads((out / "summary.json").read_text())["config"]
-    assert config["max_grad_norm"] == 1e-12 and config["lr_schedule"] == "adaptive-kl"
-    assert _moved(out) < 2.6e-4
+def test_ppo_max_grad_norm_and_adaptive_kl_reach_braxs_trainer_by_its_own_parameter_names(tmp_path, monkeypatch):
+    """--max-grad-norm and --lr-schedule adaptive-kl are handed to Brax's own `ppo.train` under its own parameter
+    names (checked against its signature), and the defaults are clip 1.0 and Brax's constant rate. Brax's trainer
+    itself, clipping included, runs in the test above (its default clip; its layers move by more than 1e-3). Until
+    2026-11-26 this ran the trainer a second time, clipped to 1e-12, to see the layers stay put: 158 s of the suite
+    compiling Brax's trainer again for settings that reach it as these keyword arguments (notebook lead10)."""
+    import inspect
 
+    pytest.importorskip("brax")
+    from brax.training.agents.ppo import train as brax_ppo
+
+    from mjx_pusht.train.ppo import PPOConfig, train_ppo
+
+    names = inspect.signature(brax_ppo.train).parameters
+    assert "max_grad_norm" in names and "learning_rate_schedule" in names
+    given = []
+
+    class Called(Exception):
+        pass
+
+    def train(**kwargs):
+        given.append(kwargs)
+        raise Called
+
+    monkeypatch.setattr(brax_ppo, "train", train)
+    small = dict(obs_type="state", envs=8, timesteps=10240, evals=1, hidden=(32, 32), batch_size=8, eval_envs=4,
+                 max_steps=50)
+    for cfg in (PPOConfig(**small), PPOConfig(**small, max_grad_norm=1e-12, lr_schedule="adaptive-kl")):
+        with pytest.raises(Called):
+            train_ppo(cfg, "mjx-jax", tmp_path / str(len(given)), progress=False)
+    assert given[0]["max_grad_norm"] == 1.0 and "learning_rate_schedule" not in given[0]
+    assert given[1]["max_grad_norm"] == 1e-12 and given[1]["learning_rate_schedule"] == "ADAPTIVE_KL"

@@ -382,16 +382,16 @@ def test_train_minutes_1_on_a_cpu_ends_within_a_minute_and_a_half_of_wall_clock(
 def test_on_mjx_every_rollout_is_one_batch_shape_and_the_last_judgement_is_the_held_out_seeds(tmp_path):
     """MJX compiles a rollout per batch shape: every iteration's batch, the first and the final judgement
     included, is the training episodes followed by the held-out ones. The last fit is judged in a padded batch:
-    its held-out rows end as the same seeds rolled out alone by the saved policy (a wrong slice fails)."""
-    from mjx_pusht.envs.functional import PushTEnv
-    from mjx_pusht.task.episode import Episode
+    its held-out rows end as the same seeds rolled out by the saved policy in another batch, ahead of other seeds
+    (a wrong slice fails; the training run's own compiled rollout, so nothing compiles twice)."""
     from mjx_pusht.train.dagger import DaggerConfig, Rollouts
     from mjx_pusht.train.run import train_dagger
 
-    shapes, mjx = [], Rollouts._mjx
+    shapes, rollouts, mjx = [], [], Rollouts._mjx
 
     def spy(self, params, norm, seeds, *args):
         shapes.append(len(seeds))
+        rollouts.append(self)
         return mjx(self, params, norm, seeds, *args)
 
     cfg = DaggerConfig(reset="chapter", envs=8, iterations=3, fit_steps=20, batch=64, hidden=(16, 16), eval_envs=4,
@@ -403,12 +403,13 @@ def test_on_mjx_every_rollout_is_one_batch_shape_and_the_last_judgement_is_the_h
         Rollouts._mjx = mjx
     assert shapes == [12] * 4 and len(summary["curve"]) == 3
     params, meta = load_checkpoint(tmp_path / "run" / "policy.msgpack")
-    env = PushTEnv(backend="mjx-jax", reset_kind="chapter", episode=Episode(max_steps=40))
-    _, _, alone = Rollouts(env, cfg)(params, (np.asarray(meta["in_mean"]), np.asarray(meta["in_std"])),
-                                     cfg.held_out_seeds(), 0.0, 99, learn=0)
+    held_out = cfg.held_out_seeds()
+    seeds = np.concatenate([held_out, np.arange(100, 100 + 12 - len(held_out))])  # first this time, not last
+    _, _, elsewhere = rollouts[-1](params, (np.asarray(meta["in_mean"]), np.asarray(meta["in_std"])), seeds, 0.0, 99,
+                                   learn=0)
     last = summary["curve"][-1]
-    assert last["success"] == alone["success"].mean()
-    assert last["coverage"] == pytest.approx(alone["coverage"].mean(), abs=1e-4)
+    assert last["success"] == elsewhere["success"][:len(held_out)].mean()
+    assert last["coverage"] == pytest.approx(elsewhere["coverage"][:len(held_out)].mean(), abs=1e-4)
 
 
 def test_train_without_rerun_says_so_in_one_line_before_training(tmp_path):
