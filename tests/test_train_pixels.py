@@ -37,6 +37,7 @@ def env():
     return PushTEnv(backend="cpu", reset_kind="chapter", pixels=96, keep_states=False)
 
 
+@pytest.mark.slow  # 42 s: eval renders every step of the held-out episodes on the CPU
 def test_a_pixel_run_is_judged_alike_by_its_own_rollout_and_by_eval_which_renders_for_the_controller(run):
     summary = json.loads((run / "summary.json").read_text())
     assert summary["obs_type"] == "pixels_agent_pos" and len(summary["curve"]) == 2
