@@ -81,6 +81,7 @@ def test_a_fits_judgement_riding_in_the_next_training_batch_is_its_judgement_alo
     assert first["coverage"] == alone["coverage"].mean()
 
 
+@pytest.mark.slow  # 15-22 s in the fast loop: two DAgger runs or fits
 def test_keep_best_keeps_the_fit_whose_next_rollout_on_fresh_training_seeds_succeeded_most(tmp_path_factory):
     """--keep best: each fit is validated on the next iteration's training seeds (with the expert's share 0 here:
     --beta-decay 0), never on the held-out ones; the run's policy is the best-validated fit, and its held-out
@@ -172,6 +173,7 @@ def test_policy_path_is_a_controller_whose_carry_is_its_memory_in_the_experts_fo
                                               [0, 0, 0, 1, 1, 0], [0, 1, 0, 0, 0, 1]])
 
 
+@pytest.mark.slow  # 15-22 s in the fast loop: two DAgger runs or fits
 def test_resume_continues_where_the_run_stopped_and_a_second_run_is_refused(run, tmp_path):
     import shutil
 
@@ -455,6 +457,7 @@ def test_a_fit_that_goes_non_finite_ends_the_run_in_one_line_naming_the_iteratio
     assert not (tmp_path / "nan" / "policy.msgpack").exists()
 
 
+@pytest.mark.slow  # 15-22 s in the fast loop: two DAgger runs or fits
 def test_late_fits_fit_again_once_the_experts_share_is_at_most_one_percent(run, tmp_path_factory):
     """--late-fits K: after a rollout whose expert's share is at most 1% the student is fitted K times (each
     --fit-steps Adam steps on fresh minibatches); earlier iterations are fitted once, as without the setting."""

@@ -205,6 +205,7 @@ def _pixel_learner(env, render=None, rows=256, **kw):
     return learner
 
 
+@pytest.mark.slow  # 15-22 s in the fast loop: two DAgger runs or fits
 def test_the_actions_and_the_reader_fitted_apart_are_the_one_scan_fit_they_replace(env):
     """A pixel student's acting layers and image reader share no weights, so the fit runs them as two scans with
     an Adam each (the actions then need not render). With as many steps each, that is exactly the fit change 25
