@@ -48,3 +48,22 @@ class Controller:
     def open_loop(self, steps: int, frame_skip: int) -> np.ndarray | None:
         """(steps, 2) velocity commands when the action ignores the observation; None for feedback."""
         return None
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Wrapper(Controller):
+    """A controller around another (`inner`): what it looks at, whether it reads the goal, and its state at reset
+    are the inner one's; a subclass changes only what its `act` makes of the inner action or observation."""
+
+    inner: Controller | None = None
+
+    @property
+    def pixels(self) -> int:
+        return self.inner.pixels
+
+    @property
+    def reads_goal(self) -> bool:
+        return self.inner.reads_goal
+
+    def init(self, key):
+        return self.inner.init(key)

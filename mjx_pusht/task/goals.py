@@ -27,7 +27,7 @@ from typing import ClassVar
 import numpy as np
 
 from mjx_pusht.errors import ConfigError
-from mjx_pusht.task.controller_base import Controller
+from mjx_pusht.task.controller_base import Controller, Wrapper
 from mjx_pusht.task.reset import CLEARANCE, PUSHER_RADIUS
 from mjx_pusht.task.rules import T_REACH, WORKSPACE_HALF, array_namespace, keypoints, wrap_angle
 
@@ -117,21 +117,13 @@ def from_goal_frame(xy, goal):
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
-class GoalFrame(Controller):
+class GoalFrame(Wrapper):
     """A controller of the fixed goal following obs["goal"]: it acts on the observation seen from the goal's frame,
     and its action is turned (a velocity) or placed (a position or target) back into the world. Without a goal in
     the observation, the controller itself. The walls are where they are: a controller that steers clear of them
     by their world positions misjudges them in the goal's frame (the goal's MARGIN leaves a pusher's room)."""
 
-    inner: Controller | None = None
     reads_goal: ClassVar[bool] = True  # it reads obs["goal"]: wrapped once
-
-    @property
-    def pixels(self) -> int:
-        return self.inner.pixels
-
-    def init(self, key):
-        return self.inner.init(key)
 
     def act(self, carry, obs, t, key):
         if "goal" not in obs:

@@ -23,6 +23,7 @@ import dataclasses
 
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model.gym_pusht import KP, KV
+from mjx_pusht.task.controller_base import Wrapper
 from mjx_pusht.task.controllers import Controller
 from mjx_pusht.task.expert_gym_pusht import CONTACTS
 from mjx_pusht.task.memory import CHAPTER, CarryFormat
@@ -119,23 +120,11 @@ def get(name: str) -> Task:
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
-class AsTargets(Controller):
+class AsTargets(Wrapper):
     """A velocity (or position) controller on a scene whose pusher takes targets: a velocity v becomes the target
     pusher + LEAD v that gym-pusht's PD law settles to moving at v; a position is the target itself."""
 
-    inner: Controller | None = None
     action_type: str = "target"
-
-    @property
-    def pixels(self) -> int:
-        return self.inner.pixels
-
-    @property
-    def reads_goal(self) -> bool:
-        return self.inner.reads_goal
-
-    def init(self, key):
-        return self.inner.init(key)
 
     def act(self, carry, obs, t, key):
         action, carry = self.inner.act(carry, obs, t, key)
@@ -151,19 +140,11 @@ def as_targets(ctrl: Controller) -> Controller:
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
-class AsVelocities(Controller):
+class AsVelocities(Wrapper):
     """A target controller read as velocities: the velocity (target - pusher) / LEAD that gym-pusht's PD law moves
     the pusher at toward the target (what a velocity-valued student is taught, train/dagger.py)."""
 
-    inner: Controller | None = None
     action_type: str = "velocity"
-
-    @property
-    def reads_goal(self) -> bool:
-        return self.inner.reads_goal
-
-    def init(self, key):
-        return self.inner.init(key)
 
     def act(self, carry, obs, t, key):
         target, carry = self.inner.act(carry, obs, t, key)
