@@ -7,6 +7,7 @@ learning test trains longer (marked slow).
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -377,7 +378,12 @@ def test_train_minutes_1_on_a_cpu_ends_within_a_minute_and_a_half_of_wall_clock(
     assert summary["backend"] == "cpu" and summary["wall_seconds"] < 60 + 15, summary["wall_seconds"]
     assert summary["config"]["envs"] == 256 and summary["eval"]["n_episodes"] == 64  # the CPU's defaults
     said = r.stdout + r.stderr
-    assert "held-out seeds: about" in said and "with eval on the held-out seeds" in said, said[-2000:]
+    assert "with eval on the held-out seeds" in said, said[-2000:]
+    # The last fit is judged alone (a pause the bar does not show, so its time is said first) only when the budget
+    # leaves no room for another rollout to carry its judgement; on a slower machine (CI's) the judgement rides in
+    # the next iteration's rollout instead and there is no pause to announce.
+    if "judging iteration" in said:
+        assert re.search(r"judging iteration \d+'s policy on the 64 held-out seeds: about \d+ s", said), said[-2000:]
 
 
 @pytest.mark.slow
