@@ -92,8 +92,28 @@ def test_a_controller_of_the_fixed_goal_acts_from_the_goals_frame_and_its_action
 def test_goal_options_are_checked_in_one_line():
     with pytest.raises(ConfigError, match="unknown goal 'moving'; choose from fixed, random"):
         PushTEnv(goal="moving")
-    with pytest.raises(ConfigError, match="random goals are not drawn in pixel observations yet"):
-        PushTEnv(goal="random", pixels=32)
+
+
+@pytest.mark.parametrize("obs_type", ["pixels", "pixels_agent_pos"])
+def test_pixel_observations_of_random_goals_show_the_goal_and_keep_their_spaces(obs_type):
+    """Pixels draw each episode's target at its goal (test_pixels.py checks where); the observation keeps the
+    pixel space (the goal is in the picture and in info["goal_pose"]), single and vector alike."""
+    import gymnasium as gym
+    from gymnasium.utils.env_checker import check_env
+
+    import mjx_pusht  # noqa: F401
+
+    one = gym.make("mjx_pusht/PushT-v0", obs_type=obs_type, goal="random", observation_size=32)
+    check_env(one.unwrapped, skip_render_check=True)
+    obs, info = one.reset(seed=5)
+    assert one.observation_space.contains(obs) and info["goal_pose"].shape == (3,)
+    many = gym.make_vec("mjx_pusht/PushT-v0", num_envs=2, backend="cpu", obs_type=obs_type, goal="random",
+                        observation_size=32)
+    obs, info = many.reset(seed=5)
+    assert many.observation_space.contains(obs) and info["goal_pose"].shape == (2, 3)
+    obs, *_, info = many.step(np.zeros((2, 2)))
+    assert many.observation_space.contains(obs)
+    one.close(), many.close()
 
 
 @pytest.mark.slow  # compiles MJX-JAX's and MJX-Warp's steps (about 30 s on 2 cores)
@@ -213,3 +233,23 @@ def test_a_goal_conditioned_policy_reads_the_goal_and_one_without_sees_it_from_t
     c, s = np.cos(goal[0, 2]), np.sin(goal[0, 2])
     np.testing.assert_allclose(plain.act(carry, {"state": state, "goal": goal}, 0, None)[0],
                                own @ np.array([[c, s], [-s, c]]), rtol=0, atol=1e-12)
+
+
+def test_a_controller_that_looks_at_pixels_for_the_fixed_goal_is_refused_random_goals_in_one_line(monkeypatch):
+    """A state controller of the fixed goal sees each episode from its goal's frame; a picture cannot be turned
+    that way (it shows the target at the goal), so one that looks is refused rather than handed a mixed view."""
+    import dataclasses
+    from typing import ClassVar
+
+    from mjx_pusht.task import controllers
+    from mjx_pusht.task.controllers import FromFunction
+
+    @dataclasses.dataclass(frozen=True, eq=False)
+    class Looks(FromFunction):
+        pixels: ClassVar[int] = 32
+
+    monkeypatch.setattr(controllers, "load", lambda spec, **kw: Looks(name=spec, action_type="velocity"))
+    for task in ("chapter", "gym-pusht"):
+        assert get(task).controller("policy:p.msgpack").pixels == 32  # the fixed goal: used as it is
+        with pytest.raises(ConfigError, match=r"^policy:p.msgpack looks at pixels and was made for the fixed goal"):
+            get(task).controller("policy:p.msgpack", goal="random")

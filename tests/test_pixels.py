@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import mujoco
 import numpy as np
 import pytest
@@ -88,6 +90,63 @@ def test_the_target_t_is_where_the_camera_model_puts_it(model, renderer):
     np.testing.assert_allclose(_project(model, pts, SIZE), to_pixels(pts, SIZE), atol=1e-2)
 
 
+def test_a_random_goals_target_is_drawn_at_that_goal_in_the_envs_pixels(model):
+    """`goal="random"` with pixels: each episode's image draws the target T where its goal puts it (the pixels
+    inside the goal T, off the block and the pusher, are the target's colour; the rest near it are not), with the
+    camera's own projection, not the env's goal arithmetic."""
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.task.goals import goal_poses
+
+    env = PushTEnv(backend="cpu", pixels=SIZE, goal="random")
+    seeds = np.arange(6)
+    s = env.reset(seeds)
+    goals = goal_poses(seeds, "chapter")
+    np.testing.assert_array_equal(s.obs["goal"], goals)
+    world, pixel = _pixel_centres(model, SIZE), 0.78 / SIZE
+    target, table = _colour(model, "target_bar", SIZE), _colour(model, "table", SIZE)
+    for i in range(len(seeds)):
+        flat = s.obs["pixels"][i].reshape(-1, 3).astype(int)
+        tee = s.obs["state"][i, 2:5]
+        _, off_block = _inside_rects(world, tee, margin=pixel)
+        off_pusher = np.hypot(*(world - s.obs["state"][i, 0:2]).T) > 0.015 + pixel
+        shown = off_block & off_pusher
+        inside, outside = _inside_rects(world, goals[i], margin=0.1 * pixel)
+        assert (inside & shown).sum() > 40, i
+        assert (abs(flat[inside & shown] - target) <= 1).all(), i
+        near = np.hypot(*(world - goals[i, :2]).T) < 0.2
+        assert (abs(flat[outside & near & shown] - table) <= 1).all(), i
+        # and nothing is drawn at the scene's own target, the origin, unless this goal covers it
+        at_origin, _ = _inside_rects(world, (0.0, 0.0, 0.0), margin=0.1 * pixel)
+        assert not (abs(flat[at_origin & outside & shown] - target) <= 1).all(axis=1).any(), i
+
+
+def test_a_goals_target_is_the_scenes_target_moved_there_by_mujocos_own_kinematics(model):
+    """The renderer moves the target's geoms after kinematics; a model whose target body is authored at the goal
+    (its pos and quat moved by the goal's rigid motion; mj_kinematics places its geoms) draws the same image."""
+    from mjx_pusht.envs.functional import PushTEnv
+
+    for task in ("chapter", "gym-pusht"):
+        env = PushTEnv.for_task(task, backend="cpu")
+        qpos = env.layout.initial_qpos(env.model, np.array([[0.02, -0.03, 0.4, 0.09, 0.09]]))
+        goal = np.array([0.05, -0.04, 2.2])
+        moved = copy.deepcopy(env.model)
+        body = moved.body("target").id
+        assert moved.body_parentid[body] == 0  # hung from the world: body_pos and body_quat are its world pose
+        c, s = np.cos(goal[2]), np.sin(goal[2])
+        x, y, z = moved.body_pos[body]
+        moved.body_pos[body] = (c * x - s * y + goal[0], s * x + c * y + goal[1], z)
+        quat = np.empty(4)
+        mujoco.mju_mulQuat(quat, np.array([np.cos(goal[2] / 2), 0.0, 0.0, np.sin(goal[2] / 2)]), moved.body_quat[body])
+        moved.body_quat[body] = quat
+        at_goal, authored = CpuRenderer(env.model, SIZE), CpuRenderer(moved, SIZE)
+        try:
+            a, b, scene = at_goal(qpos, goal), authored(qpos), at_goal(qpos)
+        finally:
+            at_goal.close(), authored.close()
+        assert (a != scene).any(), task  # the target did move
+        np.testing.assert_array_equal(a, b)
+
+
 def test_the_translucent_target_is_drawn_in_the_colour_it_shows_over_the_table(model):
     authored = model.geom_rgba[model.geom("target_bar").id]
     table = model.geom_rgba[model.geom("table").id, :3]
@@ -148,15 +207,17 @@ print(env.reset(np.arange(2)).obs["pixels"].shape)
 
 @pytest.mark.slow
 @pytest.mark.warp
-def test_mjx_warp_renders_the_cpus_image_of_the_same_states():
-    """MJX-Warp's ray tracer (through Warp's CPU device here) against MuJoCo C's OpenGL, same states."""
+@pytest.mark.parametrize("goal", ["fixed", "random"])
+def test_mjx_warp_renders_the_cpus_image_of_the_same_states(goal):
+    """MJX-Warp's ray tracer (through Warp's CPU device here) against MuJoCo C's OpenGL, same states (with random
+    goals, the target drawn at each world's goal)."""
     from mjx_pusht.backends.warp import warp_available
     from mjx_pusht.envs.functional import PushTEnv
 
     if not warp_available():
         pytest.skip("warp-lang is not installed")
     seeds = np.arange(4)
-    cpu, warp = PushTEnv(backend="cpu", pixels=SIZE), PushTEnv(backend="mjx-warp", pixels=SIZE)
+    cpu, warp = PushTEnv(backend="cpu", pixels=SIZE, goal=goal), PushTEnv(backend="mjx-warp", pixels=SIZE, goal=goal)
     a, b = cpu.reset(seeds), warp.reset(seeds)
     act = np.tile([[0.3, 0.4]], (len(seeds), 1))
     for _ in range(3):

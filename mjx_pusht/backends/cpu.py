@@ -332,7 +332,7 @@ def run_cpu(
             for k in range(episode.max_steps):
                 if table is None and carry["ep"]["done"].all() and not trace:
                     break  # every episode has ended: the rest would change nothing
-                image = None if renderer is None else renderer(qpos)
+                image = None if renderer is None else renderer(qpos, carry.get("goal"))  # the target at each goal
                 action, carry = act(carry, qpos, k, key, controller, layout, np, image)
                 # every control step, before the physics: the first non-finite action stops the run
                 action, bad = actions.record_update(actions.record_init((n,), np.float64, np),

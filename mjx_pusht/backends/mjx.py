@@ -236,7 +236,7 @@ class MjxRunner:
 
             def batched(leaves, d0, qpos0, key, combo, drawn):
                 def step(outer, k):
-                    image = jax.vmap(renderer)(outer[0][0])
+                    image = jax.vmap(renderer)(outer[0][0], outer[1].get("goal"))  # the target at each goal
                     return jax.vmap(advance, in_axes=(None, 0, 0, 0, 0, 0, None, 0))(leaves, combo, drawn, key, *outer,
                                                                                       k, image), None
 

@@ -125,12 +125,13 @@ class Pictures:
         self._window.show(img)
         return None
 
-    def _draw(self, qpos) -> np.ndarray:
+    def _draw(self, qpos, goals=None) -> np.ndarray:
+        """The pictures of (N, nq) positions, the target at each row's goal (`goals` (N, 3); None: the scene's)."""
         if self._viewer is None:
             from mjx_pusht.render.pixels import CpuRenderer
 
             self._viewer = CpuRenderer(self._env.model, self.render_size)
-        return self._viewer(np.asarray(qpos, np.float64))
+        return self._viewer(np.asarray(qpos, np.float64), None if goals is None else np.asarray(goals, np.float64))
 
     def _close_renderers(self) -> None:
         """Free this env's GL contexts (only its own); rendering after this makes new ones."""

@@ -110,7 +110,7 @@ class PushTEnv:
         if self.action_type not in ACTION_TYPES:
             raise ConfigError(f"unknown action type {self.action_type!r}; choose from {', '.join(ACTION_TYPES)}")
         self.pixels, self.threads = validate.pixels(self.pixels), validate.positive_int("threads", self.threads)
-        self.episode = episode_with_goal(self.episode, self.goal, self.scene.variant, self.pixels)
+        self.episode = episode_with_goal(self.episode, self.goal, self.scene.variant)
         if self.backend not in ("cpu", "mjx-jax", "mjx-warp"):
             raise BackendError(f"the environment runs on cpu, mjx-jax or mjx-warp, not {self.backend!r}")
         if self.scene.variant == "gym-pusht" and self.reset_kind == "task":
@@ -274,7 +274,7 @@ class PushTEnv:
         Wrappers render once, after they have replaced the rows that ended."""
         if not self.pixels:
             return state
-        return state._replace(obs={**state.obs, "pixels": self._renderer(state.data)})
+        return state._replace(obs={**state.obs, "pixels": self._renderer(state.data, state.carry.get("goal"))})
 
     def images(self, n: int):
         """A jittable function: (n, 5) observation states (pusher x, y, tee x, y, yaw) -> the (n, size, size, 3)
@@ -326,10 +326,10 @@ class PushTEnv:
             # the pusher's slide joints: in this scene (no free joint) dof addresses are qpos addresses
             obs["pusher_vel"] = qvel[..., list(self.layout.pusher)]
         if self.pixels and pixels:
-            if self.backend == "cpu":
-                obs["pixels"] = self.renderer(qpos)
+            if self.backend == "cpu":  # the target drawn at each episode's goal (None: the scene's)
+                obs["pixels"] = self.renderer(qpos, goal)
             else:  # under vmap: this world's image, from the renderer made for this batch size
-                obs["pixels"] = self._renderer(data)
+                obs["pixels"] = self._renderer(data, goal)
         return obs
 
     def _step_cpu(self, state: State, action) -> State:

@@ -165,7 +165,7 @@ class PushTGymEnv(OneWorld, Pictures, gym.Env):
         if self.render_mode is None:
             return None
         validate.started(self._state, "render")
-        return self._shown(self._draw(self._state.data.qpos[-1])[0])
+        return self._shown(self._draw(self._state.data.qpos[-1], self._state.carry.get("goal"))[0])
 
     def close(self):
         self._close_renderers()

@@ -327,7 +327,7 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         if self.render_mode is None:
             return None
         validate.started(self._state, "render")
-        img = self._draw(self._state.data.qpos[-1])[0]
+        img = self._draw(self._state.data.qpos[-1], self._state.carry.get("goal"))[0]
         return self._shown(img if self._last_action is None else _marker(img, self._last_action, self.render_size))
 
     def close(self):

@@ -28,17 +28,13 @@ def clear_of_tee(starts: np.ndarray, variant: str) -> np.ndarray:
 
 
 
-def episode_with_goal(episode, goal: str, variant: str, pixels: int):
+def episode_with_goal(episode, goal: str, variant: str):
     """The functional env's episodes with its goal option (task/goals.GOALS): random goals drawn in the variant's
-    walls. Pixels draw the target where the scene has it, at the origin, so random goals with pixel observations
-    are refused rather than drawn in the wrong place."""
+    walls (pixels draw each episode's target at its goal: render/pixels.py `Target`)."""
     import dataclasses
 
     from mjx_pusht.task.goals import check, region
 
     if check(goal) == "fixed":
         return episode
-    if pixels:
-        raise ConfigError("random goals are not drawn in pixel observations yet (the target is the scene's, at the "
-                          "origin): use state or keypoints observations")
     return dataclasses.replace(episode, goal=region(variant))

@@ -297,8 +297,10 @@ class PushTVectorEnv(Pictures, VectorEnv):
             "finite": flat["finite"],  # every state of the episode finite and bounded
             "contained": flat["contained"],  # the block and the pusher never left the walls (no missed contact)
         }
-        if "goal" in o:  # random goals: beside the T in the observation, and in info
-            obs, info["goal_pose"] = with_goal(obs, o["goal"], self.obs_type), o["goal"]
+        if "goal" in o:  # random goals: in info, and beside the T in state and keypoints (pixels draw the target there)
+            info["goal_pose"] = o["goal"]
+            if self.obs_type in ("state", "keypoints"):
+                obs = with_goal(obs, o["goal"], self.obs_type)
         if xp is np:  # the host's convention, as the single env and SyncVectorEnv give them
             info = {k: np.asarray(v, np.float64 if np.asarray(v).dtype.kind == "f" else
                                   (bool if np.asarray(v).dtype == bool else np.int64)) for k, v in info.items()}
@@ -326,7 +328,8 @@ class PushTVectorEnv(Pictures, VectorEnv):
         if self.render_mode != "rgb_array":
             return None
         validate.started(self._state, "render")
-        return tuple(self._draw(self._state.data.qpos[-1] if self.backend == "cpu" else self._state.data.qpos))
+        qpos = self._state.data.qpos[-1] if self.backend == "cpu" else self._state.data.qpos
+        return tuple(self._draw(qpos, self._state.carry.get("goal")))
 
     def close_extras(self, **kwargs):
         self._close_renderers()

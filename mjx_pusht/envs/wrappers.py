@@ -62,6 +62,8 @@ class StartPool:
         self.coverage = np.zeros((self.depth, self.n), np.float64)  # each start's coverage, computed here once
         k = len(env.scenario.randomize)  # each episode's physics factors, drawn from its seed (envs/physics.py)
         self.physics = np.zeros((self.depth, self.n, k), np.float64) if k else None
+        # each start's random goal, where its image draws the target (the step draws it again from the key)
+        self.goals = None if env.episode.goal is None else np.zeros((self.depth, self.n, 3), np.float64)
         self.dirty = np.ones((self.depth, self.n), bool)  # slots whose start has no image rendered yet
         self.pixels = None  # AutoReset's image pool: each slot's first image, on the device (final_pixels)
         self.filled = np.zeros(self.n, np.int64)  # entries drawn per row (sequence numbers < filled exist)
@@ -98,7 +100,11 @@ class StartPool:
         self.qpos[slot, row] = qpos
         tee, keys, goal = self.env.layout.tee_pose(qpos), seed_key(seeds), self.env.episode.goal
         # against each episode's goal, which its reset draws from its key (task/goals.py)
-        self.coverage[slot, row] = coverage(tee) if goal is None else coverage(tee, draw(keys, goal, np.float64))
+        if goal is None:
+            self.coverage[slot, row] = coverage(tee)
+        else:
+            self.goals[slot, row] = goals = draw(keys, goal, np.float64)
+            self.coverage[slot, row] = coverage(tee, goals)
         self.keys[slot, row] = keys
         if self.physics is not None:
             self.physics[slot, row] = per_episode.draw(self.env, seeds)
@@ -191,8 +197,8 @@ class AutoReset:
 
             renderer, d0 = WarpRenderer(self.env.model, m, size), self.env.template(m)
 
-            def put(pixels, q, s, r):
-                images = jax.vmap(lambda qp: renderer(d0.replace(qpos=qp)))(q)
+            def put(pixels, q, g, s, r):
+                images = jax.vmap(lambda qp, gg: renderer(d0.replace(qpos=qp), gg))(q, g)
                 return pixels.at[s, r].set(images)
 
             # the pool's memory is reused (a state from before this refill holds a deleted pool: it fails loudly)
@@ -202,7 +208,8 @@ class AutoReset:
             s, r = slot[lo:lo + m], row[lo:lo + m]
             s, r = np.pad(s, (0, m - len(s)), mode="edge"), np.pad(r, (0, m - len(r)), mode="edge")
             q = jnp.asarray(pool.qpos[s, r].astype(dtype))
-            pool.pixels = self._put_images[m](pool.pixels, q, jnp.asarray(s, jnp.int32), jnp.asarray(r, jnp.int32))
+            g = None if pool.goals is None else jnp.asarray(pool.goals[s, r].astype(dtype))
+            pool.pixels = self._put_images[m](pool.pixels, q, g, jnp.asarray(s, jnp.int32), jnp.asarray(r, jnp.int32))
         pool.dirty[:] = False
         return pool.pixels
 

@@ -102,9 +102,10 @@ def _font(size: int):
 
 
 def episode_grid(model, qpos: np.ndarray, layout, seeds, frame_skip: int, success: float,
-                 size: int = 128) -> np.ndarray:
+                 size: int = 128, goals=None) -> np.ndarray:
     """(frames, H, W, 3) uint8: episode i of the traced qpos (K, 1 + steps, nq) in tile i of a near-square grid,
-    one frame per control step, each tile labelled with its seed and coverage."""
+    one frame per control step, each tile labelled with its seed and coverage. `goals` (K, 3): each episode's
+    random goal, where its target is drawn and its coverage measured (None: the scene's target)."""
     from mjx_pusht.render.pixels import CpuRenderer
 
     k, t = qpos.shape[0], qpos.shape[1]
@@ -116,8 +117,9 @@ def episode_grid(model, qpos: np.ndarray, layout, seeds, frame_skip: int, succes
         frames = np.full((len(idx), rows * size, cols * size, 3), 255, np.uint8)
         for i in range(k):
             q = qpos[i, idx]
-            cov = coverage_np(layout.tee_pose(q))
-            tiles = renderer(q)
+            goal = None if goals is None else goals[i]
+            cov = coverage_np(layout.tee_pose(q)) if goal is None else coverage_np(layout.tee_pose(q), goal)
+            tiles = renderer(q, goal)
             r, c = divmod(i, cols)
             for f in range(len(idx)):
                 text = f"seed {seeds[i]}  coverage {cov[f]:.2f}"  # green once the episode has succeeded

@@ -66,6 +66,31 @@ def view_model(model, size: int = IMAGE_SIZE):
     return view
 
 
+class Target:
+    """Where the target T's geoms are drawn for an episode's goal (task/goals.py). The scene places them at its
+    goal, the origin with yaw 0, on the world body; a goal (x, y, yaw) is a rigid motion of that pose, so the
+    geoms' world poses are that motion applied to the scene's. Only the view moves them (a renderer overwrites the
+    geoms' poses after kinematics): they collide with nothing, so the physics is the same wherever they are drawn."""
+
+    NAMES = ("target_bar", "target_stem")
+
+    def __init__(self, view):
+        import mujoco
+
+        self.ids = np.array([view.geom(name).id for name in self.NAMES])
+        data = mujoco.MjData(view)
+        mujoco.mj_kinematics(view, data)
+        self.xpos, self.xmat = data.geom_xpos[self.ids].copy(), data.geom_xmat[self.ids].reshape(-1, 3, 3).copy()
+
+    def at(self, goal, xp=np):
+        """(k, 3) positions and (k, 3, 3) orientations of the target geoms for one goal (3,) (x, y, yaw)."""
+        c, s = xp.cos(goal[2]), xp.sin(goal[2])
+        zero, one = xp.zeros_like(c), xp.ones_like(c)
+        rot = xp.stack([xp.stack([c, -s, zero]), xp.stack([s, c, zero]), xp.stack([zero, zero, one])])
+        shift = xp.stack([goal[0], goal[1], zero])
+        return xp.asarray(self.xpos, rot.dtype) @ rot.T + shift, rot @ xp.asarray(self.xmat, rot.dtype)
+
+
 def _check_size(size: int) -> int:
     if int(size) != size or not 8 <= size <= 2048:
         raise ConfigError(f"image size must be an integer from 8 to 2048 pixels, got {size}")
@@ -115,6 +140,7 @@ class CpuRenderer:
                               "gym.make_vec(..., vectorization_mode='async', vector_kwargs={'context': 'forkserver'})")
         self.view = view_model(model, self.size)
         self.data = mujoco.MjData(self.view)
+        self.target = Target(self.view)
         self._gl = None
         try:
             self._gl, self._mjr = _open_context(self.view, self.size)
@@ -145,17 +171,23 @@ class CpuRenderer:
     def closed(self) -> bool:
         return not self._finalizer.alive
 
-    def __call__(self, qpos) -> np.ndarray:
+    def __call__(self, qpos, goals=None) -> np.ndarray:
+        """`goals`: None, the scene's target; else each row's goal (N, 3) or one for every row (3,) (`Target`)."""
         import mujoco
 
         if self.closed:
             raise PixelsError("this renderer was closed")
         qpos = np.atleast_2d(np.asarray(qpos, np.float64))
+        if goals is not None:
+            goals = np.broadcast_to(np.asarray(goals, np.float64), (len(qpos), 3))
         out = np.empty((len(qpos), self.size, self.size, 3), np.uint8)
         self._gl.make_current()  # another renderer's context may be current: never draw into it
         for i, q in enumerate(qpos):
             self.data.qpos[:] = q
             mujoco.mj_kinematics(self.view, self.data)
+            if goals is not None:
+                xpos, xmat = self.target.at(goals[i])
+                self.data.geom_xpos[self.target.ids], self.data.geom_xmat[self.target.ids] = xpos, xmat.reshape(-1, 9)
             mujoco.mj_camlight(self.view, self.data)
             mujoco.mjv_updateScene(self.view, self.data, self._option, None, self._cam,
                                    mujoco.mjtCatBit.mjCAT_ALL.value, self._scene)
@@ -247,6 +279,7 @@ class WarpRenderer:
             raise PixelsError("pixels on MJX need MJX-Warp's renderer: pip install 'mjx-pusht[warp]' "
                               "(warp-lang), or use the cpu backend") from None
         self.view = view_model(model, self.size)
+        self.target = Target(self.view)
         self.nworld = int(nworld)
         self.mx = mjx.put_model(self.view, impl="warp")
         self.context = mjx.create_render_context(
@@ -264,11 +297,16 @@ class WarpRenderer:
         mujoco.mj_forward(self.view, host)
         self._cam_xpos, self._cam_xmat = host.cam_xpos.copy(), host.cam_xmat.reshape(-1, 3, 3).copy()
 
-    def __call__(self, d) -> "jax.Array":  # noqa: F821
+    def __call__(self, d, goal=None) -> "jax.Array":  # noqa: F821
+        """`goal`: None, the scene's target; else this world's goal (3,) (`Target`)."""
         import jax.numpy as jnp
         from mujoco import mjx
 
         d = mjx.kinematics(self.mx, d)  # the geoms where qpos puts them (a stepped Data holds the pose before the step)
+        if goal is not None:
+            xpos, xmat = self.target.at(goal.astype(d.geom_xpos.dtype), jnp)
+            d = d.replace(geom_xpos=d.geom_xpos.at[self.target.ids].set(xpos),
+                          geom_xmat=d.geom_xmat.at[self.target.ids].set(xmat.reshape(-1, *d.geom_xmat.shape[1:])))
         d = d.replace(cam_xpos=jnp.asarray(self._cam_xpos, d.cam_xpos.dtype),
                       cam_xmat=jnp.asarray(self._cam_xmat, d.cam_xmat.dtype).reshape(d.cam_xmat.shape))
         d = mjx.refit_bvh(self.mx, d, self._ctx)

@@ -128,8 +128,15 @@ def _video(path: Path, n: int, size: int, out: Path, backend, r, combos, episode
     traced = backend.run(r.seeds[shown], trace=True, combos=combos[shown])
     # the video ends a second after the last shown episode does
     last = min(int(np.max(traced.episode["length"])) + 10, episode.max_steps)
+    goals = None
+    if episode.goal is not None:  # each episode's random goal, drawn from its seed as its rollout drew it
+        from mjx_pusht.task.controllers import seed_key
+        from mjx_pusht.task.goals import draw
+
+        goals = draw(seed_key(r.seeds[shown]), episode.goal, np.float64)
     frames = episode_grid(backend.model, traced.trace.qpos[:, : last * episode.frame_skip + 1],
-                          QposLayout.of(backend.model), r.seeds[shown], episode.frame_skip, episode.success, size)
+                          QposLayout.of(backend.model), r.seeds[shown], episode.frame_skip, episode.success, size,
+                          goals)
     fps = 1 / (episode.frame_skip * traced.trace.dt)
     write(path, frames, fps)
     summary["timing"]["video"] = round(clock.lap("video"), 3)

@@ -94,7 +94,12 @@ class Task:
 
         ctrl = load(self.expert if spec == "expert" else spec, action_type=action, frame_skip=frame_skip)
         ctrl = as_targets(ctrl) if self.action_type == "target" and ctrl.action_type != "target" else ctrl
-        return in_goal_frame(ctrl) if check(goal) == "random" and not ctrl.reads_goal else ctrl
+        if check(goal) != "random" or ctrl.reads_goal:
+            return ctrl
+        if ctrl.pixels:  # its image shows the world, the target at the goal: no frame turns a picture's target back
+            raise ConfigError(f"{spec} looks at pixels and was made for the fixed goal: random goals need a controller "
+                              "that reads obs['goal'] or one from state (seen from each goal's frame)")
+        return in_goal_frame(ctrl)
 
 
 TASKS = {

@@ -149,7 +149,8 @@ class DaggerConfig:
         self.the_task.check_reset(self.reset)
         self.episode()  # a success threshold outside (0, 1] or an unknown goal is a one-line error now
         if self.goal_conditioned and self.obs_type.startswith("pixels"):
-            raise ConfigError("--goal random trains from state or keypoints: pixels draw the target at the centre")
+            raise ConfigError("--goal random trains from state or keypoints: a pixel student's minibatches are "
+                              "rendered from states that carry no goal (not built yet)")
         if self.teacher not in TEACHERS:
             raise ConfigError(f"unknown teacher {self.teacher!r}; choose from {', '.join(TEACHERS)}")
         if self.the_task.name != "chapter" and self.teacher != "expert":
