@@ -20,8 +20,8 @@ For each N (one process each, so that one size failing to fit is recorded, not f
 - `scan_autoreset_randomized`: the same loop with physics drawn per episode (`PushTEnv(randomize=...)`, the
   `--randomize` ranges, each reset drawing its episode's from the pool), reported with `fraction_of_fixed`, its
   rate over `scan_autoreset`'s in the same process (issue 55 asks for at least 0.9); `scan_autoreset_goals` a
-  goal drawn per episode (`goal="random"`: its pose observed, reward and success against it; state only, pixels
-  draw the target at the centre), `scan_autoreset_goals_randomized` both;
+  goal drawn per episode (`goal="random"`: its pose observed, reward and success against it; with pixels, the
+  target drawn at it), `scan_autoreset_goals_randomized` both;
 - `gym_torch`: `gym.make_vec("mjx_pusht/PushT-v0", num_envs=N, array_type="torch",
   autoreset_mode="same_step")` stepped from Python by a torch policy on the same GPU (observations
   reach torch through DLPack); `gym_torch_next_step` the same in gymnasium's default mode, next_step

@@ -177,6 +177,10 @@ python3 -m benchmarks.env_loop --envs 16384,65536 --cases scan_autoreset,scan_au
 EOS
           setsid nohup bash "$HOME/issue55.sh" > "$HOME/issue55.log" 2>&1 < /dev/null &
           sleep 30; cp "$HOME/issue55.log" "$OUT/" ;;
+  issue55-pixels) # issue 55's throughput with pixels: the env loop's steps/s with goals (the target drawn at each)
+          # and drawn physics beside the fixed ones, 96 x 96 images rendered in every step (one call, foreground)
+          python3 -m benchmarks.env_loop --envs 16384,65536 --obs pixels --cases scan_autoreset,scan_autoreset_randomized,scan_autoreset_goals,scan_autoreset_goals_randomized \
+            --json "$OUT/results/$tier-env-loop-goals-randomized-pixels.json" > "$OUT/$stage.log" 2>&1 ;;
   watch-seeds) # wait up to WAIT seconds (default 570) for train-seeds' runs NAMES (default RECIPE; space-separated),
           # then copy back what they have: one tar a run (logs, curves, summaries; not the resume checkpoints' dataset
           # rings, 2.2 GB a state run, which made the tar too big to come back) and each finished seed's policy
