@@ -10,25 +10,7 @@ import re
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from conftest import run
-
-EPISODE = 20  # control steps an eval episode (gym-pusht's 300 would take minutes on two CPU cores)
-
-
-def lerobot_eval(policy, out, *env_args):
-    run("lerobot-eval", f"--policy.path={policy}", "--policy.device=cpu", "--policy.use_amp=false",
-        "--eval.batch_size=2", "--eval.n_episodes=2", f"--output_dir={out}", f"--env.episode_length={EPISODE}",
-        *env_args, cwd=out.parent)
-    info = json.loads((out / "eval_info.json").read_text())
-    (task,) = info["per_task"]
-    episodes = [dict(zip(("sum_reward", "success"), x, strict=True))
-                for x in zip(task["metrics"]["sum_rewards"], task["metrics"]["successes"], strict=True)]
-    assert info["overall"]["n_episodes"] == 2 and len(episodes) == 2
-    assert all(np.isfinite(e["sum_reward"]) and e["sum_reward"] >= 0 for e in episodes)
-    videos = sorted(out.glob("videos/*/eval_episode_*.mp4"))
-    assert len(videos) == 2 and all(v.stat().st_size > 0 for v in videos)
-    return info
-
+from conftest import lerobot_eval, run
 
 @pytest.mark.slow
 def test_lerobot_eval_runs_the_policy_on_gym_pusht(tiny_policy, tmp_path):
