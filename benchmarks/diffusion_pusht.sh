@@ -13,13 +13,13 @@
 #   demos-N      the expert's N episodes from seeds 10000.. (clear of lerobot-eval's 1000..1499), successful ones
 #                kept, in $RUNS/demos-N; a line in $OUT/results/diffusion-demos.jsonl. Seconds (+ ~2 min of Warp's
 #                first compile on a fresh machine); run with the stage after it, no call of its own.
-#   rate         both sizes' training side by side for RATE_STEPS steps, no evals: the update rate, and so STEPS for
-#                MINUTES of training ($OUT/results/diffusion-rate.json). One call, ~3 min.
+#   rate         the SIZES' training side by side for RATE_STEPS updates, no evals: the update rate, and so STEPS,
+#                EVAL_FREQ and SAVE_FREQ for MINUTES of training ($OUT/results/diffusion-rate.json). ~2 min, with demos.
 #   train-N      starts (or, when $RUNS/train-N has a checkpoint, resumes with LeRobot's --resume) lerobot-train on
 #                demos-N, detached; returns at once. Run every size in one call, then `wait`.
 #   eval-final-N detached: lerobot-eval of train-N's last checkpoint, 500 episodes on --env.type=mjx_pusht (one batch
 #                of 500) then on --env.type=pusht (gym-pusht, LeRobot's SyncVectorEnv), one after the other on the same
-#                machine; each a row (wall-clock, Wilson 95% interval) in $OUT/results/diffusion-eval.json.
+#                machine; each a row (wall-clock, Wilson 95% interval) in $OUT/results/diffusion-eval-N.json.
 #   wait         waits until the detached jobs end or WAIT_MIN minutes (default 9) pass, then returns the logs
 #                ($OUT/logs.tgz), the curve ($OUT/diffusion-curve.json, .png) and the results: one call per 9 minutes.
 #   pack-N       train-N's last checkpoint (model, optimizer, scheduler, RNG: LeRobot's whole resume state) and its
@@ -29,7 +29,8 @@
 # Carrying a packed run into a new hold: here, copy each call's parts (files_at/parts/*) into .gpu-diffusion/K/
 # folders of at most 2 parts (30 MiB: the tree itself is ~22 MiB of the 64 a call carries), and run
 #   mkdir -p $HOME/carried && cp .gpu-diffusion/K/* $HOME/carried/       # carry [".gpu-diffusion/K"], one call each
-# then `bash benchmarks/diffusion_pusht.sh unpack-N train-N wait` in the last one.
+# then `bash benchmarks/diffusion_pusht.sh unpack-N train-N wait` in the last one (once, here:
+# echo /.gpu-diffusion/ >> "$(git rev-parse --git-path info/exclude)", so the parts never travel uncarried).
 set -uo pipefail
 export PYTHONPATH=$HOME/site:$PWD PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false HF_HUB_OFFLINE=1 WANDB_MODE=disabled
 export MJX_PUSHT_JAX_CACHE=${MJX_PUSHT_JAX_CACHE:-$HOME/jax_cache}
@@ -38,12 +39,13 @@ RUNS=${RUNS:-$HOME/diffusion}  # the machine's disk: demos, runs, logs (gone wit
 PY=${PY:-python3}
 SIZES=${SIZES:-200 2000}
 STEPS=${STEPS:-30000}            # the whole run's updates (the cosine schedule's length): size it with `rate`
-MINUTES=${MINUTES:-25}           # the training minutes `rate` sizes STEPS for
-RATE_STEPS=${RATE_STEPS:-600}
+MINUTES=${MINUTES:-14}           # the training minutes `rate` sizes STEPS for (a hold is 30 minutes in all)
+RATE_STEPS=${RATE_STEPS:-400}
 SAVE_FREQ=${SAVE_FREQ:-2000}     # updates between checkpoints: size with `rate` so a hold's end loses a minute or two
 EVAL_FREQ=${EVAL_FREQ:-3000}     # the curve's points
 EVAL_EPISODES=${EVAL_EPISODES:-100}
-DOWN_DIMS=${DOWN_DIMS:-128,256,512}  # LeRobot's pusht run: 512,1024,2048 (263 M parameters, a 3 GiB resume state)
+DOWN_DIMS=${DOWN_DIMS:-128,256,512}  # 28.5 M parameters, a 326 MiB resume state; LeRobot's pusht run: 512,1024,2048
+                                     # (263 M, 3 GiB: no hold could carry it on)
 WORKERS=${WORKERS:-6}            # dataloader workers a run (16 cores, two runs side by side)
 DEVICE=${DEVICE:-cuda}           # cpu: a smoke run of the stages on a machine without a GPU
 BATCH=${BATCH:-64}
@@ -119,7 +121,10 @@ for s in sizes:
     if len(t) < 2:
         sys.exit(f"rate-{s}.log has {len(t)} log lines: RATE_STEPS must be at least twice --log_freq (100)")
     per_step = sum(t[1:]) / len(t[1:])  # the first window holds the start-up
-    row[s] = {"s_per_step": per_step, "steps_for_minutes": int(minutes * 60 / per_step)}
+    steps = int(minutes * 60 / per_step)
+    # the values to run train-N with: STEPS for MINUTES of updates, 5 curve points, a checkpoint every ~2 minutes
+    row[s] = {"s_per_step": per_step, "STEPS": steps, "EVAL_FREQ": max(100, int(round(steps / 5, -2))),
+              "SAVE_FREQ": max(100, int(round(120 / per_step, -2)))}
 print(json.dumps(row))
 PYEOF
       cat "$OUT/results/diffusion-rate.json" ;;
