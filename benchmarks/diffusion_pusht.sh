@@ -8,6 +8,7 @@
 # A command lasts at most 10 minutes but a machine is held up to 30: training and the final evals run detached
 # (setsid, so they outlive the call that started them) and `wait` collects them; a bare new machine (a new hold)
 # loses all of $RUNS, so a run that must go on leaves as parts (`pack`) and comes back carried (`unpack`).
+# A machine idle for 30 s between calls is given back, its detached jobs with it: call again at once.
 #
 # Stages (device calls each, on a machine already set up):
 #   demos-N      the expert's N episodes from seeds 10000.. (clear of lerobot-eval's 1000..1499), successful ones
@@ -32,18 +33,19 @@
 # then `bash benchmarks/diffusion_pusht.sh unpack-N train-N wait` in the last one (once, here:
 # echo /.gpu-diffusion/ >> "$(git rev-parse --git-path info/exclude)", so the parts never travel uncarried).
 set -uo pipefail
-export PYTHONPATH=$HOME/site:$PWD PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false HF_HUB_OFFLINE=1 WANDB_MODE=disabled
+export PYTHONPATH=$HOME/site:$PWD PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
+export HF_HUB_OFFLINE=1 WANDB_MODE=disabled
 export MJX_PUSHT_JAX_CACHE=${MJX_PUSHT_JAX_CACHE:-$HOME/jax_cache}
 OUT=${OUT:-outputs/bench-diffusion}
 RUNS=${RUNS:-$HOME/diffusion}  # the machine's disk: demos, runs, logs (gone with the hold)
 PY=${PY:-python3}
 SIZES=${SIZES:-200 2000}
 STEPS=${STEPS:-30000}            # the whole run's updates (the cosine schedule's length): size it with `rate`
-MINUTES=${MINUTES:-14}           # the training minutes `rate` sizes STEPS for (a hold is 30 minutes in all)
+MINUTES=${MINUTES:-10}           # the training minutes `rate` sizes STEPS for (a hold's 30 take setup and evals too)
 RATE_STEPS=${RATE_STEPS:-400}
 SAVE_FREQ=${SAVE_FREQ:-2000}     # updates between checkpoints: size with `rate` so a hold's end loses a minute or two
 EVAL_FREQ=${EVAL_FREQ:-3000}     # the curve's points
-EVAL_EPISODES=${EVAL_EPISODES:-100}
+EVAL_EPISODES=${EVAL_EPISODES:-50}
 DOWN_DIMS=${DOWN_DIMS:-128,256,512}  # 28.5 M parameters, a 326 MiB resume state; LeRobot's pusht run: 512,1024,2048
                                      # (263 M, 3 GiB: no hold could carry it on)
 WORKERS=${WORKERS:-6}            # dataloader workers a run (16 cores, two runs side by side)
@@ -117,7 +119,8 @@ import json, re, sys
 runs, minutes, sizes = sys.argv[1], float(sys.argv[2]), sys.argv[3:]
 row = {"minutes": minutes, "side_by_side": sizes}
 for s in sizes:
-    t = [float(a) + float(b) for a, b in re.findall(r"updt_s:([0-9.]+) data_s:([0-9.]+)", open(f"{runs}/logs/rate-{s}.log").read())]
+    log = open(f"{runs}/logs/rate-{s}.log").read()
+    t = [float(a) + float(b) for a, b in re.findall(r"updt_s:([0-9.]+) data_s:([0-9.]+)", log)]
     if len(t) < 2:
         sys.exit(f"rate-{s}.log has {len(t)} log lines: RATE_STEPS must be at least twice --log_freq (100)")
     per_step = sum(t[1:]) / len(t[1:])  # the first window holds the start-up
@@ -139,9 +142,9 @@ PYEOF
       fi ;;
     eval-final-*)
       ckpt="$RUNS/train-$n/checkpoints/last/pretrained_model"
-      ev="$PY -m benchmarks.lerobot_eval --policy $ckpt --device $DEVICE --episodes 500 --batch 500 --out $RUNS/eval-$n \
-          --json $RUNS/results/diffusion-eval-$n.json"
-      detach "eval-final-$n" "$ev --env mjx_pusht && $ev --env pusht" ;;
+      ev="$PY -m benchmarks.lerobot_eval --policy $ckpt --device $DEVICE --episodes 500 --batch 500 \
+          --out $RUNS/eval-$n --json $RUNS/results/diffusion-eval-$n.json"
+      detach "eval-final-$n" "$ev --env mjx_pusht; $ev --env pusht" ;;  # the second runs whatever the first gave
     wait)
       end=$(( $(date +%s) + WAIT_MIN * 60 ))
       while [ "$(date +%s)" -lt "$end" ]; do

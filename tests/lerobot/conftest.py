@@ -13,15 +13,18 @@ import numpy as np
 import pytest
 
 OFFLINE = {"HF_HUB_OFFLINE": "1", "HF_DATASETS_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1", "WANDB_MODE": "disabled"}
-os.environ.update(OFFLINE)
+# one thread a torch process: pytest runs two workers on CI's two cores, and torch's own thread pool in each
+# oversubscribes them (a diffusion policy's lerobot-eval took 30 s instead of 10 on this 2-core machine)
+ONE_THREAD = {"OMP_NUM_THREADS": "1"}
+os.environ.update(OFFLINE | ONE_THREAD)
 BIN = Path(sys.executable).parent
 HERE = Path(__file__).parent
 
 
 def run(tool: str, *args: str, cwd: Path, timeout: int = 900) -> subprocess.CompletedProcess:
     """A console script of this venv, offline; its output is shown if it fails."""
-    p = subprocess.run([str(BIN / tool), *args], cwd=cwd, env={**os.environ, **OFFLINE}, capture_output=True,
-                       text=True, timeout=timeout)
+    p = subprocess.run([str(BIN / tool), *args], cwd=cwd, env={**os.environ, **OFFLINE, **ONE_THREAD},
+                       capture_output=True, text=True, timeout=timeout)
     assert p.returncode == 0, f"{tool} exited {p.returncode}:\n{p.stdout[-3000:]}\n{p.stderr[-6000:]}"
     return p
 
