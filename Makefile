@@ -20,7 +20,8 @@ export MJX_PUSHT_JAX_CACHE ?= $(CURDIR)/.jax_cache
 PYTHON312 ?= $(shell for p in python3.12 $$(ls -d $$HOME/.pyenv/versions/3.12*/bin/python3.12 2>/dev/null); do \
 	$$p -V >/dev/null 2>&1 && { echo $$p; break; }; done)
 LEROBOT_VENV := .venv-lerobot
-LEROBOT_STAMP := $(LEROBOT_VENV)/.installed
+# the stamp is renamed when the install line changes, so that an older venv is brought up to it
+LEROBOT_STAMP := $(LEROBOT_VENV)/.installed-diffusion
 
 .PHONY: run test pytest test-lerobot docs scene bench clean
 
@@ -58,7 +59,7 @@ $(LEROBOT_STAMP): pyproject.toml plugins/lerobot_env_mjx_pusht/pyproject.toml
 	@test -n "$(PYTHON312)" || { echo "make test-lerobot needs Python 3.12 (lerobot 0.6.1 requires it): set PYTHON312=/path/to/python3.12"; exit 2; }
 	$(PYTHON312) -m venv $(LEROBOT_VENV)
 	$(LEROBOT_VENV)/bin/python -m pip install -q --upgrade pip
-	$(LEROBOT_VENV)/bin/python -m pip install -q 'lerobot[pusht,training,evaluation]==0.6.1' 'torch<2.12' 'numpy<2.3' \
+	$(LEROBOT_VENV)/bin/python -m pip install -q 'lerobot[pusht,training,evaluation,diffusion]==0.6.1' 'torch<2.12' 'numpy<2.3' \
 		'pytest>=8' 'pytest-timeout>=2.3' 'pytest-xdist>=3.6' -e '.[warp,gym]' -e plugins/lerobot_env_mjx_pusht
 	touch $(LEROBOT_STAMP)
 

@@ -1,4 +1,5 @@
-"""lerobot-eval itself, timed: wall-clock, and the share of it spent in the env (reset, step, render).
+"""lerobot-eval itself, timed: wall-clock, the share of it spent in the env (reset, step, render), and the success
+rate with its Wilson 95% interval (over the episodes per_task lists).
 
     python -m benchmarks.lerobot_eval --policy POLICY_DIR --env pusht --episodes 500 --batch 500 --json out.json
     python -m benchmarks.lerobot_eval --policy POLICY_DIR --env mjx_pusht --episodes 500 --batch 500 --json out.json
@@ -86,11 +87,17 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     lerobot_eval.main()
     wall = time.perf_counter() - t0
-    info = json.loads((out / "eval_info.json").read_text())["overall"]
+    whole = json.loads((out / "eval_info.json").read_text())
+    info = whole["overall"]
     env_s = sum(v for k, v in clock.items() if k != "make_env")
+    successes = sum(bool(s) for task in whole["per_task"] for s in task["metrics"]["successes"])
+    from mjx_pusht.study.stats import wilson
+
     row = {"env": a.env, "episodes": info["n_episodes"], "batch": a.batch, "wall_s": wall, "eval_s": info["eval_s"],
            "env_s": env_s, "env_share_of_eval": env_s / info["eval_s"], "env_seconds": clock,
-           "pc_success": info["pc_success"], "avg_sum_reward": info["avg_sum_reward"], "lerobot_eval_args": args}
+           "pc_success": info["pc_success"], "successes": successes,
+           "wilson95_pc": [100 * x for x in wilson(successes, info["n_episodes"])],
+           "avg_sum_reward": info["avg_sum_reward"], "lerobot_eval_args": args}
     print(json.dumps(row))
     if a.json:
         import torch

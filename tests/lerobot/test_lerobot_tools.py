@@ -1,40 +1,16 @@
-"""lerobot 0.6.1's own `lerobot-eval` and `lerobot-train`, unchanged, on mjx_pusht: eval of a small policy on
-gym-pusht and on the plugin's env (the batch on MJX-Warp, and LeRobot's usual vector env of MuJoCo C envs),
-and training on `mjx-pusht demos` output, whose files LeRobot's own writer would lay out alike."""
+"""lerobot 0.6.1's own `lerobot-eval`, unchanged, on mjx_pusht: a small policy on the plugin's env (the batch on
+MJX-Warp, and LeRobot's usual vector env of MuJoCo C envs), and `mjx-pusht demos` output, whose files LeRobot's own
+writer would lay out alike. lerobot-train on the demos, and lerobot-eval on gym-pusht itself:
+test_lerobot_diffusion.py."""
 
 from __future__ import annotations
 
 import json
-import re
 
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from conftest import run
-
-EPISODE = 20  # control steps an eval episode (gym-pusht's 300 would take minutes on two CPU cores)
-
-
-def lerobot_eval(policy, out, *env_args):
-    run("lerobot-eval", f"--policy.path={policy}", "--policy.device=cpu", "--policy.use_amp=false",
-        "--eval.batch_size=2", "--eval.n_episodes=2", f"--output_dir={out}", f"--env.episode_length={EPISODE}",
-        *env_args, cwd=out.parent)
-    info = json.loads((out / "eval_info.json").read_text())
-    (task,) = info["per_task"]
-    episodes = [dict(zip(("sum_reward", "success"), x, strict=True))
-                for x in zip(task["metrics"]["sum_rewards"], task["metrics"]["successes"], strict=True)]
-    assert info["overall"]["n_episodes"] == 2 and len(episodes) == 2
-    assert all(np.isfinite(e["sum_reward"]) and e["sum_reward"] >= 0 for e in episodes)
-    videos = sorted(out.glob("videos/*/eval_episode_*.mp4"))
-    assert len(videos) == 2 and all(v.stat().st_size > 0 for v in videos)
-    return info
-
-
-@pytest.mark.slow
-def test_lerobot_eval_runs_the_policy_on_gym_pusht(tiny_policy, tmp_path):
-    # lerobot 0.6.1's default AsyncVectorEnv cannot make gym_pusht/PushT-v0 in its workers: sync, as users must
-    info = lerobot_eval(tiny_policy, tmp_path / "pusht", "--env.type=pusht", "--eval.use_async_envs=false")
-    assert list(info["per_group"]) == ["pusht"]
+from conftest import lerobot_eval
 
 
 @pytest.mark.slow
@@ -83,21 +59,3 @@ def test_lerobot_reads_the_demos_as_its_own_writer_would_write_them(demos, tmp_p
     assert their_table.schema.remove_metadata() == table.schema.remove_metadata()
     stats = json.loads((tmp_path / "theirs/meta/stats.json").read_text())
     assert set(stats) == set(json.loads((demos / "meta/stats.json").read_text()))
-
-
-@pytest.mark.slow
-def test_lerobot_train_trains_on_the_demos(demos, tmp_path):
-    out = tmp_path / "train"
-    p = run("lerobot-train", "--dataset.repo_id=local/mjx_pusht_demos", f"--dataset.root={demos}",
-            "--policy.type=act", "--policy.device=cpu", "--policy.push_to_hub=false",
-            "--policy.pretrained_backbone_weights=null", "--policy.dim_model=32", "--policy.n_heads=2",
-            "--policy.dim_feedforward=64", "--policy.n_encoder_layers=1", "--policy.chunk_size=8",
-            "--policy.n_action_steps=8", "--policy.use_vae=false", "--steps=4", "--batch_size=2", "--num_workers=0",
-            "--save_freq=4", "--log_freq=1", f"--output_dir={out}", "--wandb.enable=false", cwd=tmp_path)
-    losses = [float(x) for x in re.findall(r"step:\d+ .*? loss:([0-9.eE+-]+)", p.stdout + p.stderr)]
-    assert len(losses) == 4 and all(np.isfinite(losses))
-    step = json.loads((out / "checkpoints/000004/training_state/training_step.json").read_text())
-    assert step["step"] == 4
-    config = json.loads((out / "checkpoints/000004/pretrained_model/train_config.json").read_text())
-    assert config["dataset"]["root"] == str(demos)
-    assert (out / "checkpoints/000004/pretrained_model/model.safetensors").stat().st_size > 0

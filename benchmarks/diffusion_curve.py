@@ -1,0 +1,117 @@
+"""Success against training minutes, from lerobot-train's own logs (its `--env_eval_freq` evals on the batch).
+
+    python -m benchmarks.diffusion_curve --json curve.json --png curve.png 200=hold1.log,hold2.log 2000=hold1.log
+
+Each run is NAME=LOG[,LOG...]: the logs of one `lerobot-train` output folder in the order they were written, one
+a machine hold (a hold that resumed from a checkpoint starts a new log). lerobot 0.6.1 logs a line per
+`--log_freq` steps ("step:N ... updt_s:... data_s:..."), "Eval policy at step N" before an eval and "Suite
+overall aggregated: {...}" after it (pc_success, n_episodes, eval_s), each stamped to the second. A point's
+training minutes are the wall-clock from each log's "Start offline training" to the eval, summed over the
+run's logs, less the seconds its evals took (eval_s): checkpoint saving stays in, and steps redone after a
+resume count again (minutes spent, not minutes needed). Its interval is Wilson's 95% over the eval's episodes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import json
+import re
+import sys
+from datetime import datetime
+from pathlib import Path
+
+STAMP = r"INFO (\d{4}-\d\d-\d\d \d\d:\d\d:\d\d) "
+START = re.compile(STAMP + r".*Start offline training")
+STEP = re.compile(STAMP + r".*? step:(\d+) .*?loss:([0-9.eE+-]+)")
+EVAL_AT = re.compile(STAMP + r".*Eval policy at step (\d+)")
+OVERALL = re.compile(STAMP + r".*Suite overall aggregated: (\{.*\})\s*$")
+
+
+def _t(stamp: str) -> datetime:
+    return datetime.strptime(stamp, "%Y-%m-%d %H:%M:%S")
+
+
+def parse_run(logs: list[Path]) -> dict:
+    """The eval points and the last training step of one run's logs (in hold order)."""
+    from mjx_pusht.study.stats import wilson
+
+    points, losses, spent_s, eval_total_s, last_step = [], [], 0.0, 0.0, 0
+    for log in logs:
+        start = step_at_eval = None
+        end_s = 0.0
+        for line in log.read_text(errors="replace").splitlines():
+            if m := START.search(line):
+                start = _t(m[1])
+            elif start is None:
+                continue
+            elif m := STEP.search(line):
+                last_step = int(m[2])
+                losses.append({"step": last_step, "loss": float(m[3])})
+                end_s = (_t(m[1]) - start).total_seconds()
+            elif m := EVAL_AT.search(line):
+                step_at_eval = int(m[2])
+            elif (m := OVERALL.search(line)) and step_at_eval is not None:
+                o = ast.literal_eval(m[2])  # LeRobot logs the dict's repr
+                end_s = (_t(m[1]) - start).total_seconds()
+                eval_total_s += o["eval_s"]
+                n = int(o["n_episodes"])
+                k = round(o["pc_success"] * n / 100)
+                lo, hi = wilson(k, n)
+                points.append({"step": step_at_eval, "train_min": (spent_s + end_s - eval_total_s) / 60,
+                               "wall_min": (spent_s + end_s) / 60, "pc_success": o["pc_success"], "successes": k,
+                               "n_episodes": n, "wilson95": [100 * lo, 100 * hi], "avg_sum_reward": o["avg_sum_reward"],
+                               "eval_s": o["eval_s"]})
+                step_at_eval = None
+        if start is None:
+            raise SystemExit(f"{log}: no 'Start offline training' line: not a lerobot-train log")
+        spent_s += end_s
+    return {"logs": [str(p) for p in logs], "points": points, "last_step": last_step,
+            "train_min": (spent_s - eval_total_s) / 60, "wall_min": spent_s / 60, "losses": losses}
+
+
+def plot(runs: dict, png: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    for name, run in runs.items():
+        p = run["points"]
+        x = [q["train_min"] for q in p]
+        ax.plot(x, [q["pc_success"] for q in p], marker="o", label=f"{name} episodes")
+        ax.fill_between(x, [q["wilson95"][0] for q in p], [q["wilson95"][1] for q in p], alpha=0.2)
+    ax.axhline(80, color="grey", lw=0.8, ls="--")
+    ax.set(xlabel="training minutes (evals left out)", ylabel="success % on --env.type=mjx_pusht", ylim=(0, 100),
+           title="LeRobot Diffusion Policy on mjx-pusht demos")
+    ax.legend(title="demos")
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("runs", nargs="+", help="NAME=LOG[,LOG...] per run, its logs in hold order")
+    p.add_argument("--json", type=Path, required=True)
+    p.add_argument("--png", type=Path, default=None)
+    a = p.parse_args(argv)
+    runs = {}
+    for spec in a.runs:
+        name, sep, logs = spec.partition("=")
+        if not sep or not logs:
+            p.error(f"{spec!r}: give NAME=LOG[,LOG...]")
+        runs[name] = parse_run([Path(x) for x in logs.split(",")])
+    a.json.parent.mkdir(parents=True, exist_ok=True)
+    a.json.write_text(json.dumps(runs, indent=1) + "\n")
+    if a.png:
+        plot(runs, a.png)
+    for name, run in runs.items():
+        last = run["points"][-1] if run["points"] else {}
+        print(f"{name}: {len(run['points'])} evals, step {run['last_step']}, {run['train_min']:.1f} training min; "
+              f"last eval {last.get('pc_success', float('nan')):.1f}% at {last.get('train_min', float('nan')):.1f} min")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,186 @@
+#!/usr/bin/env bash
+# LeRobot 0.6.1's own Diffusion Policy (`lerobot-train --policy.type=diffusion`, unchanged) trained on `mjx-pusht
+# demos` of the gym-pusht expert on one lent H100, evaluated on the plugin's batch as it trains, then scored by
+# `lerobot-eval` on gym-pusht itself and on the batch (issue 54; docs/lerobot-diffusion.md has the plan).
+# Usage there, from the repository root, with lerobot 0.6.1 (and diffusers), gym-pusht, this project and its plugin
+# installed (../shared/gpu/prepare.sh and benchmarks/lerobot_wheels.sh carry the wheels to $HOME/site):
+#   bash benchmarks/diffusion_pusht.sh STAGE [STAGE ...]        # stages run in the order given
+# A command lasts at most 10 minutes but a machine is held up to 30: training and the final evals run detached
+# (setsid, so they outlive the call that started them) and `wait` collects them; a bare new machine (a new hold)
+# loses all of $RUNS, so a run that must go on leaves as parts (`pack`) and comes back carried (`unpack`).
+# A machine idle for 30 s between calls is given back, its detached jobs with it: call again at once.
+#
+# Stages (device calls each, on a machine already set up):
+#   demos-N      the expert's N episodes from seeds 10000.. (clear of lerobot-eval's 1000..1499), successful ones
+#                kept, in $RUNS/demos-N; a line in $OUT/results/diffusion-demos.jsonl. Seconds (+ ~2 min of Warp's
+#                first compile on a fresh machine); run with the stage after it, no call of its own.
+#   rate         the SIZES' training side by side for RATE_STEPS updates, no evals: the update rate, and so STEPS,
+#                EVAL_FREQ and SAVE_FREQ for MINUTES of training ($OUT/results/diffusion-rate.json). ~2 min, with demos.
+#   train-N      starts (or, when $RUNS/train-N has a checkpoint, resumes with LeRobot's --resume) lerobot-train on
+#                demos-N, detached; returns at once. Run every size in one call, then `wait`.
+#   eval-final-N detached: lerobot-eval of train-N's last checkpoint, 500 episodes on --env.type=mjx_pusht (one batch
+#                of 500) then on --env.type=pusht (gym-pusht, LeRobot's SyncVectorEnv), one after the other on the same
+#                machine; each a row (wall-clock, Wilson 95% interval) in $OUT/results/diffusion-eval-N.json.
+#   wait         waits until the detached jobs end or WAIT_MIN minutes (default 9) pass, then returns the logs
+#                ($OUT/logs.tgz), the curve ($OUT/diffusion-curve.json, .png) and the results: one call per 9 minutes.
+#   pack-N       train-N's last checkpoint (model, optimizer, scheduler, RNG: LeRobot's whole resume state) and its
+#                logs as 15 MiB parts in $RUNS/pack; then `send` returns 4 of them a call (60 MiB
+#                of the 64 that come back).
+#   unpack-N     puts back a run carried in .gpu-diffusion/ (see below) as $RUNS/train-N with its logs.
+# Carrying a packed run into a new hold: here, copy each call's parts (files_at/parts/*) into .gpu-diffusion/K/
+# folders of at most 2 parts (30 MiB: the tree itself is ~22 MiB of the 64 a call carries), and run
+#   mkdir -p $HOME/carried && cp .gpu-diffusion/K/* $HOME/carried/       # carry [".gpu-diffusion/K"], one call each
+# then `bash benchmarks/diffusion_pusht.sh unpack-N train-N wait` in the last one (once, here:
+# echo /.gpu-diffusion/ >> "$(git rev-parse --git-path info/exclude)", so the parts never travel uncarried).
+set -uo pipefail
+export PYTHONPATH=$HOME/site:$PWD PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
+export HF_HUB_OFFLINE=1 WANDB_MODE=disabled
+export MJX_PUSHT_JAX_CACHE=${MJX_PUSHT_JAX_CACHE:-$HOME/jax_cache}
+OUT=${OUT:-outputs/bench-diffusion}
+RUNS=${RUNS:-$HOME/diffusion}  # the machine's disk: demos, runs, logs (gone with the hold)
+PY=${PY:-python3}
+SIZES=${SIZES:-200 2000}
+STEPS=${STEPS:-30000}            # the whole run's updates (the cosine schedule's length): size it with `rate`
+MINUTES=${MINUTES:-10}           # the training minutes `rate` sizes STEPS for (a hold's 30 take setup and evals too)
+RATE_STEPS=${RATE_STEPS:-400}
+SAVE_FREQ=${SAVE_FREQ:-2000}     # updates between checkpoints: size with `rate` so a hold's end loses a minute or two
+EVAL_FREQ=${EVAL_FREQ:-3000}     # the curve's points
+EVAL_EPISODES=${EVAL_EPISODES:-50}
+DOWN_DIMS=${DOWN_DIMS:-128,256,512}  # 28.5 M parameters, a 326 MiB resume state; LeRobot's pusht run: 512,1024,2048
+                                     # (263 M, 3 GiB: no hold could carry it on)
+WORKERS=${WORKERS:-6}            # dataloader workers a run (16 cores, two runs side by side)
+DEVICE=${DEVICE:-cuda}           # cpu: a smoke run of the stages on a machine without a GPU
+BATCH=${BATCH:-64}
+WAIT_MIN=${WAIT_MIN:-9}
+CARRIED=${CARRIED:-$HOME/carried}  # where the carried parts of a packed run are gathered
+mkdir -p "$OUT/results" "$RUNS/logs" "$RUNS/pids" "$RUNS/results"
+
+# LeRobot's published diffusion_pusht settings (lerobot/diffusion_pusht's config) where they are not 0.6.1's
+# defaults (which are horizon 64, 32 action steps and an ImageNet backbone fetched from the network), on the
+# features of LeRobot's lerobot/pusht (observation.image 96 x 96, observation.state, action): what differs from
+# that run is DOWN_DIMS, the demos and the budget (docs/lerobot-diffusion.md).
+policy_args() {
+  echo --policy.type=diffusion --policy.device="$DEVICE" --policy.push_to_hub=false --policy.use_amp=false \
+    --policy.n_obs_steps=2 --policy.horizon=16 --policy.n_action_steps=8 --policy.drop_n_last_frames=7 \
+    --policy.crop_shape=[84,84] --policy.crop_is_random=true --policy.pretrained_backbone_weights=null \
+    --policy.use_group_norm=true --policy.spatial_softmax_num_keypoints=32 "--policy.down_dims=[$DOWN_DIMS]" \
+    --policy.num_train_timesteps=100 --policy.noise_scheduler_type=DDPM --batch_size="$BATCH" --seed=100000 \
+    --num_workers="$WORKERS" --log_freq=100 --wandb.enable=false
+}
+# the curve's evals: the plugin's batch (the GPU's), seeds 100000.. (train's --seed), clear of the final eval's
+env_args() {
+  echo --env.type=mjx_pusht --env.observation_height=96 --env.observation_width=96 --env_eval_freq="$EVAL_FREQ" \
+    --eval.n_episodes="$EVAL_EPISODES" --eval.batch_size="$EVAL_EPISODES" --eval.use_async_envs=false
+}
+
+detach() {  # NAME CMD...: CMD in a session of its own, its output in $RUNS/logs/NAME-<time>.log
+  local name=$1; shift
+  setsid bash -c "$*" > "$RUNS/logs/$name-$(date +%s).log" 2>&1 < /dev/null &
+  echo $! > "$RUNS/pids/$name"
+  echo "$name started (pid $!)"
+}
+
+collect() {  # the logs, the curve and the results into $OUT (at most 8 files come back)
+  tar czf "$OUT/logs.tgz" -C "$RUNS" logs
+  local runs=()
+  for n in $SIZES; do
+    logs=$(ls "$RUNS"/logs/train-"$n"-*.log 2>/dev/null | sort | paste -sd,)
+    [ -n "$logs" ] && runs+=("$n=$logs")
+  done
+  [ ${#runs[@]} -gt 0 ] && $PY -m benchmarks.diffusion_curve --json "$OUT/diffusion-curve.json" \
+    --png "$OUT/diffusion-curve.png" "${runs[@]}"
+  cp "$RUNS"/results/* "$OUT/results/" 2>/dev/null
+  return 0
+}
+
+for stage in "$@"; do
+  n=${stage##*-}
+  case "$stage" in
+    demos-*)
+      t0=$(date +%s.%N)
+      $PY -m mjx_pusht demos --task gym-pusht --seeds "10000:$((10000 + n))" --successful-only --replace \
+        --out "$RUNS/demos-$n" --no-progress > "$RUNS/logs/demos-$n.log" 2>&1
+      rc=$?; t1=$(date +%s.%N); cat "$RUNS/logs/demos-$n.log"
+      $PY -c "import json, sys; i = json.load(open(sys.argv[1])) if sys.argv[2] == '0' else {}
+print(json.dumps({'command': 'mjx-pusht demos --task gym-pusht --seeds 10000:' + str(10000 + int(sys.argv[3]))
+      + ' --successful-only', 'rc': int(sys.argv[2]), 'wall_s': float(sys.argv[5]) - float(sys.argv[4]),
+      'episodes': i.get('total_episodes'), 'frames': i.get('total_frames')}))" \
+        "$RUNS/demos-$n/meta/info.json" "$rc" "$n" "$t0" "$t1" | tee -a "$OUT/results/diffusion-demos.jsonl" ;;
+    rate)
+      for s in $SIZES; do
+        rm -rf "$RUNS/rate-$s"
+        $PY -m lerobot.scripts.lerobot_train --dataset.repo_id="local/mjx_pusht_demos_$s" \
+          --dataset.root="$RUNS/demos-$s" $(policy_args) --steps="$RATE_STEPS" --env_eval_freq=0 \
+          --save_checkpoint=false --output_dir="$RUNS/rate-$s" > "$RUNS/logs/rate-$s.log" 2>&1 &
+      done
+      wait
+      $PY - "$RUNS" "$MINUTES" $SIZES > "$OUT/results/diffusion-rate.json" <<'PYEOF'
+import json, re, sys
+runs, minutes, sizes = sys.argv[1], float(sys.argv[2]), sys.argv[3:]
+row = {"minutes": minutes, "side_by_side": sizes}
+for s in sizes:
+    log = open(f"{runs}/logs/rate-{s}.log").read()
+    t = [float(a) + float(b) for a, b in re.findall(r"updt_s:([0-9.]+) data_s:([0-9.]+)", log)]
+    if len(t) < 2:
+        sys.exit(f"rate-{s}.log has {len(t)} log lines: RATE_STEPS must be at least twice --log_freq (100)")
+    per_step = sum(t[1:]) / len(t[1:])  # the first window holds the start-up
+    steps = int(minutes * 60 / per_step)
+    # the values to run train-N with: STEPS for MINUTES of updates, 5 curve points, a checkpoint every ~2 minutes
+    row[s] = {"s_per_step": per_step, "STEPS": steps, "EVAL_FREQ": max(100, int(round(steps / 5, -2))),
+              "SAVE_FREQ": max(100, int(round(120 / per_step, -2)))}
+print(json.dumps(row))
+PYEOF
+      cat "$OUT/results/diffusion-rate.json" ;;
+    train-*)
+      last="$RUNS/train-$n/checkpoints/last/pretrained_model/train_config.json"
+      if [ -f "$last" ]; then  # LeRobot's own resume: its config, optimizer, scheduler, RNG and data order
+        detach "train-$n" "$PY -m lerobot.scripts.lerobot_train --config_path=$last --resume=true"
+      else
+        detach "train-$n" "$PY -m lerobot.scripts.lerobot_train --dataset.repo_id=local/mjx_pusht_demos_$n \
+          --dataset.root=$RUNS/demos-$n $(policy_args) $(env_args) --steps=$STEPS --save_freq=$SAVE_FREQ \
+          --output_dir=$RUNS/train-$n"
+      fi ;;
+    eval-final-*)
+      ckpt="$RUNS/train-$n/checkpoints/last/pretrained_model"
+      ev="$PY -m benchmarks.lerobot_eval --policy $ckpt --device $DEVICE --episodes 500 --batch 500 \
+          --out $RUNS/eval-$n --json $RUNS/results/diffusion-eval-$n.json"
+      detach "eval-final-$n" "$ev --env mjx_pusht; $ev --env pusht" ;;  # the second runs whatever the first gave
+    wait)
+      end=$(( $(date +%s) + WAIT_MIN * 60 ))
+      while [ "$(date +%s)" -lt "$end" ]; do
+        alive=0
+        for f in "$RUNS"/pids/*; do [ -f "$f" ] && kill -0 "$(cat "$f")" 2>/dev/null && alive=1; done
+        [ $alive = 0 ] && break
+        sleep 10
+      done
+      for f in "$RUNS"/pids/*; do
+        [ -f "$f" ] || continue
+        if kill -0 "$(cat "$f")" 2>/dev/null; then echo "$(basename "$f") still running"
+        else echo "$(basename "$f") ended"; rm "$f"; fi
+      done
+      for log in "$RUNS"/logs/*.log; do echo "== $log"; grep -a "INFO" "$log" | tail -n 2 | cut -c1-300; done
+      collect ;;
+    pack-*)
+      mkdir -p "$RUNS/pack" && rm -f "$RUNS/pack/train-$n".* "$RUNS/pack/sent"
+      step=$(readlink "$RUNS/train-$n/checkpoints/last")
+      tar cf - -C "$RUNS" "train-$n/checkpoints/$step" "train-$n/checkpoints/last" logs \
+        | split -b 15m -d -a 3 - "$RUNS/pack/train-$n.tar.part."
+      (cd "$RUNS/pack" && sha256sum train-"$n".tar.part.* > "train-$n.sha256")
+      ls -l "$RUNS/pack"; echo "then: send, once per 4 parts" ;;
+    send)  # the next 4 parts not yet sent (and the checksums), under $OUT/parts
+      mkdir -p "$OUT/parts" && touch "$RUNS/pack/sent"
+      cp "$RUNS"/pack/*.sha256 "$OUT/parts/"
+      k=0
+      for p in "$RUNS"/pack/*.part.*; do
+        grep -qx "$p" "$RUNS/pack/sent" && continue
+        [ $k -ge 4 ] && { echo "more parts: send again"; break; }
+        cp "$p" "$OUT/parts/" && echo "$p" >> "$RUNS/pack/sent"; k=$((k + 1))
+      done
+      ls "$OUT/parts" ;;
+    unpack-*)
+      (cd "$CARRIED" && sha256sum -c "train-$n.sha256") || { echo "parts missing or damaged"; exit 1; }
+      cat "$CARRIED"/train-"$n".tar.part.* | tar xf - -C "$RUNS" && ls "$RUNS/train-$n/checkpoints" ;;
+    *) echo "unknown stage $stage (demos-N rate train-N eval-final-N wait pack-N send unpack-N)"; exit 2 ;;
+  esac
+  echo "$stage done"
+done

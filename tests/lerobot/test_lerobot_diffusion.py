@@ -1,0 +1,100 @@
+"""LeRobot's own Diffusion Policy as benchmarks/diffusion_pusht.sh trains and scores it (issue 54), shrunk to a CPU:
+`lerobot-train --policy.type=diffusion` on `mjx-pusht demos`, evaluating on `--env.type=mjx_pusht` as it trains (the
+curve's points, read back by benchmarks/diffusion_curve.py), then `lerobot-eval` of its checkpoint on gym-pusht
+itself and on the plugin's env."""
+
+from __future__ import annotations
+
+import ast
+import json
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import EPISODE, lerobot_eval, run
+from safetensors.torch import load_file
+
+STEPS = 2
+# the recipe's policy (LeRobot's pusht settings: 2 observations, actions predicted 16 and run 8 at a time, no
+# pretrained backbone) made small enough for CI: a narrow UNet, 4 diffusion steps, 32 x 32 images for the ResNet
+TINY = ("--policy.type=diffusion", "--policy.device=cpu", "--policy.push_to_hub=false", "--policy.use_amp=false",
+        "--policy.pretrained_backbone_weights=null", "--policy.use_group_norm=true", "--policy.down_dims=[16,32]",
+        "--policy.horizon=8", "--policy.n_action_steps=4", "--policy.drop_n_last_frames=3",
+        "--policy.num_train_timesteps=4", "--policy.diffusion_step_embed_dim=16",
+        "--policy.spatial_softmax_num_keypoints=8", "--policy.resize_shape=[32,32]")
+ROOT = Path(__file__).resolve().parents[2]  # for benchmarks/
+SMALL = ("--env.type=mjx_pusht", "--env.observation_height=96", "--env.observation_width=96")
+
+
+@pytest.fixture(scope="module")
+def trained(demos, tmp_path_factory):
+    """lerobot-train's output folder and its log: STEPS updates, a checkpoint, and one eval of two episodes on the
+    plugin's env (LeRobot's --env_eval_freq) at the end."""
+    out = tmp_path_factory.mktemp("diffusion") / "train"
+    p = run("lerobot-train", "--dataset.repo_id=local/mjx_pusht_demos", f"--dataset.root={demos}", *TINY,
+            f"--steps={STEPS}", "--batch_size=2", "--num_workers=0", f"--save_freq={STEPS}", "--log_freq=1",
+            f"--output_dir={out}", "--wandb.enable=false", *SMALL, f"--env.episode_length={EPISODE}",
+            f"--env_eval_freq={STEPS}", "--eval.n_episodes=2", "--eval.batch_size=2", "--eval.use_async_envs=false",
+            cwd=out.parent)
+    log = out.parent / "train.log"
+    log.write_text(p.stdout + p.stderr)
+    return out, log
+
+
+@pytest.mark.slow
+def test_lerobot_train_writes_a_diffusion_checkpoint_of_the_demos_features_and_units(trained, demos):
+    out, log = trained
+    losses = [float(x) for x in re.findall(r"step:\d+ .*? loss:([0-9.eE+-]+)", log.read_text())]
+    assert len(losses) == STEPS and all(np.isfinite(losses))  # --log_freq=1: a line an update
+    ckpt = out / f"checkpoints/{STEPS:06d}"
+    assert json.loads((ckpt / "training_state/training_step.json").read_text())["step"] == STEPS
+    assert json.loads((ckpt / "pretrained_model/train_config.json").read_text())["dataset"]["root"] == str(demos)
+    assert (ckpt / "pretrained_model/model.safetensors").stat().st_size > 0
+    assert (out / "checkpoints/last").resolve() == ckpt.resolve()
+    config = json.loads((ckpt / "pretrained_model/config.json").read_text())
+    assert config["type"] == "diffusion"
+    features = json.loads((demos / "meta/info.json").read_text())["features"]
+    h, w, c = features["observation.image"]["shape"]
+    state = features["observation.state"]["shape"]
+    assert config["input_features"] == {"observation.image": {"type": "VISUAL", "shape": [c, h, w]},
+                                        "observation.state": {"type": "STATE", "shape": state}}
+    assert config["output_features"] == {"action": {"type": "ACTION", "shape": features["action"]["shape"]}}
+    # the policy's action normalisation is the demos' own, in gym-pusht's units (pixels of the 512-pixel frame)
+    stats = json.loads((demos / "meta/stats.json").read_text())
+    (norm,) = (ckpt / "pretrained_model").glob("policy_preprocessor_step_*_normalizer_processor.safetensors")
+    saved = load_file(norm)
+    for key in ("action", "observation.state"):
+        for stat in ("min", "max"):
+            np.testing.assert_allclose(saved[f"{key}.{stat}"].numpy(), stats[key][stat], rtol=1e-6)
+    assert 0 <= min(stats["action"]["min"]) and max(stats["action"]["max"]) <= 512
+
+
+@pytest.mark.slow
+def test_the_curve_reads_the_evals_lerobot_train_logs(trained):
+    sys.path.insert(0, str(ROOT))
+    from benchmarks.diffusion_curve import parse_run
+
+    _, log = trained
+    text = log.read_text()
+    (point,) = parse_run([log])["points"]
+    # against the per-episode line LeRobot logs beside the aggregate the curve reads
+    per_task = ast.literal_eval(re.search(r"Suite per_task aggregated: (\[.*\])\s*$", text, re.M)[1])
+    successes = [s for task in per_task for s in task["metrics"]["successes"]]
+    assert point["step"] == STEPS and point["n_episodes"] == len(successes) == 2
+    assert point["successes"] == sum(successes)
+    assert 0 <= point["wilson95"][0] <= point["pc_success"] <= point["wilson95"][1] <= 100
+    assert 0 <= point["train_min"] < point["wall_min"]  # the eval's own seconds are left out
+    assert np.isfinite(point["avg_sum_reward"])
+
+
+@pytest.mark.slow
+def test_lerobot_eval_scores_the_checkpoint_on_gym_pusht_and_on_the_plugins_env(trained, tmp_path):
+    policy = trained[0] / "checkpoints/last/pretrained_model"
+    # lerobot 0.6.1's default AsyncVectorEnv cannot make gym_pusht/PushT-v0 in its workers: sync, as users must
+    gym = lerobot_eval(policy, tmp_path / "pusht", "--env.type=pusht", "--eval.use_async_envs=false")
+    # the plugin's env sync too (AsyncVectorEnv's workers cost ~10 s to start on two cores)
+    ours = lerobot_eval(policy, tmp_path / "mjx", *SMALL, "--eval.use_async_envs=false")
+    assert list(gym["per_group"]) == ["pusht"] and list(ours["per_group"]) == ["mjx_pusht"]
+    assert gym["overall"]["n_episodes"] == ours["overall"]["n_episodes"] == 2
