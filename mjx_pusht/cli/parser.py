@@ -238,6 +238,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="what the policy sees (default state; pixels_agent_pos: the 96 x 96 top camera and the "
                         "pusher's position, DAgger only)")
     t.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
+    t.add_argument("--devices", type=_positive, default=None,
+                   help="mjx backends: this many of the host's devices (GPUs) roll out and learn, each its share of "
+                        "the episodes and of every minibatch, gradients averaged (default: every one; DAgger from "
+                        "pixels: one)")
     t.add_argument("--out", type=_folder, default=Path("outputs/train"), help="the run's folder (default outputs/train)")
     t.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     t.add_argument("--share-out", action="store_true", help=SHARE_HELP)

@@ -65,8 +65,12 @@ def cmd_train(args) -> int:
         raise TrainError("train rolls out on cpu, mjx-jax or mjx-warp; gym-pusht itself judges a trained policy: "
                          "eval --task gym-pusht --backend gym-pusht --controller policy:PATH")
     _method_settings(args, name)
+    from mjx_pusht.train.devices import check_divides, training_devices
+
+    devices = training_devices(args.devices, name, pixels=args.algo == "dagger" and args.obs.startswith("pixels"))
     if args.algo == "ppo":
-        return _cmd_ppo(args, name, why)
+        check_divides(devices, envs=args.envs, batch=args.batch or 256)  # Brax gives each device its share of both
+        return _cmd_ppo(args, name, why, devices)
     cfg = DaggerConfig(obs_type=args.obs, envs=args.envs, iterations=args.iterations, hidden=tuple(args.hidden),
                        learning_rate=args.lr or 1e-3, batch=args.batch or 4096, fit_steps=args.fit_steps,
                        beta_decay=args.beta_decay, max_samples=args.max_samples, eval_envs=args.eval_envs,
@@ -77,6 +81,8 @@ def cmd_train(args) -> int:
                        max_steps=args.max_steps, task=None if task.name == "chapter" else task.name,
                        success_threshold=args.success_threshold, goal=None if args.goal == "fixed" else args.goal,
                        randomize=args.randomize)
+    check_divides(devices, envs=cfg.envs, eval_envs=cfg.eval_envs, batch=cfg.batch,
+                  **({"image_batch": cfg.image_batch} if cfg.image else {}))  # each device's share of each
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
@@ -89,7 +95,7 @@ def cmd_train(args) -> int:
     from mjx_pusht.train.run import train_dagger
 
     summary = train_dagger(cfg, name, out, resume=args.resume, minutes=args.minutes, progress=args.progress,
-                           rerun=args.rerun, keep=args.keep)
+                           rerun=args.rerun, keep=args.keep, devices=devices)
     return _finish(args, name, out, summary, banner)
 
 
@@ -113,7 +119,7 @@ def _check_rerun(args) -> None:
                              "pip install rerun-sdk, or pass --no-rerun") from None
 
 
-def _cmd_ppo(args, name: str, why: str) -> int:
+def _cmd_ppo(args, name: str, why: str, devices: list) -> int:
     """`train --algo ppo`: Brax's PPO (train/ppo.py), then the same judgement and files as DAgger's."""
     from mjx_pusht.io.banner import Banner
     from mjx_pusht.io.outputs import claim_out_dir
@@ -133,9 +139,10 @@ def _cmd_ppo(args, name: str, why: str) -> int:
     banner = Banner("train")
     print(f"backend: {name} ({why}); Brax PPO from {cfg.obs_type}: {cfg.envs} envs, {cfg.timesteps:,} env steps, "
           f"held-out judgement {cfg.evals} times on seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
-    curve = train_ppo(cfg, name, out, resume=args.resume, progress=args.progress, minutes=args.minutes, keep=args.keep)
+    curve = train_ppo(cfg, name, out, resume=args.resume, progress=args.progress, minutes=args.minutes, keep=args.keep,
+                      devices=len(devices))
     summary = write_summary(cfg, name, out, curve, args.rerun, method="ppo", kept=kept_row(curve, args.keep),
-                            keep=args.keep)
+                            keep=args.keep, devices=len(devices))
     return _finish(args, name, out, summary, banner)
 
 
