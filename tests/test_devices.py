@@ -10,15 +10,18 @@ from __future__ import annotations
 import json
 import os
 import re
+import socket
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from jax.tree_util import tree_leaves as jax_leaves
 from helpers import ENV
 
 from mjx_pusht.cli.commands import main
+from mjx_pusht.train.policy import load_checkpoint
 from mjx_pusht.train.devices import check_divides
 from mjx_pusht.train.resume import TrainError
 
@@ -59,7 +62,9 @@ def test_bad_devices_are_one_line_before_anything_is_written(tmp_path, capsys):
                          (["--backend", "mjx-jax", "--devices", "64"], "--devices 64: this process has 1"),
                          (["--backend", "cpu", "--devices", "1"], "the cpu backend steps MuJoCo C"),
                          (["--backend", "mjx-warp", "--obs", "pixels_agent_pos", "--devices", "2"],
-                          "DAgger from pixels trains on one device")):
+                          "DAgger from pixels trains on one device"),
+                         (["--num-processes", "2", "--coordinator", "127.0.0.1:1", "--minutes", "5", "--algo", "ppo"],
+                          "--minutes, --algo ppo: not with --num-processes yet")):
         assert main(["train", "--no-rerun", "--out", str(out), *argv]) in (1, 2)
         err = capsys.readouterr().err
         assert needle in err and err.count("\n") == 1, err
@@ -100,3 +105,37 @@ def test_ppo_hands_the_device_count_to_braxs_own_device_mapping(tmp_path, monkey
         with pytest.raises(Called):
             train_ppo(cfg, "mjx-jax", tmp_path / str(devices), progress=False, devices=devices)
     assert [g["max_devices_per_host"] for g in given] == [None, 2]
+
+
+TINY = ["train", "--backend", "mjx-warp", "--reset", "chapter", "--envs", "4", "--iterations", "2", "--fit-steps", "20",
+        "--batch", "64", "--hidden", "32,32", "--eval-envs", "2", "--max-samples", "5000", "--max-steps", "10",
+        "--no-rerun", "--record", "0", "--no-progress"]
+
+
+@pytest.mark.slow
+def test_two_processes_joined_by_jax_distributed_train_the_policy_two_devices_of_one_process_do(tmp_path):
+    """Two processes on localhost (one CPU device each, their gradients averaged across processes through gloo)
+    against one process with 2 forced CPU devices: the same run, so the same weights; process 0 wrote the run."""
+    port = _free_port()
+    env = {**ENV, "JAX_PLATFORMS": "cpu"}
+    procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *TINY, "--out", str(tmp_path / "two"),
+                               "--num-processes", "2", "--coordinator", f"127.0.0.1:{port}", "--process-id", str(i)],
+                              env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for i in (1, 0)]
+    one = subprocess.Popen([sys.executable, "-m", "mjx_pusht", *TINY, "--out", str(tmp_path / "one")], env=TWO,
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    logs = [p.communicate(timeout=600)[0] for p in (*procs, one)]
+    assert [p.returncode for p in (*procs, one)] == [0, 0, 0], logs
+    assert "process 1: trained on 1 of the run's 2 devices; process 0 writes the run" in logs[0]
+    runs = [json.loads((tmp_path / d / "summary.json").read_text()) for d in ("two", "one")]
+    assert runs[0]["devices"] == runs[1]["devices"] == 2
+    assert [r["samples"] for r in runs[0]["curve"]] == [r["samples"] for r in runs[1]["curve"]]
+    two, one = (load_checkpoint(tmp_path / d / "policy.msgpack")[0] for d in ("two", "one"))
+    for a, b in zip(jax_leaves(two), jax_leaves(one), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
+    assert runs[0]["eval"]["n_episodes"] == 2  # process 0 judged it with eval, as one process does
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]

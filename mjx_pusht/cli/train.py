@@ -48,10 +48,21 @@ def cmd_train(args) -> int:
     from mjx_pusht.backends.base import resolve
     from mjx_pusht.io.banner import Banner
     from mjx_pusht.io.outputs import claim_out_dir
+    from mjx_pusht.study.distributed import Processes
     from mjx_pusht.train.dagger import DaggerConfig
 
     from mjx_pusht.task.tasks import get as get_task
 
+    processes = Processes(args.process_id, args.num_processes, args.coordinator, args.peer_timeout)
+    if processes.many:
+        # each process would judge --minutes by its own clock, and --resume, PPO's callbacks write from every process:
+        # not built yet
+        given = [f for f, v in (("--minutes", args.minutes), ("--resume", args.resume), ("--algo ppo", args.algo == "ppo"))
+                 if v]
+        if given:
+            raise TrainError(f"{', '.join(given)}: not with --num-processes yet (DAgger on several processes trains "
+                             "for --iterations, from the start)")
+    processes.initialize()  # before anything asks JAX for its devices
     task = get_task(args.task)
     if args.algo == "ppo" and args.goal != "fixed":
         raise TrainError("--goal random trains a goal-conditioned policy with DAgger; PPO trains on the fixed goal")
@@ -83,6 +94,12 @@ def cmd_train(args) -> int:
                        randomize=args.randomize)
     check_divides(devices, envs=cfg.envs, eval_envs=cfg.eval_envs, batch=cfg.batch,
                   **({"image_batch": cfg.image_batch} if cfg.image else {}))  # each device's share of each
+    if processes.many:  # one run: every process must have been given the same one
+        from mjx_pusht.train.resume import config_dict
+
+        processes.agree({**config_dict(cfg), "backend": name, "devices": len(devices), "out": str(args.out.resolve())})
+        if not processes.leader:  # its files go to a folder of its own, removed after: process 0 writes the run's
+            return _follow(cfg, name, devices, processes, args)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
@@ -97,6 +114,25 @@ def cmd_train(args) -> int:
     summary = train_dagger(cfg, name, out, resume=args.resume, minutes=args.minutes, progress=args.progress,
                            rerun=args.rerun, keep=args.keep, devices=devices)
     return _finish(args, name, out, summary, banner)
+
+
+def _follow(cfg, backend: str, devices: list, processes, args) -> int:
+    """A process other than 0 of a run over several: the same loop on its own devices, its gradients averaged with
+    every other's, its files (the same as process 0's) into a temporary folder, removed after."""
+    import shutil
+    import tempfile
+
+    from mjx_pusht.train.run import train_dagger
+
+    out = Path(tempfile.mkdtemp(prefix=f"mjx-pusht-train-process-{processes.process_id}-"))
+    try:
+        train_dagger(cfg, backend, out, progress=False, rerun=False, keep=args.keep, devices=devices)
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+    mine = sum(d.process_index == processes.process_id for d in devices)
+    print(f"process {processes.process_id}: trained on {mine} of the run's {len(devices)} devices; process 0 writes "
+          f"the run to {args.out}")
+    return 0
 
 
 def _restart(out: Path, args) -> None:

@@ -311,25 +311,26 @@ class Rollouts:
 
         env, spread = self.env, self.spread or Spread(jax.devices()[:1])
         spread.check(len(seeds), "a rollout's episodes (--envs + --eval-envs)")
-        blocks = spread.blocks(len(seeds))
         # a program per device on its block of the seeds (devices.py: MJX-Warp's FFI call is not partitioned);
         # each episode's random draws are its seed's, whichever device runs it
         keys = jax.random.split(jax.random.key(self.cfg.seed * 1_000_003 + rng), len(seeds))
         shared, beta = (params, tuple(jnp.asarray(a, jnp.float32) for a in norm)), jnp.asarray(beta)
         self._episodes_jit = self._episodes_jit or jax.jit(self._episodes)  # one, compiled for each device it runs on
 
+        shared = spread.own_copy(shared)
+
         def block(device, s0, rows):
             return self._episodes_jit(*jax.device_put((*shared, s0, beta[rows], keys[rows]), device))
 
         # the blocks' start states made here, on one thread: the env keeps its programs per batch size
-        parts = spread.each(block, [(env.reset(seeds[rows]), rows) for rows in blocks])
+        parts = spread.each(block, [(device, env.reset(seeds[rows]), rows) for device, rows in spread.local(len(seeds))])
         ends = [_outcomes(env.check(p[0])) for p in parts]
-        outcome = {k: np.concatenate([e[k] for e in ends]) for k in ends[0]}
+        outcome = {k: spread.gather(np.concatenate([e[k] for e in ends])) for k in ends[0]}
         x, y, live = (spread.join([p[i] for p in parts], axis=1) for i in (1, 2, 3))  # (T, N, ...): N over devices
         if not learn:  # judged only (the last fit's judgement): no samples, and no compaction compiled for them
             return x[0, :0], y[0, :0], 0, outcome
         if learn not in self._compact:
-            self._compact[learn] = jax.jit(partial(_compact, learn=learn))
+            self._compact[learn] = jax.jit(partial(_compact, learn=learn), out_shardings=spread.sharding(None))
         x, y, count = self._compact[learn](x, y, live)
         return x, y, int(count), outcome
 

@@ -110,8 +110,11 @@ class Learner:
             key = jax.random.fold_in(key, part)
         if candidate:  # past any part's number: a candidate never repeats a late fit's minibatches
             key = jax.random.fold_in(key, CANDIDATE_KEYS + candidate)
+        # one value for every device of every process (a typed key cannot be put on another process's devices: its
+        # bits can)
+        args = self.spread.replicate((jnp.int32(self.filled), norm, jax.random.key_data(key)))
         self.params, self.opt_state, loss, pose_mse, loss_max = self._fit(self.params, self.opt_state, self.x, self.y,
-                                                                          jnp.int32(self.filled), norm, key)
+                                                                          *args)
         self.loss_max = float(loss_max)
         if self.cfg.image:
             self.pose_error_mm = float(np.sqrt(pose_mse / 4) * POSE_SCALE * 1000)
@@ -172,7 +175,7 @@ def _parts(params: dict, image: int) -> tuple[dict, ...]:
     return {k: v for k, v in params.items() if k not in reader}, reader
 
 
-def _fit(model, opts, batch, image_batch, steps, render, fmt, eps, devices, params, opt_state, x, y, filled, norm, key):
+def _fit(model, opts, batch, image_batch, steps, render, fmt, eps, devices, params, opt_state, x, y, filled, norm, bits):
     """Adam steps on minibatches of `batch` samples from the ring; returns the new parameters and optimiser states,
     the loss and (a pixel student) the pose estimate's squared error, each over the last tenth of its steps, and the
     actions' largest minibatch loss over all the steps.
@@ -199,6 +202,8 @@ def _fit(model, opts, batch, image_batch, steps, render, fmt, eps, devices, para
     from mjx_pusht.task.rules import CTRL_LIMIT
     from mjx_pusht.train.devices import AXIS
     from mjx_pusht.train.policy import pose_target
+
+    key = jax.random.wrap_key_data(bits)  # the minibatches' key (Learner.fit)
 
     def imitation(head, yb):
         pred = jnp.tanh(head[:, :2]) * CTRL_LIMIT
