@@ -63,8 +63,8 @@ def test_bad_devices_are_one_line_before_anything_is_written(tmp_path, capsys):
                          (["--backend", "cpu", "--devices", "1"], "the cpu backend steps MuJoCo C"),
                          (["--backend", "mjx-warp", "--obs", "pixels_agent_pos", "--devices", "2"],
                           "DAgger from pixels trains on one device"),
-                         (["--num-processes", "2", "--coordinator", "127.0.0.1:1", "--minutes", "5", "--algo", "ppo"],
-                          "--minutes, --algo ppo: not with --num-processes yet")):
+                         (["--num-processes", "2", "--coordinator", "127.0.0.1:1", "--algo", "ppo"],
+                          "--algo ppo: not with --num-processes yet")):
         assert main(["train", "--no-rerun", "--out", str(out), *argv]) in (1, 2)
         err = capsys.readouterr().err
         assert needle in err and err.count("\n") == 1, err
@@ -118,7 +118,8 @@ def test_two_processes_joined_by_jax_distributed_train_the_policy_two_devices_of
     against one process with 2 forced CPU devices: the same run, so the same weights; process 0 wrote the run."""
     port = _free_port()
     env = {**ENV, "JAX_PLATFORMS": "cpu"}
-    procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *TINY, "--out", str(tmp_path / "two"),
+    # --minutes: every process stops where process 0's clock says (never here: ten minutes)
+    procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *TINY, "--out", str(tmp_path / "two"), "--minutes", "10",
                                "--num-processes", "2", "--coordinator", f"127.0.0.1:{port}", "--process-id", str(i)],
                               env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for i in (1, 0)]
     one = subprocess.Popen([sys.executable, "-m", "mjx_pusht", *TINY, "--out", str(tmp_path / "one")], env=TWO,

@@ -54,14 +54,11 @@ def cmd_train(args) -> int:
     from mjx_pusht.task.tasks import get as get_task
 
     processes = Processes(args.process_id, args.num_processes, args.coordinator, args.peer_timeout)
-    if processes.many:
-        # each process would judge --minutes by its own clock, and --resume, PPO's callbacks write from every process:
-        # not built yet
-        given = [f for f, v in (("--minutes", args.minutes), ("--resume", args.resume), ("--algo ppo", args.algo == "ppo"))
-                 if v]
-        if given:
-            raise TrainError(f"{', '.join(given)}: not with --num-processes yet (DAgger on several processes trains "
-                             "for --iterations, from the start)")
+    if processes.many and (args.resume or args.algo == "ppo"):
+        # the processes other than 0 write into folders of their own (`_follow`), and PPO's callbacks would judge and
+        # write in every process: not built yet
+        raise TrainError(f"{'--resume' if args.resume else '--algo ppo'}: not with --num-processes yet (DAgger on "
+                         "several processes trains from the start)")
     processes.initialize()  # before anything asks JAX for its devices
     task = get_task(args.task)
     if args.algo == "ppo" and args.goal != "fixed":
@@ -126,7 +123,8 @@ def _follow(cfg, backend: str, devices: list, processes, args) -> int:
 
     out = Path(tempfile.mkdtemp(prefix=f"mjx-pusht-train-process-{processes.process_id}-"))
     try:
-        train_dagger(cfg, backend, out, progress=False, rerun=False, keep=args.keep, devices=devices)
+        train_dagger(cfg, backend, out, minutes=args.minutes, progress=False, rerun=False, keep=args.keep,
+                     devices=devices)
     finally:
         shutil.rmtree(out, ignore_errors=True)
     mine = sum(d.process_index == processes.process_id for d in devices)

@@ -184,8 +184,18 @@ class Budget:
         self.episodes = 1  # the latest rollout's
 
     def spent(self, seconds: float) -> bool:
-        """Whether `seconds` more from now would pass the budget."""
-        return self.deadline is not None and time.perf_counter() + seconds > self.deadline
+        """Whether `seconds` more from now would pass the budget: by process 0's clock, where several processes train
+        one run (each would otherwise stop at its own iteration, and the others wait for it)."""
+        import jax
+
+        if self.deadline is None:
+            return False
+        over = time.perf_counter() + seconds > self.deadline
+        if jax.process_count() == 1:
+            return over
+        from jax.experimental import multihost_utils
+
+        return bool(multihost_utils.broadcast_one_to_all(np.bool_(over)))
 
     def rolled(self, seconds: float, episodes: int, steps: int) -> None:
         self.last, self.step, self.episodes = seconds, seconds / max(steps, 1), episodes
