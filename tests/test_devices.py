@@ -48,7 +48,7 @@ def test_a_fit_and_a_rollout_on_two_devices_are_those_on_one():
     assert two["loss"] == pytest.approx(one["loss"], rel=1e-6)
     for a, b in zip(one["params"], two["params"], strict=True):
         np.testing.assert_allclose(b, a, rtol=1e-5, atol=1e-6)
-    assert max(np.max(np.abs(np.subtract(a, b))) for a, b in zip(one["params"], out["fit"]["start"])) > 1e-3  # it fitted
+    assert max(np.max(np.abs(np.subtract(a, b))) for a, b in zip(one["params"], out["fit"]["start"])) > 1e-3  # fitted
     one, two = out["rollout"]["1"], out["rollout"]["2"]
     assert two["devices"] == 2  # the samples' rows come from both devices, in seed order
     for k in ("success", "coverage", "finite", "y", "x"):  # every seed's episode and every sample, to the bit
@@ -119,8 +119,9 @@ def test_two_processes_joined_by_jax_distributed_train_the_policy_two_devices_of
     port = _free_port()
     env = {**ENV, "JAX_PLATFORMS": "cpu"}
     # --minutes: every process stops where process 0's clock says (never here: ten minutes)
-    procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *TINY, "--out", str(tmp_path / "two"), "--minutes", "10",
-                               "--num-processes", "2", "--coordinator", f"127.0.0.1:{port}", "--process-id", str(i)],
+    flags = ["--out", str(tmp_path / "two"), "--minutes", "10", "--num-processes", "2", "--coordinator",
+             f"127.0.0.1:{port}"]
+    procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *TINY, *flags, "--process-id", str(i)],
                               env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for i in (1, 0)]
     one = subprocess.Popen([sys.executable, "-m", "mjx_pusht", *TINY, "--out", str(tmp_path / "one")], env=TWO,
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

@@ -323,7 +323,7 @@ class Rollouts:
             return self._episodes_jit(*jax.device_put((*shared, s0, beta[rows], keys[rows]), device))
 
         # the blocks' start states made here, on one thread: the env keeps its programs per batch size
-        parts = spread.each(block, [(device, env.reset(seeds[rows]), rows) for device, rows in spread.local(len(seeds))])
+        parts = spread.each(block, [(dev, env.reset(seeds[rows]), rows) for dev, rows in spread.local(len(seeds))])
         ends = [_outcomes(env.check(p[0])) for p in parts]
         outcome = {k: spread.gather(np.concatenate([e[k] for e in ends])) for k in ends[0]}
         x, y, live = (spread.join([p[i] for p in parts], axis=1) for i in (1, 2, 3))  # (T, N, ...): N over devices

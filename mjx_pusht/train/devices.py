@@ -74,7 +74,8 @@ class Spread:
         import jax
 
         m = n // len(self)
-        return [(d, slice(i * m, (i + 1) * m)) for i, d in enumerate(self.devices) if d.process_index == jax.process_index()]
+        return [(d, slice(i * m, (i + 1) * m)) for i, d in enumerate(self.devices)
+                if d.process_index == jax.process_index()]
 
     def sharding(self, axis: int | None):
         """Rows along `axis` split over the devices (None: every device holds the whole array)."""
