@@ -164,6 +164,23 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
             --goal "${GOAL:-0.9}" -- --backend mjx-warp $task $args --keep best --no-progress --no-rerun \
             --record 0 > "$run.log" 2>&1 < /dev/null &)
           sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
+  train-scaling) # one run each on DEVICES (default 1,2,4) GPUs of this host, the same run otherwise (issue 56;
+          # benchmarks/train_scaling.py: control steps/s during training, x one GPU, and minutes to GOAL held-out, in
+          # scaling.json/.md): RECIPE ppo (Brax PPO from state, 3 minutes) or dagger-state (DAgger from state, 5
+          # minutes); DAgger from pixels trains on one GPU so far (Warp's render context is one GPU's). Started in its
+          # own session like train-seeds (about 5-7 minutes a run with compiling and eval), then
+          # `watch-seeds NAMES=scaling-RECIPE` copies back the runs and scaling.json.
+          run=$HOME/runs/seeds-scaling-${RECIPE:?RECIPE=ppo or dagger-state}; mkdir -p "$run"
+          case "$RECIPE" in
+            ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes ${MINUTES:-3}" ;;
+            dagger-state) args="$dagger_fit --iterations ${ITERATIONS:-60} --minutes ${MINUTES:-5} $state_data" ;;
+            *) echo "unknown RECIPE $RECIPE" >&2; exit 2 ;;
+          esac
+          # shellcheck disable=SC2086  # $args is a list of flags
+          (cd "$HOME/runs" && setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' "$run.pid" python3 -m benchmarks.train_scaling \
+            --devices "${DEVICES:-1,2,4}" --goal "${GOAL:-0.95}" --out "$(basename "$run")" -- --backend mjx-warp \
+            --reset task $args --seed "${SEED:-0}" --keep best --no-progress --no-rerun --record 0 > "$run.log" 2>&1 < /dev/null &)
+          sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
   issue55) # issue 55 in one hold, one after another in the background (watch with watch-seeds NAMES="goals rand"):
           # DAgger from state on gym-pusht's task with a goal per episode, then with kp and kv drawn per episode (10
           # minutes each, seed 0), then the env loop's steps/s with goals and drawn physics beside the fixed ones

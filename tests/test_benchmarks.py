@@ -205,3 +205,25 @@ def test_dagger_host_work_measures_the_ring_and_the_checkpoint_at_tiny_sizes(tmp
     c = result["checkpoint"]
     assert c["ring_bytes"] == 10000 * 4 * (DaggerConfig().sample_width + 3)  # float32 samples and labels
     assert c["writer_seconds"] > 0 and c["steps_per_s_alone"] > 0
+
+
+def test_train_scaling_times_each_device_counts_run_against_one_devices(tmp_path):
+    """benchmarks/train_scaling.py on finished runs (read, not run again): the committed DAgger-from-state run as the
+    1-device run and, as a 2-device run, the same run at half its wall-clock: twice the control steps a second, the
+    goal rate reached in half the minutes, each from the summary's own curve."""
+    from benchmarks import train_scaling
+
+    s = json.loads((Path(__file__).resolve().parents[1] / "outputs" / "reports" / "train" / "dagger-state" /
+                    "summary.json").read_text())
+    for n in (1, 2):
+        (tmp_path / f"devices-{n}").mkdir()
+        (tmp_path / f"devices-{n}" / "summary.json").write_text(json.dumps(
+            s | {"devices": n, "wall_seconds": s["wall_seconds"] / n,
+                 "curve": [r | {"wall_seconds": r["wall_seconds"] / n} for r in s["curve"]]}))
+    assert train_scaling.main(["--devices", "1,2", "--goal", "0.9", "--out", str(tmp_path)]) == 0
+    one, two = json.loads((tmp_path / "scaling.json").read_text())["runs"]
+    assert one["steps_per_second"] == pytest.approx(s["env_steps"] / s["wall_seconds"])
+    assert two["steps_per_second"] == pytest.approx(2 * one["steps_per_second"])
+    first = next(r for r in s["curve"] if r["success"] >= 0.9)
+    assert one["minutes_to_goal"] == pytest.approx(first["wall_seconds"] / 60) == 2 * two["minutes_to_goal"]
+    assert "| 2 | " in (tmp_path / "scaling.md").read_text() and "| 2.00 |" in (tmp_path / "scaling.md").read_text()

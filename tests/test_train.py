@@ -47,6 +47,7 @@ def run(tmp_path_factory):
 def test_a_run_leaves_policy_curve_summary_and_the_eval_of_its_held_out_seeds(run):
     summary = json.loads((run / "summary.json").read_text())
     assert summary["method"] == "dagger" and summary["iterations_run"] == 2 and len(summary["curve"]) == 2
+    assert summary["devices"] == 1  # MuJoCo C's rollouts, the learner on JAX's one default device
     assert summary["wall_seconds"] >= summary["simulation_seconds"] > 0 and summary["learning_seconds"] > 0
     for name in ("policy.msgpack", "curve.csv", "curve.png", "checkpoints/policy_000.msgpack",
                  "checkpoints/policy_001.msgpack", "checkpoints/resume.msgpack"):

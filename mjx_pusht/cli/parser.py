@@ -177,6 +177,16 @@ def _task_args(p: argparse.ArgumentParser, reset_help: str) -> None:
     success_arg(p)
 
 
+def _process_args(p: argparse.ArgumentParser, what: str, writes: str) -> None:
+    """Several processes joined through jax.distributed (study/distributed.py): sweep and train."""
+    p.add_argument("--num-processes", type=_positive, default=1,
+                   help=f"processes sharing this {what} through jax.distributed, one a host or GPU (default 1)")
+    p.add_argument("--process-id", type=_nonneg, default=0, help=f"this process's index, 0 .. N-1 (0 writes {writes})")
+    p.add_argument("--coordinator", default=None, metavar="HOST:PORT", help="where process 0 listens")
+    p.add_argument("--peer-timeout", type=_positive_float, default=300.0, metavar="SECONDS",
+                   help="how long to wait for every process to join before giving up (default 300)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="mjx-pusht", description="PushT in MuJoCo at scale: CPU reference and MJX batch.")
     p.add_argument("--verbose", action="store_true",
@@ -209,12 +219,7 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--audit", type=_fraction, default=0.01, metavar="FRACTION",
                    help="MJX backends: re-run this fraction of the rows (at least 64, at most 16,384) plus every "
                         "flagged row on the CPU reference and record whether they agree (default 0.01; 0 skips)")
-    w.add_argument("--num-processes", type=_positive, default=1,
-                   help="processes sharing this sweep through jax.distributed, one a host or GPU (default 1)")
-    w.add_argument("--process-id", type=_nonneg, default=0, help="this process's index, 0 .. N-1 (0 writes the table)")
-    w.add_argument("--coordinator", default=None, metavar="HOST:PORT", help="where process 0 listens")
-    w.add_argument("--peer-timeout", type=_positive_float, default=300.0, metavar="SECONDS",
-                   help="how long to wait for every process to join before giving up (default 300)")
+    _process_args(w, "sweep", "the table")
 
     e = sub.add_parser("eval", help="a controller on many start states: per_episode.parquet, success rate + interval")
     _batch_args(e, "eval", "episodes", seeds="512")
@@ -238,6 +243,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="what the policy sees (default state; pixels_agent_pos: the 96 x 96 top camera and the "
                         "pusher's position, DAgger only)")
     t.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
+    t.add_argument("--devices", type=_positive, default=None,
+                   help="mjx backends: this many of the host's devices (GPUs) roll out and learn, each its share of "
+                        "the episodes and of every minibatch, gradients averaged (default: every one; DAgger from "
+                        "pixels: one)")
+    _process_args(t, "training run (its episodes and minibatches split over every process's devices)",
+                  "the run's files")
     t.add_argument("--out", type=_folder, default=Path("outputs/train"), help="the run's folder (default outputs/train)")
     t.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     t.add_argument("--share-out", action="store_true", help=SHARE_HELP)

@@ -48,10 +48,18 @@ def cmd_train(args) -> int:
     from mjx_pusht.backends.base import resolve
     from mjx_pusht.io.banner import Banner
     from mjx_pusht.io.outputs import claim_out_dir
+    from mjx_pusht.study.distributed import Processes
     from mjx_pusht.train.dagger import DaggerConfig
 
     from mjx_pusht.task.tasks import get as get_task
 
+    processes = Processes(args.process_id, args.num_processes, args.coordinator, args.peer_timeout)
+    if processes.many and (args.resume or args.algo == "ppo"):
+        # the processes other than 0 write into folders of their own (`_follow`), and PPO's callbacks would judge and
+        # write in every process: not built yet
+        raise TrainError(f"{'--resume' if args.resume else '--algo ppo'}: not with --num-processes yet (DAgger on "
+                         "several processes trains from the start)")
+    processes.initialize()  # before anything asks JAX for its devices
     task = get_task(args.task)
     if args.algo == "ppo" and args.goal != "fixed":
         raise TrainError("--goal random trains a goal-conditioned policy with DAgger; PPO trains on the fixed goal")
@@ -65,8 +73,12 @@ def cmd_train(args) -> int:
         raise TrainError("train rolls out on cpu, mjx-jax or mjx-warp; gym-pusht itself judges a trained policy: "
                          "eval --task gym-pusht --backend gym-pusht --controller policy:PATH")
     _method_settings(args, name)
+    from mjx_pusht.train.devices import check_divides, training_devices
+
+    devices = training_devices(args.devices, name, pixels=args.algo == "dagger" and args.obs.startswith("pixels"))
     if args.algo == "ppo":
-        return _cmd_ppo(args, name, why)
+        check_divides(devices, envs=args.envs, batch=args.batch or 256)  # Brax gives each device its share of both
+        return _cmd_ppo(args, name, why, devices)
     cfg = DaggerConfig(obs_type=args.obs, envs=args.envs, iterations=args.iterations, hidden=tuple(args.hidden),
                        learning_rate=args.lr or 1e-3, batch=args.batch or 4096, fit_steps=args.fit_steps,
                        beta_decay=args.beta_decay, max_samples=args.max_samples, eval_envs=args.eval_envs,
@@ -77,6 +89,14 @@ def cmd_train(args) -> int:
                        max_steps=args.max_steps, task=None if task.name == "chapter" else task.name,
                        success_threshold=args.success_threshold, goal=None if args.goal == "fixed" else args.goal,
                        randomize=args.randomize)
+    check_divides(devices, envs=cfg.envs, eval_envs=cfg.eval_envs, batch=cfg.batch,
+                  **({"image_batch": cfg.image_batch} if cfg.image else {}))  # each device's share of each
+    if processes.many:  # one run: every process must have been given the same one
+        from mjx_pusht.train.resume import config_dict
+
+        processes.agree({**config_dict(cfg), "backend": name, "devices": len(devices), "out": str(args.out.resolve())})
+        if not processes.leader:  # its files go to a folder of its own, removed after: process 0 writes the run's
+            return _follow(cfg, name, devices, processes, args)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
@@ -89,8 +109,28 @@ def cmd_train(args) -> int:
     from mjx_pusht.train.run import train_dagger
 
     summary = train_dagger(cfg, name, out, resume=args.resume, minutes=args.minutes, progress=args.progress,
-                           rerun=args.rerun, keep=args.keep)
+                           rerun=args.rerun, keep=args.keep, devices=devices)
     return _finish(args, name, out, summary, banner)
+
+
+def _follow(cfg, backend: str, devices: list, processes, args) -> int:
+    """A process other than 0 of a run over several: the same loop on its own devices, its gradients averaged with
+    every other's, its files (the same as process 0's) into a temporary folder, removed after."""
+    import shutil
+    import tempfile
+
+    from mjx_pusht.train.run import train_dagger
+
+    out = Path(tempfile.mkdtemp(prefix=f"mjx-pusht-train-process-{processes.process_id}-"))
+    try:
+        train_dagger(cfg, backend, out, minutes=args.minutes, progress=False, rerun=False, keep=args.keep,
+                     devices=devices)
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+    mine = sum(d.process_index == processes.process_id for d in devices)
+    print(f"process {processes.process_id}: trained on {mine} of the run's {len(devices)} devices; process 0 writes "
+          f"the run to {args.out}")
+    return 0
 
 
 def _restart(out: Path, args) -> None:
@@ -113,7 +153,7 @@ def _check_rerun(args) -> None:
                              "pip install rerun-sdk, or pass --no-rerun") from None
 
 
-def _cmd_ppo(args, name: str, why: str) -> int:
+def _cmd_ppo(args, name: str, why: str, devices: list) -> int:
     """`train --algo ppo`: Brax's PPO (train/ppo.py), then the same judgement and files as DAgger's."""
     from mjx_pusht.io.banner import Banner
     from mjx_pusht.io.outputs import claim_out_dir
@@ -133,9 +173,10 @@ def _cmd_ppo(args, name: str, why: str) -> int:
     banner = Banner("train")
     print(f"backend: {name} ({why}); Brax PPO from {cfg.obs_type}: {cfg.envs} envs, {cfg.timesteps:,} env steps, "
           f"held-out judgement {cfg.evals} times on seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
-    curve = train_ppo(cfg, name, out, resume=args.resume, progress=args.progress, minutes=args.minutes, keep=args.keep)
+    curve = train_ppo(cfg, name, out, resume=args.resume, progress=args.progress, minutes=args.minutes, keep=args.keep,
+                      devices=len(devices))
     summary = write_summary(cfg, name, out, curve, args.rerun, method="ppo", kept=kept_row(curve, args.keep),
-                            keep=args.keep)
+                            keep=args.keep, devices=len(devices))
     return _finish(args, name, out, summary, banner)
 
 

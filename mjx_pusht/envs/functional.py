@@ -237,8 +237,8 @@ class PushTEnv:
 
     def template(self, n: int):
         """The fresh mjx.Data every episode of an `n`-world batch starts from (MJX-Warp sizes its buffers by n)."""
-        if n not in self._templates:
-            self._templates[n] = self.runner.initial_data(n)
+        if n not in self._templates:  # on this process's device: MJX's own default is jax.devices()[0], another
+            self._templates[n] = self.runner.initial_data(n, self.runner.devices[0])  # process's under jax.distributed
         return self._templates[n]
 
     def fresh_one(self, d0, qpos, key, coverage0=None, physics=None) -> State:

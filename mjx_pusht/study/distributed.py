@@ -69,6 +69,9 @@ class Processes:
 
         if self.leader:
             self._check_port_free()
+        # collectives across processes on CPU devices (a training run's gradients, tested with 2 CPU processes) go
+        # through gloo; without it JAX's CPU client has none. GPUs' collectives are NCCL's whatever this says.
+        jax.config.update("jax_cpu_collectives_implementation", "gloo")
         joined = threading.Event()
         threading.Thread(target=self._watchdog, args=(joined,), daemon=True, name="join-watchdog").start()
         try:

@@ -244,10 +244,11 @@ def _sample(xp, obs, x, image: int):
 class Rollouts:
     """Rolls episodes out on one env with the student, the expert labelling: (features, labels) and outcomes."""
 
-    def __init__(self, env, cfg: DaggerConfig):
-        self.env, self.cfg, self.expert = env, cfg, teacher(cfg)
+    def __init__(self, env, cfg: DaggerConfig, spread=None):
+        """`spread` (devices.Spread; None: JAX's default device): the devices an MJX rollout's seeds are split over."""
+        self.env, self.cfg, self.expert, self.spread = env, cfg, teacher(cfg), spread
         self.task = cfg.the_task
-        self._compiled, self._compact = {}, {}
+        self._compact, self._episodes_jit = {}, None
         self.steps = 0  # the control steps the last rollout ran (its batch's longest episode; on MJX every step)
         self.cut = False  # whether the last rollout stopped at its deadline, episodes unfinished
 
@@ -307,21 +308,32 @@ class Rollouts:
         import jax
         import jax.numpy as jnp
 
-        env = self.env
-        n = len(seeds)
-        s0 = env.reset(seeds)
-        if n not in self._compiled:
-            self._compiled[n] = jax.jit(self._episodes)
-        keys = jax.random.split(jax.random.key(self.cfg.seed * 1_000_003 + rng), n)
-        s, x, y, live = self._compiled[n](params, tuple(jnp.asarray(a, jnp.float32) for a in norm), s0,
-                                          jnp.asarray(beta), keys)
-        env.check(s)
+        from mjx_pusht.train.devices import Spread
+
+        env, spread = self.env, self.spread or Spread(jax.devices()[:1])
+        spread.check(len(seeds), "a rollout's episodes (--envs + --eval-envs)")
+        # a program per device on its block of the seeds (devices.py: MJX-Warp's FFI call is not partitioned);
+        # each episode's random draws are its seed's, whichever device runs it
+        keys = jax.random.split(jax.random.key(self.cfg.seed * 1_000_003 + rng), len(seeds))
+        shared, beta = (params, tuple(jnp.asarray(a, jnp.float32) for a in norm)), jnp.asarray(beta)
+        self._episodes_jit = self._episodes_jit or jax.jit(self._episodes)  # one, compiled for each device it runs on
+
+        shared = spread.own_copy(shared)
+
+        def block(device, s0, rows):
+            return self._episodes_jit(*jax.device_put((*shared, s0, beta[rows], keys[rows]), device))
+
+        # the blocks' start states made here, on one thread: the env keeps its programs per batch size
+        parts = spread.each(block, [(dev, env.reset(seeds[rows]), rows) for dev, rows in spread.local(len(seeds))])
+        ends = [_outcomes(env.check(p[0])) for p in parts]
+        outcome = {k: spread.gather(np.concatenate([e[k] for e in ends])) for k in ends[0]}
+        x, y, live = (spread.join([p[i] for p in parts], axis=1) for i in (1, 2, 3))  # (T, N, ...): N over devices
         if not learn:  # judged only (the last fit's judgement): no samples, and no compaction compiled for them
-            return x[0, :0], y[0, :0], 0, _outcomes(s)
+            return x[0, :0], y[0, :0], 0, outcome
         if learn not in self._compact:
-            self._compact[learn] = jax.jit(partial(_compact, learn=learn))
+            self._compact[learn] = jax.jit(partial(_compact, learn=learn), out_shardings=spread.sharding(None))
         x, y, count = self._compact[learn](x, y, live)
-        return x, y, int(count), _outcomes(s)
+        return x, y, int(count), outcome
 
     def _episodes(self, params, norm, s, beta, keys):
         """The batch's episodes: a scan over control steps of the vmapped control step (as the env's own jitted

@@ -14,18 +14,30 @@ from mjx_pusht.train.policy import POSE_SCALE, feature_size, network
 
 # -- the fit: minibatch regression onto the expert's labels ------------------------------------------
 class Learner:
-    """The student network, its optimisers (one a part of the network, `_parts`) and the dataset ring, on the
-    default JAX device. A pixel student needs `render`: a jittable (n, RENDER_KEY) states -> (n, H, W, 3) uint8
-    images for n = cfg.image_batch (`PushTEnv.images`), the same images its rollouts showed it."""
+    """The student network, its optimisers (one a part of the network, `_parts`) and the dataset ring, held whole on
+    every device of `spread` (devices.Spread; None: JAX's default device). A pixel student needs `render`: a jittable
+    (n, RENDER_KEY) states -> (n, H, W, 3) uint8 images for n = cfg.image_batch / devices (`PushTEnv.images`), the
+    same images its rollouts showed it.
 
-    def __init__(self, cfg: DaggerConfig, render=None):
+    The fit is data-parallel: one program over the devices (shard_map), each device the loss of its share of every
+    minibatch (the same minibatch whatever the device count), the loss differentiated their mean: the gradient of
+    the whole minibatch, averaged across devices, one set of weights. So a fit on N devices is the fit on one, up to
+    the order of float sums (a test fits the same data on 1 and 2 devices)."""
+
+    def __init__(self, cfg: DaggerConfig, render=None, spread=None):
         import jax
         import jax.numpy as jnp
         import optax
 
+        from mjx_pusht.train.devices import Spread
+
         if cfg.image and render is None:
             raise ConfigError("a pixel student's Learner needs the env's renderer (PushTEnv.images)")
         self.cfg = cfg
+        self.spread = spread = spread or Spread(jax.devices()[:1])
+        spread.check(cfg.batch, "--batch")
+        if cfg.image:
+            spread.check(cfg.image_batch, "--image-batch")
         self.model = network(cfg.hidden, cfg.activation, cfg.image, 2 + cfg.memory.size)
         width = feature_size(cfg.obs_type, cfg.memory, cfg.goal_conditioned)
         image = (jnp.zeros((1, cfg.image, cfg.image, 3), jnp.uint8), jnp.zeros((1, 2))) if cfg.image else ()  # image, pusher
@@ -38,20 +50,29 @@ class Learner:
         self.opts = tuple(_adam(cfg.learning_rate, steps, cfg.max_grad_norm) for steps in
                           ((cfg.fit_steps, cfg.reader_steps) if cfg.image else (cfg.fit_steps,)))
         self.start(jax.random.key(cfg.seed))
-        self.x = jnp.zeros((cfg.max_samples, cfg.sample_width), jnp.float32)
-        self.y = jnp.zeros((cfg.max_samples, 3), jnp.float32)  # _label: action, memory
+        self.x, self.y = spread.replicate((jnp.zeros((cfg.max_samples, cfg.sample_width), jnp.float32),
+                                           jnp.zeros((cfg.max_samples, 3), jnp.float32)))  # _label: action, memory
         self.filled, self.head, self.floor = 0, 0, 0  # samples held; where the next goes; kept below here
         self.norm = None  # (mean, std) of the features, fixed from the first iteration's data
         self.pose_error_mm = None  # a pixel student's last fit: its pose estimate's RMS error per number, mm
         self.loss_max = None  # the last fit's largest minibatch loss (the actions'): a spike in the fit shows here
-        self._write = jax.jit(_ring_write, donate_argnums=(0, 1))
-        self._fit = jax.jit(partial(_fit, self.model, self.opts, cfg.batch, cfg.image_batch,
-                                    (cfg.fit_steps, cfg.reader_steps), render, cfg.memory, cfg.action_eps))
+        whole = spread.sharding(None)
+        self._write = jax.jit(_ring_write, donate_argnums=(0, 1), out_shardings=(whole, whole))
+        fit = partial(_fit, self.model, self.opts, cfg.batch, cfg.image_batch, (cfg.fit_steps, cfg.reader_steps),
+                      render, cfg.memory, cfg.action_eps, len(spread))
+        self._fit = jax.jit(jax.shard_map(fit, mesh=spread.mesh, in_specs=whole.spec, out_specs=whole.spec))
 
     def start(self, key) -> None:
         """A fresh network from `key` and fresh optimiser states for it."""
         self.params = self._init(key)
         self.opt_state = tuple(opt.init(part) for opt, part in zip(self.opts, _parts(self.params, self.cfg.image)))
+        self.place()
+
+    def place(self) -> None:
+        """The network, its optimisers' states and the ring whole on every device (after `start`, or a restore)."""
+        self.params, self.opt_state = self.spread.replicate((self.params, self.opt_state))
+        if hasattr(self, "x"):
+            self.x, self.y = self.spread.replicate((self.x, self.y))
 
     def add(self, x, y, keep: bool = False, n: int | None = None) -> None:
         """Append the first `n` rows of samples `x` and labels `y` (all if None; the rest is padding, as
@@ -89,8 +110,11 @@ class Learner:
             key = jax.random.fold_in(key, part)
         if candidate:  # past any part's number: a candidate never repeats a late fit's minibatches
             key = jax.random.fold_in(key, CANDIDATE_KEYS + candidate)
+        # one value for every device of every process (a typed key cannot be put on another process's devices: its
+        # bits can)
+        args = self.spread.replicate((jnp.int32(self.filled), norm, jax.random.key_data(key)))
         self.params, self.opt_state, loss, pose_mse, loss_max = self._fit(self.params, self.opt_state, self.x, self.y,
-                                                                          jnp.int32(self.filled), norm, key)
+                                                                          *args)
         self.loss_max = float(loss_max)
         if self.cfg.image:
             self.pose_error_mm = float(np.sqrt(pose_mse / 4) * POSE_SCALE * 1000)
@@ -151,11 +175,13 @@ def _parts(params: dict, image: int) -> tuple[dict, ...]:
     return {k: v for k, v in params.items() if k not in reader}, reader
 
 
-def _fit(model, opts, batch, image_batch, steps, render, fmt, eps, params, opt_state, x, y, filled, norm, key):
+def _fit(model, opts, batch, image_batch, steps, render, fmt, eps, devices, params, opt_state, x, y, filled, norm, bits):
     """Adam steps on minibatches of `batch` samples from the ring; returns the new parameters and optimiser states,
     the loss and (a pixel student) the pose estimate's squared error, each over the last tenth of its steps, and the
     actions' largest minibatch loss over all the steps.
     `steps` is (the actions' steps, the image reader's steps); a state student takes the first.
+    Run under shard_map over `devices` devices (Learner): every device draws the same minibatch and takes its own
+    contiguous share of it; each loss is the devices' shares' mean (lax.pmean), so its gradient is the minibatch's.
 
     A pixel student has two parts that share no parameters, fitted one after the other. Its Dense layers learn the
     teacher's action and memory from the *true* pose (`pose_target`: what the image shows), as a state student
@@ -174,7 +200,10 @@ def _fit(model, opts, batch, image_batch, steps, render, fmt, eps, params, opt_s
     import optax
 
     from mjx_pusht.task.rules import CTRL_LIMIT
+    from mjx_pusht.train.devices import AXIS
     from mjx_pusht.train.policy import pose_target
+
+    key = jax.random.wrap_key_data(bits)  # the minibatches' key (Learner.fit)
 
     def imitation(head, yb):
         pred = jnp.tanh(head[:, :2]) * CTRL_LIMIT
@@ -191,8 +220,11 @@ def _fit(model, opts, batch, image_batch, steps, render, fmt, eps, params, opt_s
         return mse + MEMORY_WEIGHT * jnp.mean(move)
 
     def minibatch(k, n):
-        """The first n of `batch` samples drawn from the ring: (features normalised, labels, image state or None)."""
-        idx = jax.random.randint(k, (batch,), 0, filled)[:n]
+        """This device's share of the first n of `batch` samples drawn from the ring: (features normalised, labels,
+        image state or None)."""
+        share = n // devices
+        idx = jax.lax.dynamic_slice_in_dim(jax.random.randint(k, (batch,), 0, filled), jax.lax.axis_index(AXIS) * share,
+                                           share)
         xb, state = x[idx], None
         if render is not None:  # a pixel student's sample: its image's state first, then the features
             state, xb = xb[:, :RENDER_KEY], xb[:, RENDER_KEY:]
@@ -201,13 +233,14 @@ def _fit(model, opts, batch, image_batch, steps, render, fmt, eps, params, opt_s
     def acting(p, fixed, k):  # the actions and memory, from the features (and a pixel student's true pose)
         xb, yb, state = minibatch(k, batch)
         if render is None:
-            return imitation(model.apply({"params": p}, xb), yb)
-        return imitation(model.apply({"params": {**fixed, **p}}, xb, None, state[:, :2], pose_target(state))[0], yb)
+            return jax.lax.pmean(imitation(model.apply({"params": p}, xb), yb), AXIS)
+        head = model.apply({"params": {**fixed, **p}}, xb, None, state[:, :2], pose_target(state))[0]
+        return jax.lax.pmean(imitation(head, yb), AXIS)
 
     def reading(p, fixed, k):  # a pixel student's pose estimate from the images, against the true pose
         xb, _, state = minibatch(k, image_batch)
         _, pose = model.apply({"params": {**fixed, **p}}, xb, render(state), state[:, :2])
-        return jnp.mean(jnp.sum((pose - pose_target(state)) ** 2, axis=-1))
+        return jax.lax.pmean(jnp.mean(jnp.sum((pose - pose_target(state)) ** 2, axis=-1)), AXIS)
 
     def descend(loss_fn, opt, part, state, fixed, n, k):
         def step(c, k):

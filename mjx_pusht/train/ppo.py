@@ -218,7 +218,7 @@ class _BudgetSpent(Exception):
 
 
 def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, progress: bool = True,
-              minutes: float | None = None, keep: str = "last") -> list[dict]:
+              minutes: float | None = None, keep: str = "last", devices: int | None = None) -> list[dict]:
     """Brax PPO on the adapter, judged on the held-out seeds at every evaluation; returns the curve.
 
     Each curve row has the held-out success of the action the policy is saved with (`cfg.act`) and of both
@@ -229,7 +229,8 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     value networks; Brax restores no optimiser state, so Adam starts afresh) up to `cfg.timesteps`.
     `minutes`: stop at the first judgement past this much training wall-clock (resumable from there).
     `keep`: "best": policy.msgpack is the judged policy with the highest validation success (never chosen by
-    the held-out seeds); "last": the last judged. A non-finite network, observation statistic or judged episode
+    the held-out seeds); "last": the last judged. `devices`: this host's devices Brax maps its training over
+    (its max_devices_per_host; None: every one), each its share of the envs and of every minibatch. A non-finite network, observation statistic or judged episode
     stops the run with a TrainError naming the judgement; the files of the last good one stay."""
     import functools
 
@@ -322,7 +323,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
             num_minibatches=cfg.num_minibatches, num_updates_per_batch=cfg.updates_per_batch,
             reward_scaling=cfg.reward_scaling, normalize_observations=True, seed=cfg.seed + len(curve),
             num_evals=evals_left + 1, run_evals=False, policy_params_fn=on_params, progress_fn=on_metrics,
-            restore_params=restored, max_grad_norm=cfg.max_grad_norm,
+            restore_params=restored, max_grad_norm=cfg.max_grad_norm, max_devices_per_host=devices,
             **({"learning_rate_schedule": "ADAPTIVE_KL"} if cfg.lr_schedule == "adaptive-kl" else {}),
             network_factory=functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=cfg.hidden))
     except _BudgetSpent:

@@ -57,7 +57,9 @@ def checkpoint(path, cfg, learner, iteration, env_steps, curve, writer=None):
     if writer is not None:
         writer.join()  # one file, written in order
     path = Path(path)
-    x, y = np.asarray(learner.x[:learner.filled]), np.asarray(learner.y[:learner.filled])
+    # this process's own copy of the ring, sliced here: slicing the array held on every process's devices would be a
+    # program they all must run, and only the one whose clock says so checkpoints (several processes: run.py)
+    x, y = (np.asarray(a[:learner.filled]) for a in learner.spread.own_copy((learner.x, learner.y)))
     ring = _ring_file(path, iteration)
     tree = {"config": json.dumps(config_dict(cfg), sort_keys=True), "iteration": iteration, "env_steps": env_steps,
             "curve": json.dumps(curve), "params": to_numpy(learner.params),

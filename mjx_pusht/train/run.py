@@ -35,18 +35,20 @@ def _meta(cfg, iteration: int, env_steps: int, norm) -> dict:
 
 
 def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes: float | None = None,
-                 progress: bool = True, rerun: bool = True, keep: str = "last") -> dict:
+                 progress: bool = True, rerun: bool = True, keep: str = "last", devices=None) -> dict:
     """Run DAgger on `backend` into `out`; returns the summary (also written as summary.json).
 
     `keep`: which fit is the run's policy.msgpack: the last one, or ("best") the one whose next rollout
     succeeded most on that iteration's fresh training seeds with the expert's share at most
     VALIDATION_BETA (`curve.kept`); never chosen by the held-out seeds, so its held-out rate is not a maximum
-    taken over the curve's noise. `minutes`: the budget of the training and its last judgement (`Budget`)."""
+    taken over the curve's noise. `minutes`: the budget of the training and its last judgement (`Budget`).
+    `devices`: those the rollouts and the learner spread over (devices.py; None: JAX's default device)."""
     needs("train_dagger", "train", ("flax", "optax"))  # one line naming the extra, before any work
     import jax
     from tqdm import tqdm
 
     from mjx_pusht.train.dagger import Rollouts
+    from mjx_pusht.train.devices import Spread
     from mjx_pusht.train.learner import Learner
     from mjx_pusht.train.policy import save
 
@@ -54,11 +56,14 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     ckpt = out / "checkpoints"
     ckpt.mkdir(parents=True, exist_ok=True)
     env = dagger_env(cfg, backend)
-    rollouts, learner = Rollouts(env, cfg), Learner(cfg, env.images(cfg.image_batch) if cfg.image else None)
+    spread = Spread(devices or jax.devices()[:1])
+    rollouts = Rollouts(env, cfg, spread)
+    learner = Learner(cfg, env.images(cfg.image_batch // len(spread)) if cfg.image else None, spread)
     curve, start, env_steps, wall0 = [], 0, 0, 0.0
     resume_path = ckpt / "resume.msgpack"
     if resume:
         start, env_steps, curve, wall0 = restore(resume_path, cfg, learner)
+        learner.place()
     held_out = cfg.held_out_seeds()
     t_start = time.perf_counter() - wall0
     saved, every = time.perf_counter(), resume_every_s(learner.x.nbytes + learner.y.nbytes)
@@ -159,7 +164,7 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         shutil.copyfile(ckpt / f"policy_{kept['iteration']:03d}.msgpack", out / "policy.msgpack")
         bar.write(f"keeping iteration {kept['iteration']}'s policy: {kept['validation_success']:.1%} on its "
                   f"validation rollout (held-out {kept['success']:.1%})")
-    summary = write_summary(cfg, backend, out, curve, rerun, kept=kept, keep=keep)
+    summary = write_summary(cfg, backend, out, curve, rerun, kept=kept, keep=keep, devices=len(spread))
     # what the last held-out judgement took (or, judged in a rollout, would take alone): `mjx-pusht train` states it
     # as the time to expect of `evaluate` on the same seeds, before it starts
     return summary | {"judgement_seconds": round(sim_judge if pending is not None else clock.judge, 1)}
@@ -179,8 +184,18 @@ class Budget:
         self.episodes = 1  # the latest rollout's
 
     def spent(self, seconds: float) -> bool:
-        """Whether `seconds` more from now would pass the budget."""
-        return self.deadline is not None and time.perf_counter() + seconds > self.deadline
+        """Whether `seconds` more from now would pass the budget: by process 0's clock, where several processes train
+        one run (each would otherwise stop at its own iteration, and the others wait for it)."""
+        import jax
+
+        if self.deadline is None:
+            return False
+        over = time.perf_counter() + seconds > self.deadline
+        if jax.process_count() == 1:
+            return over
+        from jax.experimental import multihost_utils
+
+        return bool(multihost_utils.broadcast_one_to_all(np.bool_(over)))
 
     def rolled(self, seconds: float, episodes: int, steps: int) -> None:
         self.last, self.step, self.episodes = seconds, seconds / max(steps, 1), episodes

@@ -12,15 +12,16 @@ from mjx_pusht.train.resume import config_dict
 
 
 def write_summary(cfg, backend, out: Path, curve, rerun: bool = True, method: str = "dagger",
-                  kept: dict | None = None, keep: str = "last") -> dict:
+                  kept: dict | None = None, keep: str = "last", devices: int = 1) -> dict:
     """summary.json (and the curve's files) of a `method` run on `backend`; `kept`: the curve row of the fit
-    that is the run's policy (the last row when None), chosen by the rule `keep`. Returns the summary."""
+    that is the run's policy (the last row when None), chosen by the rule `keep`; `devices`: how many it trained
+    on (`train --devices`). Returns the summary."""
     from mjx_pusht.backends.base import versions
 
     last = curve[-1] if curve else None
     final = kept or last
     summary = {
-        "method": method, "obs_type": cfg.obs_type, "backend": backend, "device": _device(backend),
+        "method": method, "obs_type": cfg.obs_type, "backend": backend, "device": _device(backend), "devices": devices,
         "versions": versions(), "config": config_dict(cfg), "iterations_run": len(curve),
         "env_steps": last["env_steps"] if last else 0,
         "wall_seconds": round(last["wall_seconds"], 3) if last else 0.0,

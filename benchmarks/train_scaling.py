@@ -1,0 +1,93 @@
+"""One training run on 1, 2 and 4 devices of one host (`train --devices N`), the same run otherwise: how much faster
+training goes, and how much sooner it reaches its goal rate (issue 56).
+
+    python -m benchmarks.train_scaling --devices 1,2,4 --goal 0.95 --out runs/scaling -- --backend mjx-warp ...
+
+Runs `mjx-pusht train ARGS --devices N --out OUT/devices-N` for each count in turn (a count whose folder already
+holds a finished run is read, not run again), then writes OUT/scaling.json and OUT/scaling.md: for each count the
+control steps a second during training (the env steps learned from over the training wall-clock; DAgger's also
+over its rollouts' seconds alone), each as a multiple of one device's, the minutes of training wall-clock to the
+first held-out judgement at or above --goal (None if never), and eval's held-out success of the kept policy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from benchmarks.train_seeds import row
+from mjx_pusht.io.outputs import atomic_write_bytes, atomic_write_json
+
+
+def measure(run: Path, goal: float) -> dict:
+    """One finished run's throughput and time to the goal rate, from its summary.json and curve."""
+    s = json.loads((run / "summary.json").read_text())
+    r = row(run)
+    curve = s["curve"]
+    # PPO's learning_seconds are Brax's epochs (its rollouts and updates in one program); DAgger's wall-clock holds
+    # its rollouts, fits and judgements, its simulation_seconds the rollouts alone
+    train_s = s["learning_seconds"] if s["method"] == "ppo" else s["wall_seconds"]
+    at_goal = next((c for c in curve if c["success"] >= goal), None)
+    return {"devices": s.get("devices", 1), "device": s["device"], "method": s["method"], "obs_type": s["obs_type"],
+            "env_steps": s["env_steps"], "training_seconds": train_s,
+            "steps_per_second": s["env_steps"] / train_s if train_s else None,
+            "rollout_steps_per_second": (s["env_steps"] / s["simulation_seconds"]
+                                         if s["method"] == "dagger" and s["simulation_seconds"] else None),
+            "minutes_to_goal": None if at_goal is None else at_goal["wall_seconds"] / 60,
+            "held_out_success": r["held_out_success"], "held_out_ci95": r["held_out_ci95"]}
+
+
+def markdown(rows: list[dict], goal: float) -> str:
+    base = rows[0]["steps_per_second"] if rows[0]["devices"] == 1 else None
+    lines = [f"| devices | control steps/s in training | x one device | minutes to {goal:.0%} held-out | "
+             "held-out (eval) |", "|---|---|---|---|---|"]
+    for r in rows:
+        times = f"{r['steps_per_second'] / base:.2f}" if base else "n/a"
+        mins = "never" if r["minutes_to_goal"] is None else f"{r['minutes_to_goal']:.1f}"
+        lines.append(f"| {r['devices']} | {r['steps_per_second']:,.0f} | {times} | {mins} | "
+                     f"{r['held_out_success']:.1%} |")
+    return "\n".join(lines + ["", f"{rows[0]['method']} from {rows[0]['obs_type']} on {rows[0]['device']}"]) + "\n"
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--devices", default="1,2,4", help="comma-separated device counts, one run each (default 1,2,4)")
+    p.add_argument("--goal", type=float, required=True, help="the held-out rate to time (e.g. 0.95)")
+    p.add_argument("--out", type=Path, required=True)
+    args, train_args = p.parse_known_args(argv)
+    train_args = [a for a in train_args if a != "--"]
+    if any(a in ("--devices", "--out") for a in train_args):
+        p.error("--devices and --out are this script's to set for each run")
+    try:
+        counts = [int(n) for n in args.devices.split(",")]
+    except ValueError:
+        p.error(f"--devices takes comma-separated integers, got {args.devices!r}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows, failed = [], []
+    for n in counts:
+        run = args.out / f"devices-{n}"
+        if not ((run / "summary.json").is_file() and "eval" in json.loads((run / "summary.json").read_text())):
+            cmd = [sys.executable, "-m", "mjx_pusht", "train", *train_args, "--devices", str(n), "--out", str(run)]
+            print("$", " ".join(cmd), flush=True)
+            t = time.perf_counter()
+            rc = subprocess.call(cmd)
+            print(f"{n} devices: exit {rc} after {time.perf_counter() - t:.0f} s", flush=True)
+        try:
+            rows.append(measure(run, args.goal))
+        except (OSError, KeyError, ValueError) as e:  # unreadable, cut or unfinished: listed, not dropped
+            failed.append(f"{run} ({e})")
+    atomic_write_json(args.out / "scaling.json", {"goal": args.goal, "train_args": train_args, "runs": rows,
+                                                  "failed": failed})
+    if rows:
+        atomic_write_bytes(args.out / "scaling.md", markdown(rows, args.goal).encode())
+        print(markdown(rows, args.goal), end="")
+    print("\n".join(f"failed: {f}" for f in failed), file=sys.stderr)
+    return 0 if rows and not failed else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

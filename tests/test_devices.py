@@ -1,0 +1,143 @@
+"""Training on several devices (issue 56): `train --devices N` splits each rollout's seeds and each minibatch over N
+devices, and the result is the one device's, to float tolerance: the same minibatch, its mean gradient averaged
+across devices, one set of weights; each seed's episode the same whichever device ran it.
+
+JAX cannot change its device count once imported: the 2-device runs are processes of their own, on 2 CPU devices
+forced by XLA_FLAGS (tests/forced_devices.py)."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from jax.tree_util import tree_leaves as jax_leaves
+from helpers import ENV
+
+from mjx_pusht.cli.commands import main
+from mjx_pusht.train.policy import load_checkpoint
+from mjx_pusht.train.devices import check_divides
+from mjx_pusht.train.resume import TrainError
+
+pytest.importorskip("flax")
+pytest.importorskip("optax")
+
+TWO = {**ENV, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu"}
+
+
+def _forced(what: str) -> dict:
+    r = subprocess.run([sys.executable, str(Path(__file__).with_name("forced_devices.py")), what], capture_output=True,
+                       text=True, env={**TWO, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.slow
+def test_a_fit_and_a_rollout_on_two_devices_are_those_on_one():
+    """~30 s: one fit compiled twice, an MJX-Warp rollout compiled three times (8 worlds; 4 on each device)."""
+    out = _forced("both:mjx-warp")
+    one, two = out["fit"]["1"], out["fit"]["2"]
+    assert one["devices"] == 1 and two["devices"] == 2  # the weights held on both devices, one set
+    # the minibatch's mean gradient, each device's share averaged: the loss and every weight as on one device
+    assert two["loss"] == pytest.approx(one["loss"], rel=1e-6)
+    for a, b in zip(one["params"], two["params"], strict=True):
+        np.testing.assert_allclose(b, a, rtol=1e-5, atol=1e-6)
+    assert max(np.max(np.abs(np.subtract(a, b))) for a, b in zip(one["params"], out["fit"]["start"])) > 1e-3  # fitted
+    one, two = out["rollout"]["1"], out["rollout"]["2"]
+    assert two["devices"] == 2  # the samples' rows come from both devices, in seed order
+    for k in ("success", "coverage", "finite", "y", "x"):  # every seed's episode and every sample, to the bit
+        assert two[k] == one[k], k
+    assert len(set(one["coverage"])) == 8  # eight different episodes, not one repeated
+
+
+def test_bad_devices_are_one_line_before_anything_is_written(tmp_path, capsys):
+    out = tmp_path / "run"
+    for argv, needle in ((["--devices", "0"], "must be an integer >= 1"),
+                         (["--backend", "mjx-jax", "--devices", "64"], "--devices 64: this process has 1"),
+                         (["--backend", "cpu", "--devices", "1"], "the cpu backend steps MuJoCo C"),
+                         (["--backend", "mjx-warp", "--obs", "pixels_agent_pos", "--devices", "2"],
+                          "DAgger from pixels trains on one device"),
+                         (["--num-processes", "2", "--coordinator", "127.0.0.1:1", "--algo", "ppo"],
+                          "--algo ppo: not with --num-processes yet")):
+        assert main(["train", "--no-rerun", "--out", str(out), *argv]) in (1, 2)
+        err = capsys.readouterr().err
+        assert needle in err and err.count("\n") == 1, err
+    assert not out.exists()
+
+
+def test_what_does_not_split_evenly_over_the_devices_is_one_line():
+    two = [object(), object()]  # the check reads only how many there are
+    check_divides(two, envs=8, eval_envs=4, batch=64)
+    for sizes, needle in (({"envs": 7}, "--envs (7) must be a multiple of the 2 devices"),
+                          ({"image_batch": 5}, "--image-batch (5) must be")):
+        with pytest.raises(TrainError, match=re.escape(needle)):
+            check_divides(two, **sizes)
+
+
+def test_ppo_hands_the_device_count_to_braxs_own_device_mapping(tmp_path, monkeypatch):
+    """Brax's `ppo.train` maps its rollouts and update over `max_devices_per_host` local devices itself (pmap, its
+    gradients pmean'd): `--devices` reaches it there (None: every one). A 2-device run of Brax's trainer on 2 forced
+    CPU devices took 7.5 minutes on the 2-core CI machine, so it is not run here (notebook h-devices)."""
+    pytest.importorskip("brax")
+    from brax.training.agents.ppo import train as brax_ppo
+
+    from mjx_pusht.train.ppo import PPOConfig, train_ppo
+
+    given = []
+
+    class Called(Exception):
+        pass
+
+    def train(**kwargs):
+        given.append(kwargs)
+        raise Called
+
+    monkeypatch.setattr(brax_ppo, "train", train)
+    cfg = PPOConfig(obs_type="state", envs=8, timesteps=10240, evals=1, hidden=(32, 32), batch_size=8, eval_envs=4,
+                    max_steps=50)
+    for devices in (None, 2):
+        with pytest.raises(Called):
+            train_ppo(cfg, "mjx-jax", tmp_path / str(devices), progress=False, devices=devices)
+    assert [g["max_devices_per_host"] for g in given] == [None, 2]
+
+
+TINY = ["train", "--backend", "mjx-warp", "--reset", "chapter", "--envs", "4", "--iterations", "2", "--fit-steps", "20",
+        "--batch", "64", "--hidden", "32,32", "--eval-envs", "2", "--max-samples", "5000", "--max-steps", "10",
+        "--no-rerun", "--record", "0", "--no-progress"]
+
+
+@pytest.mark.slow
+def test_two_processes_joined_by_jax_distributed_train_the_policy_two_devices_of_one_process_do(tmp_path):
+    """Two processes on localhost (one CPU device each, their gradients averaged across processes through gloo)
+    against one process with 2 forced CPU devices: the same run, so the same weights; process 0 wrote the run."""
+    port = _free_port()
+    env = {**ENV, "JAX_PLATFORMS": "cpu"}
+    # --minutes: every process stops where process 0's clock says (never here: ten minutes)
+    flags = ["--out", str(tmp_path / "two"), "--minutes", "10", "--num-processes", "2", "--coordinator",
+             f"127.0.0.1:{port}"]
+    procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *TINY, *flags, "--process-id", str(i)],
+                              env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for i in (1, 0)]
+    one = subprocess.Popen([sys.executable, "-m", "mjx_pusht", *TINY, "--out", str(tmp_path / "one")], env=TWO,
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    logs = [p.communicate(timeout=600)[0] for p in (*procs, one)]
+    assert [p.returncode for p in (*procs, one)] == [0, 0, 0], logs
+    assert "process 1: trained on 1 of the run's 2 devices; process 0 writes the run" in logs[0]
+    runs = [json.loads((tmp_path / d / "summary.json").read_text()) for d in ("two", "one")]
+    assert runs[0]["devices"] == runs[1]["devices"] == 2
+    assert [r["samples"] for r in runs[0]["curve"]] == [r["samples"] for r in runs[1]["curve"]]
+    two, one = (load_checkpoint(tmp_path / d / "policy.msgpack")[0] for d in ("two", "one"))
+    for a, b in zip(jax_leaves(two), jax_leaves(one), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
+    assert runs[0]["eval"]["n_episodes"] == 2  # process 0 judged it with eval, as one process does
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
