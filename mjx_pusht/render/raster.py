@@ -12,6 +12,10 @@ geoms it draws are those both renderers draw (WarpRenderer's `enabled_geom_group
 (finite where their size says), boxes, cylinders, capsules and spheres, each upright (turned about z only, checked
 once at construction, so a box's or a cylinder's visible surface is its flat top and its footprint a rectangle or a
 disk). The camera's pose and extent are MuJoCo's own (mj_forward of the view).
+
+`state_images(env)` is `pixels.state_images(env, n)` on this renderer, for any batch: a learner renders its
+minibatches through it inside a shard_map'd fit. Tests (tests/test_raster.py): MuJoCo C's image but for under 1e-3 of
+the pixels, each on an edge (the bound MJX-Warp meets against it); MJX-Warp's, the same bound (measured: no pixel).
 """
 
 from __future__ import annotations
