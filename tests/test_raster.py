@@ -154,7 +154,10 @@ import json, sys
 import jax, numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from mjx_pusht.envs.functional import PushTEnv
+from mjx_pusht.backends.jax_setup import enable_compilation_cache
 from mjx_pusht.render.raster import state_images
+
+enable_compilation_cache()  # a second run compiles nothing
 
 states, goals = (np.asarray(a, np.float32) for a in json.loads(sys.stdin.read()))
 images = state_images(PushTEnv.for_task("gym-pusht", pixels=64))
