@@ -193,6 +193,8 @@ def test_a_model_it_would_draw_wrongly_is_refused_in_one_line():
     tilted = copy.deepcopy(base)
     bar = tilted.geom("tee_bar").id
     tilted.geom_quat[bar], tilted.geom_sameframe[bar] = (np.cos(0.1), np.sin(0.1), 0, 0), 0  # tipped about x
+    camera = copy.deepcopy(base)
+    camera.cam_quat[camera.camera(CAMERA).id] = (np.cos(0.1), 0, np.sin(0.1), 0)  # looking a little sideways
     hinge = copy.deepcopy(base)
     hinge.jnt_axis[hinge.joint("tee_yaw").id] = (0, 1, 0)  # the T turns about y
     ellipsoid = copy.deepcopy(base)
@@ -202,7 +204,8 @@ def test_a_model_it_would_draw_wrongly_is_refused_in_one_line():
     for model, needle in [(tilted, "geom tee_bar is tilted"), (ellipsoid, "geom pusher_tip is of type ellipsoid"),
                           (translucent, "geom tee_bar has alpha 0.5"),
                           (hinge, "geom tee_bar can turn about another axis \\(joint tee_yaw\\)"),
-                          (build_model(SceneSpec("free-tee")), "joint tee_free")]:
+                          (build_model(SceneSpec("free-tee")), "joint tee_free"),
+                          (camera, "an orthographic camera looking straight down")]:
         with pytest.raises(PixelsError, match=needle) as e:
             Raster(model, 64)
         assert "\n" not in str(e.value)

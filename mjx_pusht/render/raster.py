@@ -129,7 +129,7 @@ def _check_drawable(view, host, g: int) -> None:
     body = view.geom_bodyid[g]
     while body:
         for j in range(view.body_jntadr[body], view.body_jntadr[body] + view.body_jntnum[body]):
-            kind = mujoco.mjtJoint(view.jnt_type[j])  # (a numpy int never equals the enum)
+            kind = mujoco.mjtJoint(view.jnt_type[j])  # (a numpy int is never `in` a tuple of the enum's members)
             tilted_hinge = kind == mujoco.mjtJoint.mjJNT_HINGE and not np.allclose(abs(host.xaxis[j, 2]), 1, atol=1e-9)
             if kind in (mujoco.mjtJoint.mjJNT_BALL, mujoco.mjtJoint.mjJNT_FREE) or tilted_hinge:
                 raise PixelsError(f"the raster renderer draws upright geoms (turned about z only); geom {name} can "
