@@ -53,6 +53,10 @@ case "$stage" in
   render) python3 -m benchmarks.render --backend mjx-warp --tier "$tier" --batches "${BATCHES:-1024,4096,16384,65536}" \
             --save-pixels "$OUT/pixels-$tier.npz" --out "$OUT/results" > "$OUT/$stage.log" 2>&1
           python3 -m benchmarks.render --backend mjx-warp --tier "$tier" --vector-env --out "$OUT/results" >> "$OUT/$stage.log" 2>&1 ;;
+  raster) # the pure-JAX renderer (render/raster.py, issue 56) against MJX-Warp's ray tracer on the same states:
+          # images/s at the learner's 512 images a minibatch and up, and the pixels they differ in (no GL here: no cpu)
+          python3 -m benchmarks.raster --renderers raster,warp --batches "${BATCHES:-512,4096,65536}" \
+            --json "$OUT/results/$tier-raster.json" > "$OUT/$stage.log" 2>&1 ;;
   e2e-1m) # the 1 M-seed CLI as a user runs it: one warm-up, then 3 runs with the default audit and 3 with --audit 0
           python3 -m mjx_pusht sweep --seeds 65536 --backend mjx-warp --no-rerun --no-progress --out "$HOME/warm" \
             > "$OUT/e2e.log" 2>&1
