@@ -2,7 +2,7 @@
 device count once imported): fits the same data, or rolls out the same seeds, on 1 and on 2 of them and prints what
 each gave, as JSON, for the test to compare.
 
-    python tests/forced_devices.py fit|rollout|both[:BACKEND]
+    python tests/forced_devices.py fit|rollout|pixels|both|all[:BACKEND]
 """
 
 from __future__ import annotations
@@ -57,7 +57,32 @@ def rollout(backend: str) -> dict:
     return out
 
 
+def pixels(backend: str) -> dict:
+    """A pixel student on 1 and 2 devices: a rollout of 4 seeds (the images drawn in it by the raster renderer on
+    each device), then a fit of its samples (each device rendering its share of every minibatch again)."""
+    import jax
+
+    from mjx_pusht.train.dagger import DaggerConfig, Rollouts
+    from mjx_pusht.train.devices import Spread
+    from mjx_pusht.train.learner import Learner
+    from mjx_pusht.train.run import _unit, dagger_env
+
+    cfg = DaggerConfig(obs_type="pixels_agent_pos", envs=2, eval_envs=2, max_steps=6, hidden=(16,), batch=8,
+                       image_batch=4, fit_steps=3, image_steps=3, max_samples=512, reset="chapter")
+    env, out = dagger_env(cfg, backend), {}
+    for n in (1, 2):
+        spread = Spread(jax.devices()[:n])
+        learner = Learner(cfg, env.images(cfg.image_batch // n), spread)
+        x, y, k, outcome = Rollouts(env, cfg, spread).padded(learner.params, _unit(cfg), np.arange(4), 0.5, 0, 2)
+        learner.add(x, y, keep=True, n=k)
+        loss = learner.fit(0)
+        out[n] = {"x": np.asarray(x[:k]).tolist(), "coverage": np.asarray(outcome["coverage"]).tolist(),
+                  "loss": loss, "pose_error_mm": learner.pose_error_mm,
+                  "params": [np.asarray(a).ravel().tolist() for a in jax.tree.leaves(learner.params)]}
+    return out
+
+
 if __name__ == "__main__":
     what, _, backend = sys.argv[1].partition(":")
-    jobs = {"fit": fit, "rollout": lambda: rollout(backend or "mjx-jax")}
-    print(json.dumps({k: f() for k, f in jobs.items() if what in (k, "both")}))
+    jobs = {"fit": fit, "rollout": lambda: rollout(backend or "mjx-jax"), "pixels": lambda: pixels(backend or "mjx-jax")}
+    print(json.dumps({k: f() for k, f in jobs.items() if what in (k, "all") or what == "both" and k != "pixels"}))

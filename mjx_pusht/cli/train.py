@@ -75,7 +75,7 @@ def cmd_train(args) -> int:
     _method_settings(args, name)
     from mjx_pusht.train.devices import check_divides, training_devices
 
-    devices = training_devices(args.devices, name, pixels=args.algo == "dagger" and args.obs.startswith("pixels"))
+    devices = training_devices(args.devices, name)
     if args.algo == "ppo":
         check_divides(devices, envs=args.envs, batch=args.batch or 256)  # Brax gives each device its share of both
         return _cmd_ppo(args, name, why, devices)

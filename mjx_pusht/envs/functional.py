@@ -102,6 +102,9 @@ class PushTEnv:
     # (notebook change 13); "WARP" is MJX's default, which the sweep keeps
     graph_mode: str | None = None
     randomize: Any = None  # {name: (lo, hi)} scale factors drawn per episode from its seed (model/randomize.py)
+    # MJX: obs["pixels"] drawn by the raster renderer (render/raster.py: plain JAX ops, so any MJX backend and any
+    # device, under shard_map too; the same bytes as MJX-Warp's ray tracer on every state tested) instead of MJX-Warp's
+    raster: bool = False
 
     def __post_init__(self) -> None:
         from mjx_pusht.backends.base import BackendError
@@ -161,10 +164,11 @@ class PushTEnv:
             self.model = self.runner.model
             self._xp = jnp
             self._mx = self.runner.models.first()
-            if self.pixels and impl != "warp":
+            if self.pixels and impl != "warp" and not self.raster:
                 from mjx_pusht.render.pixels import PixelsError
 
-                raise PixelsError("pixel observations on MJX need MJX-Warp's renderer: use backend mjx-warp (or cpu)")
+                raise PixelsError("pixel observations on MJX-JAX need the raster renderer (raster=True): or use "
+                                  "backend mjx-warp (MJX-Warp's ray tracer), or cpu")
             self._renderers, self._jitted, self._templates = {}, {}, {}
             self.step = self._step_mjx
         self.layout = QposLayout.of(self.model)
@@ -278,8 +282,14 @@ class PushTEnv:
 
     def images(self, n: int):
         """A jittable function: (n, 5) observation states (pusher x, y, tee x, y, yaw) -> the (n, size, size, 3)
-        uint8 images `obs["pixels"]` shows of them, on this env's renderer (a learner renders its minibatches
-        again from the states, rather than keeping their images: train/dagger.py)."""
+        uint8 images `obs["pixels"]` shows of them (a learner renders its minibatches again from the states, rather
+        than keeping their images: train/dagger.py). On MJX by the raster renderer, whichever draws obs["pixels"]
+        (MJX-Warp's bytes on every state tested, and plain JAX ops: a data-parallel fit runs it on every device);
+        on cpu by MuJoCo C's renderer, as obs["pixels"]."""
+        if self.backend != "cpu":
+            from mjx_pusht.render.raster import state_images
+
+            return state_images(self)
         from mjx_pusht.render.pixels import state_images
 
         return state_images(self, n)
@@ -361,7 +371,11 @@ class PushTEnv:
         import jax
 
         if n not in self._jitted:
-            if self.pixels:
+            if self.pixels and self.raster:
+                from mjx_pusht.render.raster import Raster
+
+                self._renderers[n] = Raster(self.model, self.pixels)
+            elif self.pixels:
                 from mjx_pusht.render.pixels import WarpRenderer
 
                 self._renderers[n] = WarpRenderer(self.model, n, self.pixels)

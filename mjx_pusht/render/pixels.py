@@ -232,30 +232,26 @@ def _free(gl, mjr) -> None:
 
 
 def state_images(env, n: int):
-    """`PushTEnv.images`: a jittable function from (n, 5) observation states to env's (n, size, size, 3) images."""
+    """`PushTEnv.images` on the cpu backend: a jittable function from (n, 5) observation states to env's (n, size,
+    size, 3) images, by MuJoCo C's OpenGL renderer on the host (on MJX: render/raster.py `state_images`)."""
     import jax
     import jax.numpy as jnp
 
     if not env.pixels or env.layout.tee is None:
         raise ConfigError("images() needs an env with pixels and the tee on slide and hinge joints")
     q0 = np.asarray(env.model.qpos0, np.float64)
-
     shape = jax.ShapeDtypeStruct((n, env.pixels, env.pixels, 3), jnp.uint8)
-    if env.backend == "cpu":  # MuJoCo C's OpenGL renderer, on the host
-        from concurrent.futures import ThreadPoolExecutor
+    from concurrent.futures import ThreadPoolExecutor
 
-        # JAX calls back on threads of its own, where a GL context cannot be made current (EGL_BAD_ACCESS, or a
-        # crash): the images are rendered on one thread of ours, with a renderer of its own
-        pool = ThreadPoolExecutor(1, thread_name_prefix="images")
-        renderer = pool.submit(CpuRenderer, env.model, env.pixels).result()
+    # JAX calls back on threads of its own, where a GL context cannot be made current (EGL_BAD_ACCESS, or a
+    # crash): the images are rendered on one thread of ours, with a renderer of its own
+    pool = ThreadPoolExecutor(1, thread_name_prefix="images")
+    renderer = pool.submit(CpuRenderer, env.model, env.pixels).result()
 
-        def render(st):
-            return pool.submit(renderer, env.layout.qpos_of_state(q0, np.asarray(st, np.float64))).result()
+    def render(st):
+        return pool.submit(renderer, env.layout.qpos_of_state(q0, np.asarray(st, np.float64))).result()
 
-        return lambda states: jax.pure_callback(render, shape, states)
-    renderer, d0 = WarpRenderer(env.model, n, env.pixels), env.template(n)
-    return lambda states: jax.vmap(lambda q: renderer(d0.replace(qpos=q)))(
-        env.layout.qpos_of_state(q0, states.astype(env.runner.dtype)))
+    return lambda states: jax.pure_callback(render, shape, states)
 
 
 def unpack_rgb(packed):

@@ -18,11 +18,12 @@ from mjx_pusht.train.resume import TrainError
 AXIS = "devices"  # the mesh's one axis: the batch's rows (seeds in a rollout, samples in a minibatch)
 
 
-def training_devices(count: int | None, backend: str, pixels: bool = False) -> list:
+def training_devices(count: int | None, backend: str) -> list:
     """The devices `backend`'s training runs on: this process's first `count` (None: every one), and as many of every
     other process's joined through jax.distributed; or a one-line TrainError: more than there are, a count or
-    several processes on the cpu backend (MuJoCo C steps on the host's cores, its learner on JAX's default device),
-    more than one device for a pixel student."""
+    several processes on the cpu backend (MuJoCo C steps on the host's cores, its learner on JAX's default device).
+    A pixel student's images, in its rollouts and its fit, are the raster renderer's (plain JAX ops, any device:
+    train/run.py `dagger_env`), so it spreads as a state student does."""
     import jax
 
     if backend == "cpu":
@@ -30,16 +31,11 @@ def training_devices(count: int | None, backend: str, pixels: bool = False) -> l
             raise TrainError("--devices and --num-processes spread training over the devices of the mjx-jax or "
                              "mjx-warp backends; the cpu backend steps MuJoCo C on the host's cores")
         return jax.local_devices()[:1]
-    # Warp's render context (its buffers) lives on one device, and the learner renders inside the one program
-    # shard_map lays over all of them: a context per device is not built yet, so a pixel student takes one
-    if pixels and (count is not None and count > 1 or jax.process_count() > 1):
-        raise TrainError("DAgger from pixels trains on one device of one process so far (Warp's render context is "
-                         "one device's): pass --devices 1 and no --num-processes")
     local = jax.local_devices()
     if count is not None and count > len(local):
         raise TrainError(f"--devices {count}: this process has {len(local)} "
                          f"({local[0].platform}: {getattr(local[0], 'device_kind', local[0].platform)})")
-    n = 1 if pixels else len(local) if count is None else count
+    n = len(local) if count is None else count
     # every process's first n (jax.distributed: the global devices, process by process): one mesh over them all
     return [d for p in range(jax.process_count()) for d in [d for d in jax.devices() if d.process_index == p][:n]]
 

@@ -232,9 +232,12 @@ def dagger_env(cfg, backend: str):
     # stepping once a call. Measured on an H100: 491k against 287k control steps/s at 4,096 (notebook change 16).
     graph_mode = "WARP" if backend == "mjx-warp" and has_gpu() else None
     task = cfg.the_task
+    # A pixel student's images on MJX are the raster renderer's, in its rollouts as in its fit (PushTEnv.images):
+    # plain JAX ops, so every device of a data-parallel run draws its own worlds (MJX-Warp's ray tracer is an FFI
+    # call with a render context of one device, which XLA cannot partition), and MJX-JAX trains from pixels too.
     return PushTEnv(backend=backend, reset_kind=cfg.reset, action_type=task.action_type, scene=task.scene(),
                     episode=cfg.episode(), threads=default_threads(), keep_states=False,
-                    pixels=cfg.image, graph_mode=graph_mode, randomize=cfg.randomize)
+                    pixels=cfg.image, graph_mode=graph_mode, randomize=cfg.randomize, raster=backend != "cpu")
 
 
 def non_finite(outcome: dict, seeds: np.ndarray, *arrays) -> str | None:
