@@ -35,3 +35,31 @@ def assert_matches_cpu(mjx, cpu) -> None:
     np.testing.assert_allclose(mjx.gap_settled, cpu.gap_settled, atol=1e-5)
     np.testing.assert_array_equal(mjx.rigid, cpu.rigid)
     assert mjx.finite.all()
+
+
+SMALL_PPO = dict(obs_type="state", envs=8, timesteps=10240, evals=1, hidden=(32, 32), batch_size=8, eval_envs=4,
+                 max_steps=50)
+
+
+def brax_ppo_arguments(monkeypatch, tmp_path, runs) -> list[dict]:
+    """The keyword arguments `train_ppo` hands Brax's own `ppo.train`, one dict for each (PPOConfig, train_ppo's
+    keyword arguments) of `runs`; Brax's trainer is stopped at its call, so nothing compiles."""
+    import pytest
+    from brax.training.agents.ppo import train as brax_ppo
+
+    from mjx_pusht.train.ppo import train_ppo
+
+    given = []
+
+    class Called(Exception):
+        pass
+
+    def train(**kwargs):
+        given.append(kwargs)
+        raise Called
+
+    monkeypatch.setattr(brax_ppo, "train", train)
+    for cfg, kwargs in runs:
+        with pytest.raises(Called):
+            train_ppo(cfg, "mjx-jax", tmp_path / str(len(given)), progress=False, **kwargs)
+    return given

@@ -93,25 +93,12 @@ def test_ppo_hands_the_device_count_to_braxs_own_device_mapping(tmp_path, monkey
     gradients pmean'd): `--devices` reaches it there (None: every one). A 2-device run of Brax's trainer on 2 forced
     CPU devices took 7.5 minutes on the 2-core CI machine, so it is not run here (notebook h-devices)."""
     pytest.importorskip("brax")
-    from brax.training.agents.ppo import train as brax_ppo
+    from helpers import SMALL_PPO, brax_ppo_arguments
 
-    from mjx_pusht.train.ppo import PPOConfig, train_ppo
+    from mjx_pusht.train.ppo import PPOConfig
 
-    given = []
-
-    class Called(Exception):
-        pass
-
-    def train(**kwargs):
-        given.append(kwargs)
-        raise Called
-
-    monkeypatch.setattr(brax_ppo, "train", train)
-    cfg = PPOConfig(obs_type="state", envs=8, timesteps=10240, evals=1, hidden=(32, 32), batch_size=8, eval_envs=4,
-                    max_steps=50)
-    for devices in (None, 2):
-        with pytest.raises(Called):
-            train_ppo(cfg, "mjx-jax", tmp_path / str(devices), progress=False, devices=devices)
+    cfg = PPOConfig(**SMALL_PPO)
+    given = brax_ppo_arguments(monkeypatch, tmp_path, [(cfg, {"devices": None}), (cfg, {"devices": 2})])
     assert [g["max_devices_per_host"] for g in given] == [None, 2]
 
 

@@ -211,24 +211,13 @@ def test_ppo_max_grad_norm_and_adaptive_kl_reach_braxs_trainer_by_its_own_parame
     pytest.importorskip("brax")
     from brax.training.agents.ppo import train as brax_ppo
 
-    from mjx_pusht.train.ppo import PPOConfig, train_ppo
+    from helpers import SMALL_PPO, brax_ppo_arguments
+
+    from mjx_pusht.train.ppo import PPOConfig
 
     names = inspect.signature(brax_ppo.train).parameters
     assert "max_grad_norm" in names and "learning_rate_schedule" in names
-    given = []
-
-    class Called(Exception):
-        pass
-
-    def train(**kwargs):
-        given.append(kwargs)
-        raise Called
-
-    monkeypatch.setattr(brax_ppo, "train", train)
-    small = dict(obs_type="state", envs=8, timesteps=10240, evals=1, hidden=(32, 32), batch_size=8, eval_envs=4,
-                 max_steps=50)
-    for cfg in (PPOConfig(**small), PPOConfig(**small, max_grad_norm=1e-12, lr_schedule="adaptive-kl")):
-        with pytest.raises(Called):
-            train_ppo(cfg, "mjx-jax", tmp_path / str(len(given)), progress=False)
+    given = brax_ppo_arguments(monkeypatch, tmp_path, [
+        (PPOConfig(**SMALL_PPO), {}), (PPOConfig(**SMALL_PPO, max_grad_norm=1e-12, lr_schedule="adaptive-kl"), {})])
     assert given[0]["max_grad_norm"] == 1.0 and "learning_rate_schedule" not in given[0]
     assert given[1]["max_grad_norm"] == 1e-12 and given[1]["learning_rate_schedule"] == "ADAPTIVE_KL"
