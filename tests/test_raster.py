@@ -171,6 +171,7 @@ print(json.dumps({"devices": len(a.sharding.device_set), "equal": bool((np.asarr
 """
 
 
+@pytest.mark.slow  # a subprocess of its own: imports JAX and MJX and compiles twice (9-14 s on 2 cores)
 def test_it_runs_under_shard_map_over_two_devices_with_the_same_images():
     """In a process with 2 forced CPU devices (JAX fixes its device count at import): state_images shard_map'd over
     both, each device drawing its half of the batch, gives the one-device program's images to the bit."""
