@@ -177,6 +177,21 @@ python3 -m benchmarks.env_loop --envs 16384,65536 --cases scan_autoreset,scan_au
 EOS
           setsid nohup bash "$HOME/issue55.sh" > "$HOME/issue55.log" 2>&1 < /dev/null &
           sleep 30; cp "$HOME/issue55.log" "$OUT/" ;;
+  ppo-gym) # issue 53's PPO from state on gym-pusht's task: seed SEED (default 0), 10 minutes on one GPU (train-seeds'
+          # ppo recipe with TASK=gym-pusht; ~11.5 minutes with compiling and its eval), then its kept policy in gym-pusht
+          # itself (eval --backend gym-pusht, pymunk on this host's cores) on the first GYM_SEEDS (default 1000) held-out
+          # seeds, one after another in their own session; watch both with watch-seeds NAMES="ppo-gym-train ppo-gym"
+          mkdir -p "$HOME/runs"; cat > "$HOME/ppo-gym.sh" <<EOS
+cd "$PWD"
+TASK=gym-pusht RECIPE=ppo SEEDS=${SEED:-0} NAME=ppo-gym-train WAIT=1 bash benchmarks/gpu.sh train-seeds $tier
+sleep 2; while kill -0 \$(cat $HOME/runs/seeds-ppo-gym-train.pid) 2>/dev/null; do sleep 5; done
+python3 -m mjx_pusht eval --task gym-pusht --backend gym-pusht --seeds 1000000000:$((1000000000 + ${GYM_SEEDS:-1000})) \
+  --controller policy:$HOME/runs/seeds-ppo-gym-train/seed-${SEED:-0}/policy.msgpack --no-rerun --no-progress \
+  --record 0 --out $HOME/runs/seeds-ppo-gym
+EOS
+          (cd "$HOME/runs" && setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' \
+            "$HOME/runs/seeds-ppo-gym.pid" bash "$HOME/ppo-gym.sh" > "$HOME/runs/seeds-ppo-gym.log" 2>&1 < /dev/null &)
+          sleep "${WAIT:-60}"; cp "$HOME/runs/seeds-ppo-gym.log" "$OUT/" ;;
   watch-seeds) # wait up to WAIT seconds (default 570) for train-seeds' runs NAMES (default RECIPE; space-separated),
           # then copy back what they have: one tar a run (logs, curves, summaries; not the resume checkpoints' dataset
           # rings, 2.2 GB a state run, which made the tar too big to come back) and each finished seed's policy
