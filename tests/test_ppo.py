@@ -94,30 +94,79 @@ def test_a_sampled_ppo_action_is_a_draw_from_braxs_own_distribution_keyed_by_see
     assert np.abs(apply_ppo(dense, {**meta, "act": "mean"}, obs[:1]) - np.tanh(loc) * CTRL_LIMIT).max() < 1e-6
 
 
-def test_ppos_training_reward_makes_succeeding_the_best_outcome():
-    """Success ends the episode, so at PPO's discount, ending it now with success must be worth more than
-    staying just short of it forever (with the coverage itself as the reward, it was not: PPO learned to
-    park the T at 0.8 coverage, notebook change 18)."""
+def _state(x, cov, success=False):
+    """What the training reward reads of an env state: obs["state"] (pusher x, y, tee x, y, yaw), coverage, success."""
     from types import SimpleNamespace
 
     import jax.numpy as jnp
 
-    from mjx_pusht.train.ppo import PPOConfig, training_reward
+    return SimpleNamespace(obs={"state": jnp.asarray(x, jnp.float32)},
+                           metrics={"coverage": jnp.float32(cov), "success": jnp.bool_(success)})
 
-    at = jnp.asarray([0.0, 0.05, 0.0, 0.0, 0.0])  # pusher above the T at the target pose: no shaping change
 
-    def state(cov, success):
-        return SimpleNamespace(obs={"state": at}, metrics={"coverage": jnp.float32(cov), "success": jnp.bool_(success)})
+@pytest.mark.parametrize("task", ["chapter", "gym-pusht"])
+def test_ppos_training_reward_makes_succeeding_the_best_outcome(task):
+    """Success ends the episode, so at PPO's discount, ending it now with success must be worth more than
+    staying just short of it forever (with the coverage itself as the reward, it was not: PPO learned to
+    park the T at 0.8 coverage, notebook change 18). On either task's scene, with its run's own reward."""
+    from mjx_pusht.train.ppo import PPOConfig
 
-    gamma = PPOConfig().discounting
-    short = state(0.94, False)
-    stay = float(training_reward(short, short)) / (1 - gamma)  # forever at 0.94: never ends
-    finish = float(training_reward(short, state(0.95, True)))  # then nothing: the episode is over
+    cfg = PPOConfig(task=None if task == "chapter" else task, reset="task" if task == "chapter" else task)
+    reward = cfg.reward()
+    at = [0.0, 0.05, 0.0, 0.0, 0.0]  # pusher above the T at the target pose: no shaping change
+    short = _state(at, 0.94)
+    stay = float(reward(short, short)) / (1 - cfg.discounting)  # forever at 0.94: never ends
+    finish = float(reward(short, _state(at, 0.95, True)))  # then nothing: the episode is over
     assert finish > stay
     # and the shaping pays for bringing the T toward its pose: at the same coverage, a step from 1 cm off to
     # the target is worth more than the step back
-    off = SimpleNamespace(obs={"state": at.at[2].set(0.01)}, metrics=short.metrics)
-    assert float(training_reward(off, short)) > float(training_reward(short, off))
+    off = _state([0.0, 0.05, 0.01, 0.0, 0.0], 0.94)
+    assert float(reward(off, short)) > float(reward(short, off))
+
+
+def test_ppos_shaping_weighs_a_tenth_of_either_tasks_arena_alike():
+    """The shaping's length scale is the same fraction of each scene's arena: bringing the T home from a tenth of
+    the arena's width away (the pusher riding along, 5 cm above it) pays the same on either task. The arenas, between
+    the walls' inner faces: the chapter's 0.78 m (walls at +-0.39 m), gym-pusht's 497 px (its wall segments at 5 and
+    506 px, radius 2; one pixel a millimetre here), 0.497 m."""
+    from mjx_pusht.train.ppo import PPOConfig
+
+    gain = {}
+    for task, width in (("chapter", 0.78), ("gym-pusht", 0.497)):
+        reward = PPOConfig(task=None if task == "chapter" else task, reset="task" if task == "chapter" else task).reward()
+        d = width / 10
+        home, off = _state([0.0, 0.05, 0.0, 0.0, 0.0], 0.5), _state([d, 0.05, d, 0.0, 0.0], 0.5)
+        gain[task] = float(reward(off, home)) - float(reward(home, home))
+    assert gain["chapter"] > 0 and gain["gym-pusht"] == pytest.approx(gain["chapter"], rel=1e-5)
+
+
+def test_ppo_on_gym_pushts_task_trains_on_gym_pushts_own_episodes():
+    """`train --algo ppo --task gym-pusht`: its episodes end where gym-pusht's own do (its success threshold, its
+    registered time limit), and the Brax adapter it trains on starts each table seed where gym-pusht's own
+    `reset(seed=seed)` does, in the observation a policy sees in gym-pusht itself (its state in the world frame)."""
+    pytest.importorskip("brax")
+    gym = pytest.importorskip("gymnasium")
+    pytest.importorskip("gym_pusht")
+    import jax
+
+    from mjx_pusht.envs.brax import BraxPushT
+    from mjx_pusht.model import gym_pusht as frame
+    from mjx_pusht.task.rules import wrap_angle
+    from mjx_pusht.train.ppo import PPOConfig
+
+    cfg = PPOConfig(task="gym-pusht", reset="gym-pusht")
+    peer = gym.make("gym_pusht/PushT-v0", obs_type="state")
+    episode = cfg.episode()
+    assert episode.success == peer.unwrapped.success_threshold and episode.max_steps == peer.spec.max_episode_steps
+    env = BraxPushT(backend="mjx-jax", max_worlds=8, table=64, task=cfg.task, reset_kind=cfg.reset, episode=episode)
+    s = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), 8))
+    seeds = np.asarray(s.info["seed"])
+    assert len(set(seeds.tolist())) > 1
+    for seed, obs in zip(seeds, np.asarray(s.obs)):
+        o, _ = peer.reset(seed=int(seed))
+        tee = frame.pose_to_world(o[None, 2:4], o[None, 4])[0]
+        assert np.abs(obs[0:2] - frame.to_world(o[None, 0:2])[0]).max() < 1e-5, seed
+        assert np.abs(obs[2:4] - tee[:2]).max() < 1e-5 and abs(wrap_angle(obs[4] - tee[2])) < 1e-5, seed
 
 
 def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
@@ -192,6 +241,37 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp
     args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "20480", "2"
     r = cli(*args, "--resume")  # nothing left to do is one line, not a crash inside Brax
     assert r.returncode == 1 and "already reached 20,480 env steps" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_a_ppo_policy_trained_on_gym_pushts_task_runs_in_gym_pusht_itself(tmp_path):
+    """A tiny `train --algo ppo --task gym-pusht` on the CPU writes a policy that `eval --backend gym-pusht` (gym-pusht
+    0.1.8 itself, pymunk) loads and runs on the same held-out seeds. It sees the same observation and commands the
+    same targets there (kept in gym-pusht's frame, as gym-pusht's action space keeps them): where its pusher never
+    moved the T, the pusher ends where the batch's episode ended it."""
+    pytest.importorskip("brax")
+    pytest.importorskip("gym_pusht")
+    out = tmp_path / "ppo"
+    r = cli("train", "--algo", "ppo", "--task", "gym-pusht", "--backend", "mjx-jax", "--envs", "8", "--batch", "8",
+            "--timesteps", "10240", "--iterations", "1", "--eval-envs", "8", "--hidden", "32,32", "--no-rerun",
+            "--record", "0", "--no-progress", "--out", str(out), "--max-steps", "50")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["config"]["task"] == summary["held_out"]["task"] == "gym-pusht"
+    assert summary["held_out"]["reset"] == "gym-pusht" and summary["held_out"]["success_coverage"] == 0.95
+    policy = out / "policy.msgpack"
+    r = cli("eval", "--task", "gym-pusht", "--backend", "gym-pusht", "--controller", f"policy:{policy}", "--seeds",
+            summary["held_out"]["seeds"], "--max-steps", "50", "--record", "0", "--no-rerun", "--no-progress",
+            "--out", str(tmp_path / "peer"))
+    assert r.returncode == 0, r.stderr
+    batch, peer = (pq.read_table(d / "per_episode.parquet").to_pydict() for d in (out / "eval", tmp_path / "peer"))
+    assert batch["seed"] == peer["seed"] and peer["episode_length"] == [50] * 8
+    still = [i for i in range(8) if all(abs(t[f"tee_final_{a}"][i] - t[f"start_{a}"][i]) < 1e-6
+                                        for t in (batch, peer) for a in ("x", "y", "yaw"))]
+    assert still, "every episode moved the T: nothing to compare the pusher on"
+    for i in still:
+        for a in ("x", "y"):
+            assert batch[f"pusher_final_{a}"][i] == pytest.approx(peer[f"pusher_final_{a}"][i], abs=1e-4), (i, a)
 
 
 def _moved(out) -> float:

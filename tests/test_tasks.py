@@ -64,15 +64,20 @@ def test_the_two_tasks_are_data_the_one_control_step_reads():
 
 
 def test_a_velocity_controller_commands_the_target_gym_pushts_pd_law_settles_to_at_that_velocity():
+    """... within gym-pusht's action space, its 512-pixel frame: a target past its edge is clipped there, as gym-pusht
+    (its backend, the drop-in, LeRobot) clips its actions."""
     from mjx_pusht.task.controllers import Random
 
     ctrl = TASKS["gym-pusht"].controller("random")
     assert ctrl.action_type == "target"
-    obs = {"state": np.array([[0.1, -0.2, 0.0, 0.0, 0.3]])}
     key = np.zeros((1, 2), np.uint32)
-    target, _ = ctrl.act(ctrl.init(key), obs, 5, key)
-    velocity, _ = Random().act(None, obs, 5, key)
-    np.testing.assert_allclose(target, obs["state"][:, 0:2] + 0.2 * velocity)  # kv / kp = 20 / 100 s
+    for pusher in ([0.0, 0.015], [0.1, -0.2]):  # the frame's centre; 3 cm inside its edge, the target 9 cm past it
+        obs = {"state": np.array([pusher + [0.0, 0.0, 0.3]])}
+        target, _ = ctrl.act(ctrl.init(key), obs, 5, key)
+        velocity, _ = Random().act(None, obs, 5, key)
+        lead = obs["state"][:, 0:2] + 0.2 * velocity  # kv / kp = 20 / 100 s
+        np.testing.assert_allclose(frame.to_px(target), np.clip(frame.to_px(lead), 0, 512), atol=1e-9)
+        assert np.array_equal(target, lead) == (pusher == [0.0, 0.015])
     assert LEAD == 0.2
 
 
@@ -120,7 +125,8 @@ def test_the_gym_pusht_backend_runs_gym_pushts_task_only():
 
 
 @pytest.mark.parametrize(("extra", "why"), [
-    (("--algo", "ppo", "--backend", "mjx-jax"), "--algo ppo trains on the chapter task"),  # not: "--teacher" unasked
+    (("--algo", "ppo", "--backend", "mjx-jax", "--goal", "random"), "--goal random trains a goal-conditioned policy "
+     "with DAgger"),  # not: "--teacher" unasked (PPO trains on gym-pusht's task, at its fixed goal)
     (("--backend", "gym-pusht"), "train rolls out on cpu, mjx-jax or mjx-warp"),  # before the banner, not after
 ])
 def test_train_refuses_on_gym_pushts_task_what_it_cannot_do_in_one_line(extra, why, tmp_path, capsys):

@@ -226,13 +226,18 @@ class MjxRunner:
         else:
             # A controller that looks: MJX-Warp's ray tracer renders the batch each control step. Its call is one
             # for the whole batch (custom_vmap): traced inside a vmapped scan's body it would be traced unbatched
-            # first and return every world's image to each, so this rollout scans the vmapped step instead.
-            from mjx_pusht.render.pixels import PixelsError, WarpRenderer
+            # first and return every world's image to each, so this rollout scans the vmapped step instead. Where
+            # Warp's renderer cannot serve (MJX-JAX; a program a device, since its render context is one GPU's), the
+            # raster renderer draws the same bytes in plain JAX ops (render/raster.py), as training's rollouts do.
+            if warp and n_dev == 1:
+                from mjx_pusht.render.pixels import WarpRenderer
 
-            if not warp or n_dev > 1:
-                raise PixelsError(f"{controller.name} looks at pixels, which MJX renders with MJX-Warp on one GPU: "
-                                  "use --backend mjx-warp on one device (or cpu)")
-            renderer = self._renderers[batch] = WarpRenderer(model, batch, controller.pixels)
+                renderer = WarpRenderer(model, batch, controller.pixels)
+            else:
+                from mjx_pusht.render.raster import Raster
+
+                renderer = Raster(model, controller.pixels)
+            self._renderers[batch] = renderer
 
             def batched(leaves, d0, qpos0, key, combo, drawn):
                 def step(outer, k):

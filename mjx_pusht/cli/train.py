@@ -63,8 +63,6 @@ def cmd_train(args) -> int:
     task = get_task(args.task)
     if args.algo == "ppo" and args.goal != "fixed":
         raise TrainError("--goal random trains a goal-conditioned policy with DAgger; PPO trains on the fixed goal")
-    if args.algo == "ppo" and task.name != "chapter":
-        raise TrainError(f"--algo ppo trains on the chapter task; --task {task.name} is DAgger's so far")
     if args.algo == "dagger" and args.teacher is None and task.name != "chapter":
         args.teacher = "expert"  # the paced teacher is the chapter expert's
     args.reset = task.check_reset(args.reset)
@@ -166,13 +164,14 @@ def _cmd_ppo(args, name: str, why: str, devices: list) -> int:
                     hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
                     eval_envs=args.eval_envs, seed=args.seed, reset=args.reset, act=args.ppo_act,
                     max_grad_norm=args.max_grad_norm, lr_schedule=args.lr_schedule, max_steps=args.max_steps,
-                    success_threshold=args.success_threshold, randomize=args.randomize)
+                    success_threshold=args.success_threshold, randomize=args.randomize,
+                    task=None if args.task == "chapter" else args.task)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)
     _restart(out, args)
     _check_rerun(args)
     banner = Banner("train")
-    print(f"backend: {name} ({why}); Brax PPO from {cfg.obs_type}: {cfg.envs} envs, {cfg.timesteps:,} env steps, "
-          f"held-out judgement {cfg.evals} times on seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
+    print(f"backend: {name} ({why}); Brax PPO from {cfg.obs_type} on the {cfg.the_task.name} task: {cfg.envs} envs, "
+          f"{cfg.timesteps:,} env steps, held-out judgement {cfg.evals} times on seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
     curve = train_ppo(cfg, name, out, resume=args.resume, progress=args.progress, minutes=args.minutes, keep=args.keep,
                       devices=len(devices))
     summary = write_summary(cfg, name, out, curve, args.rerun, method="ppo", kept=kept_row(curve, args.keep),

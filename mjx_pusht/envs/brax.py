@@ -11,7 +11,10 @@ batches them). The physics state (`State.pipeline_state`) is the functional env'
 Start poses come from a table drawn ahead on the host (task seeds `first_seed` ..
 `first_seed + table - 1`, reset.py), held on the device; `reset(rng)` picks a row of it.
 `info["seed"]` says which seed an episode started from, so any episode can be replayed by
-`eval`. `randomize={name: (lo, hi)}` draws each table seed's physics as `eval --randomize` draws it
+`eval`. `task` is the task's name (task/tasks.py): its scene, starts and episodes (the chapter's by default).
+An action is a velocity (m/s, +-1 per axis) on either task, as a trained policy's is (train/policy.py): on
+gym-pusht's, whose pusher takes targets, the target that moves it at that velocity (`Task.from_velocity`), as
+`eval` drives the saved policy there. `randomize={name: (lo, hi)}` draws each table seed's physics as `eval --randomize` draws it
 (model/randomize.py; held on the device beside the starts), its values in `info["physics"]`.
 Brax's own AutoResetWrapper restarts a done env from that env's *first* state (every episode of an
 env then starts the same); `wrap_for_training` is the same wrapper stack with a fresh start from the
@@ -66,6 +69,7 @@ from mjx_pusht.task.controllers import seed_key
 from mjx_pusht.task.episode import Episode
 from mjx_pusht.task.goals import with_goal
 from mjx_pusht.task.reset import start_poses
+from mjx_pusht.task.tasks import get as get_task
 
 OBS_TYPES = ("state", "keypoints")
 
@@ -73,11 +77,11 @@ OBS_TYPES = ("state", "keypoints")
 class BraxPushT(Env):
     """One PushT world as a Brax Env (state or keypoints observations; reward: coverage, or your `reward_fn`).
     `episode`: e.g. `tasks.get("chapter").episode(success_threshold=0.9, goal="random")`, random goals observed
-    beside the T (task/goals.with_goal)."""
+    beside the T (task/goals.with_goal); None: the task's own. `reset_kind` None: the task's own starts."""
 
-    def __init__(self, backend: str = "mjx-warp", obs_type: str = "state", reset_kind: str = "task",
-                 episode: Episode = Episode(), max_worlds: int = 4096, table: int = 65536, first_seed: int = 0,
-                 reward_fn=None, starts: np.ndarray | None = None, randomize=None):
+    def __init__(self, backend: str = "mjx-warp", obs_type: str = "state", reset_kind: str | None = None,
+                 episode: Episode | None = None, max_worlds: int = 4096, table: int = 65536, first_seed: int = 0,
+                 reward_fn=None, starts: np.ndarray | None = None, randomize=None, task: str = "chapter"):
         """`starts`: a (table, 5) array of starts (tee x, y, yaw, pusher x, y) to draw from instead of the task
         seeds' own (row i is still keyed and reported as seed `first_seed + i`)."""
         if obs_type not in OBS_TYPES:
@@ -87,7 +91,11 @@ class BraxPushT(Env):
         max_worlds, self.table = validate.positive_int("max_worlds", max_worlds), validate.positive_int("table", table)
         self.first_seed = validate.seed(first_seed, "first_seed")
         validate.seed(self.first_seed + self.table - 1, "first_seed + table - 1 (the table's last seed)")
-        self.env = PushTEnv(backend=backend, reset_kind=reset_kind, episode=episode, randomize=randomize)
+        self.task = get_task(task)
+        reset_kind = self.task.check_reset(reset_kind)
+        self.env = PushTEnv(backend=backend, reset_kind=reset_kind, action_type=self.task.action_type,
+                            episode=self.task.episode() if episode is None else episode, scene=self.task.scene(),
+                            randomize=randomize)
         self.obs_type, self.reward_fn = obs_type, reward_fn
         seeds = np.arange(self.first_seed, self.first_seed + self.table, dtype=np.int64)
         if starts is None:
@@ -136,7 +144,7 @@ class BraxPushT(Env):
         p = state.pipeline_state
         action, record = action_check.record_update(state.info["bad_action"], jnp.asarray(action), ~p.carry["ep"]["done"],
                                                     p.step, jnp)
-        s = self.env.advance_one(p, action)
+        s = self.env.advance_one(p, self.task.from_velocity(action, p.obs))
         reward = s.reward if self.reward_fn is None else self.reward_fn(p, s)
         return self._brax(s, reward, {**state.info, "bad_action": record}, state.metrics)
 

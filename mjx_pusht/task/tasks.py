@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 
 from mjx_pusht.errors import ConfigError
+from mjx_pusht.model import gym_pusht as frame
 from mjx_pusht.model.gym_pusht import KP, KV
 from mjx_pusht.task.controller_base import Wrapper
 from mjx_pusht.task.controllers import Controller
@@ -32,6 +33,18 @@ from mjx_pusht.task.rules import SUCCESS_COVERAGE, array_namespace
 # s: a PD-tracked pusher (gym-pusht's law, kp 100, kv 20) moving at velocity v settles this far behind its target,
 # so a velocity command v becomes the target pusher + LEAD v
 LEAD = KV / KP
+FRAME_PX = 512.0  # gym-pusht's action space: targets within its 512-pixel frame (the drop-in's TARGET_BOUNDS)
+
+
+def lead_target(pusher, velocity):
+    """The target pusher + LEAD v, kept in gym-pusht's frame as gym-pusht's action space keeps it (its backend and
+    the drop-in clip every target so): unclipped, a policy's target far outside sent the pusher a metre off on the
+    batch where gym-pusht stopped it at the frame's edge. A target inside is pusher + LEAD v to the bit."""
+    xp = array_namespace(pusher)
+    target = pusher + LEAD * xp.astype(xp.asarray(velocity), pusher.dtype)
+    px = frame.to_px(target, xp)
+    inside = xp.all((px >= 0.0) & (px <= FRAME_PX), axis=-1)
+    return xp.where(inside[..., None], target, frame.to_world(xp.clip(px, 0.0, FRAME_PX), xp))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,7 +96,7 @@ class Task:
         """A velocity command as this task's scene takes it: itself, or (targets) the target that reaches it."""
         if self.action_type != "target":
             return action
-        return obs["state"][..., 0:2] + LEAD * action
+        return lead_target(obs["state"][..., 0:2], action)
 
     def controller(self, spec: str, *, action: str | None = None, frame_skip: int = 10, goal: str = "fixed") -> Controller:
         """The controller `spec` names (`expert`: this task's expert), commanding what this task's scene takes; for
@@ -127,7 +140,8 @@ def get(name: str) -> Task:
 @dataclasses.dataclass(frozen=True, eq=False)
 class AsTargets(Wrapper):
     """A velocity (or position) controller on a scene whose pusher takes targets: a velocity v becomes the target
-    pusher + LEAD v that gym-pusht's PD law settles to moving at v; a position is the target itself."""
+    pusher + LEAD v (`lead_target`: kept in gym-pusht's frame) that gym-pusht's PD law settles to moving at v; a
+    position is the target itself."""
 
     action_type: str = "target"
 
@@ -135,9 +149,7 @@ class AsTargets(Wrapper):
         action, carry = self.inner.act(carry, obs, t, key)
         if self.inner.action_type == "position":
             return action, carry
-        xp = array_namespace(obs["state"])
-        pusher = obs["state"][..., 0:2]
-        return pusher + LEAD * xp.astype(xp.asarray(action), pusher.dtype), carry
+        return lead_target(obs["state"][..., 0:2], action), carry
 
 
 def as_targets(ctrl: Controller) -> Controller:

@@ -8,7 +8,10 @@ control steps) on held-out seeds, by the same code the `policy:PATH` controller 
 The training reward, per control step (`training_reward`):
 
     r = (coverage(s') - 1) + SUCCESS_BONUS * success(s') + SHAPING * (phi(s') - phi(s))
-    phi(s) = -(|tee position error| / 0.1 m + |tee yaw error| / 1 rad + |pusher to the T| / 0.1 m) / 3
+    phi(s) = -(|tee position error| / L + |tee yaw error| / 1 rad + |pusher to the T| / L) / 3
+
+L is 0.1 m on the chapter's scene (`shaping_length`: its arena's width over 7.8) and the same fraction of
+gym-pusht's (0.064 m), so the shaping weighs a start's distance from the goal alike on either task (--task).
 
 The first term is the env's own reward (the coverage, what gym-pusht pays) less 1: a cost for every
 step not yet covered. Success ends the episode, so a reward of plain coverage made *not* succeeding
@@ -80,17 +83,20 @@ class PPOConfig:
     # held 99.3-100% from their third judgement on, epoch KL <= 0.14.
     max_grad_norm: float | None = 1.0
     lr_schedule: str | None = None  # "adaptive-kl": Brax's ADAPTIVE_KL, the rate /1.5 or x1.5 toward desired_kl 0.01
-    success_threshold: float | None = None  # the coverage an episode succeeds at; None: the chapter task's (0.95)
+    success_threshold: float | None = None  # the coverage an episode succeeds at; None: the task's (0.95)
     # Physics drawn per episode from its seed in training (the Brax adapter's table) and every judgement, as DAgger's
     # (DaggerConfig.randomize); None: the scene's own (a resume file from before this setting existed still matches)
     randomize: tuple | None = None
+    # The task trained and judged on (task/tasks.TASKS), as DaggerConfig.task; None: the chapter's (a resume file
+    # from before this setting existed still matches). The policy acts in velocities on either task (envs/brax.py).
+    task: str | None = None
 
     def __post_init__(self) -> None:
         if self.randomize is not None:
             from mjx_pusht.model.randomize import check
-            from mjx_pusht.model.scene import SceneSpec
 
-            object.__setattr__(self, "randomize", check(self.randomize, SceneSpec(), "--randomize") or None)
+            object.__setattr__(self, "randomize", check(self.randomize, self.the_task.scene(), "--randomize") or None)
+        self.the_task.check_reset(self.reset)
         if self.act not in PPO_ACTS:
             raise ConfigError(f"PPO acts with its Gaussian's {' or '.join(PPO_ACTS)}, not {self.act!r}")
         if self.obs_type not in ("state", "keypoints"):
@@ -114,11 +120,18 @@ class PPOConfig:
                               f"(--batch x {self.num_minibatches} minibatches x unroll {self.unroll_length}) per "
                               f"judgement ({self.evals})")
 
-    def episode(self):
-        """The episodes trained and judged on: the chapter task's, at `max_steps` and `success_threshold`."""
+    @property
+    def the_task(self):
         from mjx_pusht.task.tasks import get
 
-        return get("chapter").episode(max_steps=self.max_steps, success_threshold=self.success_threshold)
+        return get(self.task or "chapter")
+
+    def episode(self):
+        """The episodes trained and judged on: the task's, at `max_steps` and `success_threshold`."""
+        return self.the_task.episode(max_steps=self.max_steps, success_threshold=self.success_threshold)
+
+    def reward(self):  # `training_reward` at this task's scene's shaping length
+        return lambda prev, s: training_reward(prev, s, shaping_length(self.the_task.variant))
 
     def held_out_seeds(self) -> np.ndarray:
         return held_out_seeds(self.eval_envs)  # the same held-out task seeds as DAgger's
@@ -128,8 +141,19 @@ class PPOConfig:
         return TABLE + np.arange(self.validation_envs or max(8, self.eval_envs // 4), dtype=np.int64)
 
 
-def training_reward(prev, s):
-    """The reward PPO is trained on (module docstring), from one world's env states before and after a step."""
+def shaping_length(variant: str) -> float:
+    """The shaping's length scale on a scene variant, m: 0.1 between the chapter's walls, 0.78 m apart; the same
+    fraction of gym-pusht's, 497 px (mm) apart, 0.064 (its T and pusher are the chapter's: its arena is smaller)."""
+    from mjx_pusht.model import gym_pusht as frame
+    from mjx_pusht.task.rules import WORKSPACE_HALF
+
+    lo, hi = frame.WALL_INNER_PX
+    return 0.1 if variant == "chapter" else 0.1 * (hi - lo) * frame.PX / (2 * WORKSPACE_HALF)
+
+
+def training_reward(prev, s, length: float = 0.1):
+    """The reward PPO is trained on (module docstring), from one world's env states before and after a step;
+    `length`: the shaping's length scale (`shaping_length`), the chapter's by default."""
     import jax.numpy as jnp
 
     from mjx_pusht.task.rules import distance_to_tee, wrap_angle
@@ -137,8 +161,8 @@ def training_reward(prev, s):
     def phi(state):
         x = state.obs["state"]
         pose = x[2:5]
-        far = jnp.linalg.norm(pose[:2]) / 0.1 + jnp.abs(wrap_angle(pose[2])) / 1.0
-        reach = distance_to_tee(x[0:2], pose) / 0.1
+        far = jnp.linalg.norm(pose[:2]) / length + jnp.abs(wrap_angle(pose[2])) / 1.0
+        reach = distance_to_tee(x[0:2], pose) / length
         return -(far + reach) / 3.0
 
     m = s.metrics
@@ -177,7 +201,8 @@ def _judge(env, cfg: PPOConfig):
 
         def body(s, _):
             obs = s.obs[cfg.obs_type]
-            return env.advance_one(s, ppo_action(dense, meta, obs, s.key, s.step, noise)), None
+            action = cfg.the_task.from_velocity(ppo_action(dense, meta, obs, s.key, s.step, noise), s.obs)
+            return env.advance_one(s, action), None
 
         s, _ = jax.lax.scan(body, s, None, cfg.max_steps)
         return s.metrics["success"], s.metrics["coverage"], jnp.isfinite(s.obs[cfg.obs_type]).all()
@@ -254,10 +279,12 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
         raise TrainError(f"--resume: the run in {out} already reached {done:,} env steps and {len(curve) - 1} "
                          "judgements; raise --timesteps and --iterations to go on")
     episode = cfg.episode()
+    task = cfg.the_task
     env = BraxPushT(backend=backend, obs_type=cfg.obs_type, reset_kind=cfg.reset, episode=episode,
-                    max_worlds=max(cfg.envs, 128), table=TABLE, reward_fn=training_reward, randomize=cfg.randomize)
-    judge_env = PushTEnv(backend=backend, reset_kind=cfg.reset, episode=episode, keep_states=False,
-                         randomize=cfg.randomize)
+                    max_worlds=max(cfg.envs, 128), table=TABLE, reward_fn=cfg.reward(), randomize=cfg.randomize,
+                    task=task.name)
+    judge_env = PushTEnv(backend=backend, reset_kind=cfg.reset, action_type=task.action_type, episode=episode,
+                         scene=task.scene(), keep_states=False, randomize=cfg.randomize)
     judge = _judge(judge_env, cfg)
     ckpt.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter() - (curve[-1]["wall_seconds"] if curve else 0.0)
