@@ -202,21 +202,6 @@ EOS
           # and drawn physics beside the fixed ones, 96 x 96 images rendered in every step (one call, foreground)
           python3 -m benchmarks.env_loop --envs 16384,65536 --obs pixels --cases scan_autoreset,scan_autoreset_randomized,scan_autoreset_goals,scan_autoreset_goals_randomized \
             --json "$OUT/results/$tier-env-loop-goals-randomized-pixels.json" > "$OUT/$stage.log" 2>&1 ;;
-  ppo-gym) # issue 53's PPO from state on gym-pusht's task: seed SEED (default 0), 10 minutes on one GPU (train-seeds'
-          # ppo recipe with TASK=gym-pusht; ~11.5 minutes with compiling and its eval), then its kept policy in gym-pusht
-          # itself (eval --backend gym-pusht, pymunk on this host's cores) on the first GYM_SEEDS (default 1000) held-out
-          # seeds, one after another in their own session; watch both with watch-seeds NAMES="ppo-gym-train ppo-gym"
-          mkdir -p "$HOME/runs"; cat > "$HOME/ppo-gym.sh" <<EOS
-cd "$PWD"
-TASK=gym-pusht RECIPE=ppo SEEDS=${SEED:-0} NAME=ppo-gym-train WAIT=1 bash benchmarks/gpu.sh train-seeds $tier
-sleep 2; while kill -0 \$(cat $HOME/runs/seeds-ppo-gym-train.pid) 2>/dev/null; do sleep 5; done
-python3 -m mjx_pusht eval --task gym-pusht --backend gym-pusht --seeds 1000000000:$((1000000000 + ${GYM_SEEDS:-1000})) \
-  --controller policy:$HOME/runs/seeds-ppo-gym-train/seed-${SEED:-0}/policy.msgpack --no-rerun --no-progress \
-  --record 0 --out $HOME/runs/seeds-ppo-gym
-EOS
-          (cd "$HOME/runs" && setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' \
-            "$HOME/runs/seeds-ppo-gym.pid" bash "$HOME/ppo-gym.sh" > "$HOME/runs/seeds-ppo-gym.log" 2>&1 < /dev/null &)
-          sleep "${WAIT:-60}"; cp "$HOME/runs/seeds-ppo-gym.log" "$OUT/" ;;
   issue53) # issue 53's runs in one hold of 4 GPUs, a GPU each, in the background (watch-seeds, back to back:
           # NAMES="ppo-gym-0 ppo-gym-1 bench" first, then NAMES="px-gym-0 px-gym-1"): GPUs 0 and 1 DAgger from pixels on
           # gym-pusht's task, seeds 0 and 1, MINUTES (default 16) each; GPUs 2 and 3 PPO from state on it, seeds 0 and 1

@@ -2,7 +2,7 @@
 
 - raster: render/raster.py's `state_images` (plain JAX ops: MJX's kinematics, then each pixel's highest geom),
   jitted over the batch, on JAX's default device;
-- warp: MJX-Warp's ray tracer (render/pixels.py `state_images` of an mjx-warp env: the same states in, one jitted
+- warp: MJX-Warp's ray tracer (render/pixels.py `WarpRenderer` on an mjx-warp env's Data: the same states in, one jitted
   call over the batch), on Warp's CUDA device, or its CPU device where there is no GPU;
 - cpu: MuJoCo C's OpenGL renderer (`CpuRenderer`) over the same qpos, one image after another (needs GL: EGL or
   OSMesa; a GPU machine without it leaves it out with --renderers raster,warp).
@@ -29,6 +29,18 @@ from benchmarks.render import _rate
 RENDERERS = ("raster", "warp", "cpu")
 
 
+def _warp_images(env, n: int):
+    """MJX-Warp's ray tracer on (n, 5) states, as the env renders a step's Data (pixels.state_images is MuJoCo C's
+    since training draws with the raster: with it, this benchmark asked a GPU machine for OpenGL and failed)."""
+    import jax
+
+    from mjx_pusht.render.pixels import WarpRenderer
+
+    q0, renderer, d0 = np.asarray(env.model.qpos0, np.float64), WarpRenderer(env.model, n, env.pixels), env.template(n)
+    return lambda states: jax.vmap(lambda q: renderer(d0.replace(qpos=q)))(
+        env.layout.qpos_of_state(q0, states.astype(env.runner.dtype)))
+
+
 def measure(task: str, n: int, size: int, renderers: list[str]) -> dict:
     import jax
     import jax.numpy as jnp
@@ -46,7 +58,7 @@ def measure(task: str, n: int, size: int, renderers: list[str]) -> dict:
         fn = jax.jit(raster.state_images(env))
         fns["raster"] = lambda: jax.block_until_ready(fn(jnp.asarray(states)))
     if "warp" in renderers:
-        wfn = jax.jit(pixels.state_images(PushTEnv.for_task(task, backend="mjx-warp", pixels=size), n))
+        wfn = jax.jit(_warp_images(PushTEnv.for_task(task, backend="mjx-warp", pixels=size), n))
         fns["warp"] = lambda: jax.block_until_ready(wfn(jnp.asarray(states)))
     if "cpu" in renderers:
         cpu = pixels.CpuRenderer(env.model, size)

@@ -186,21 +186,29 @@ def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
 
 
 @pytest.mark.slow
-def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp_path):
+def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval_and_runs_in_gym_pusht_itself(tmp_path):
+    """One tiny `train --algo ppo --task gym-pusht` on the CPU (Brax's trainer compiled once: 2-6 minutes here):
+    Brax's own trainer, its judgements, --keep, --resume; and the policy `eval --backend gym-pusht` (gym-pusht 0.1.8
+    itself, pymunk) loads and runs on the same held-out seeds. The chapter's task differs only in the task's data
+    (scene, starts, episode: the adapter tests above and test_autoreset.py; the reward's unit tests above)."""
     pytest.importorskip("brax")
+    pytest.importorskip("gym_pusht")
     out = tmp_path / "ppo"
     # 50-step episodes: each judgement and the eval cost a sixth of the task's 300 (this test's time is MJX on a CPU)
-    args = ["train", "--algo", "ppo", "--backend", "mjx-jax", "--envs", "8", "--batch", "8", "--timesteps", "10240",
-            "--iterations", "1", "--eval-envs", "4", "--hidden", "32,32", "--no-rerun", "--record", "0",
-            "--no-progress", "--out", str(out), "--keep", "best", "--max-steps", "50"]
+    args = ["train", "--algo", "ppo", "--task", "gym-pusht", "--backend", "mjx-jax", "--envs", "8", "--batch", "8",
+            "--timesteps", "10240", "--iterations", "1", "--eval-envs", "8", "--hidden", "32,32", "--no-rerun",
+            "--record", "0", "--no-progress", "--out", str(out), "--keep", "best", "--max-steps", "50"]
     r = cli(*args)
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
+    assert summary["config"]["task"] == summary["held_out"]["task"] == "gym-pusht"
+    assert summary["held_out"]["reset"] == "gym-pusht" and summary["held_out"]["success_coverage"] == 0.95
+    _runs_alike_in_gym_pusht_itself(out, summary, tmp_path / "peer")
     assert summary["method"] == "ppo" and [c["env_steps"] for c in summary["curve"]] == [0, 10240]
     assert summary["config"]["max_grad_norm"] == 1.0  # clipped by default: unclipped, PPO's curves collapsed (issue 40)
     # --max-steps reaches the trainer, its judge and the eval after it: every held-out episode ran 50 steps
     assert summary["config"]["max_steps"] == summary["held_out"]["max_steps"] == 50
-    assert pq.read_table(out / "eval" / "per_episode.parquet").to_pydict()["episode_length"] == [50] * 4
+    assert pq.read_table(out / "eval" / "per_episode.parquet").to_pydict()["episode_length"] == [50] * 8
     # every judgement: both actions on the held-out seeds, the saved one's on the validation seeds, and after
     # training, Brax's own loss metrics of the epoch that made it
     for row in summary["curve"]:
@@ -243,28 +251,15 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval(tmp
     assert r.returncode == 1 and "already reached 20,480 env steps" in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
-@pytest.mark.slow
-def test_a_ppo_policy_trained_on_gym_pushts_task_runs_in_gym_pusht_itself(tmp_path):
-    """A tiny `train --algo ppo --task gym-pusht` on the CPU writes a policy that `eval --backend gym-pusht` (gym-pusht
-    0.1.8 itself, pymunk) loads and runs on the same held-out seeds. It sees the same observation and commands the
-    same targets there (kept in gym-pusht's frame, as gym-pusht's action space keeps them): where its pusher never
-    moved the T, the pusher ends where the batch's episode ended it."""
-    pytest.importorskip("brax")
-    pytest.importorskip("gym_pusht")
-    out = tmp_path / "ppo"
-    r = cli("train", "--algo", "ppo", "--task", "gym-pusht", "--backend", "mjx-jax", "--envs", "8", "--batch", "8",
-            "--timesteps", "10240", "--iterations", "1", "--eval-envs", "8", "--hidden", "32,32", "--no-rerun",
-            "--record", "0", "--no-progress", "--out", str(out), "--max-steps", "50")
+def _runs_alike_in_gym_pusht_itself(out, summary, peer_out) -> None:
+    """The run's policy in gym-pusht itself on the run's held-out seeds sees the same observation and commands the
+    same targets (kept in gym-pusht's frame, as gym-pusht's action space keeps them): where its pusher never moved
+    the T, the pusher ends where the batch's episode ended it."""
+    r = cli("eval", "--task", "gym-pusht", "--backend", "gym-pusht", "--controller", f"policy:{out / 'policy.msgpack'}",
+            "--seeds", summary["held_out"]["seeds"], "--max-steps", "50", "--record", "0", "--no-rerun",
+            "--no-progress", "--out", str(peer_out))
     assert r.returncode == 0, r.stderr
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["config"]["task"] == summary["held_out"]["task"] == "gym-pusht"
-    assert summary["held_out"]["reset"] == "gym-pusht" and summary["held_out"]["success_coverage"] == 0.95
-    policy = out / "policy.msgpack"
-    r = cli("eval", "--task", "gym-pusht", "--backend", "gym-pusht", "--controller", f"policy:{policy}", "--seeds",
-            summary["held_out"]["seeds"], "--max-steps", "50", "--record", "0", "--no-rerun", "--no-progress",
-            "--out", str(tmp_path / "peer"))
-    assert r.returncode == 0, r.stderr
-    batch, peer = (pq.read_table(d / "per_episode.parquet").to_pydict() for d in (out / "eval", tmp_path / "peer"))
+    batch, peer = (pq.read_table(d / "per_episode.parquet").to_pydict() for d in (out / "eval", peer_out))
     assert batch["seed"] == peer["seed"] and peer["episode_length"] == [50] * 8
     still = [i for i in range(8) if all(abs(t[f"tee_final_{a}"][i] - t[f"start_{a}"][i]) < 1e-6
                                         for t in (batch, peer) for a in ("x", "y", "yaw"))]

@@ -97,7 +97,8 @@ TWO_CPU_DEVICES = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_
 
 @pytest.mark.slow
 def test_sweep_sharded_over_two_cpu_devices_gives_the_same_rows():
-    # In float64 the sharded batch reproduces the unsharded one to 1e-12 on every column.
+    # A program a device, each on its half of the seeds (launch.per_device: XLA's compile of MJX-JAX's rollout
+    # shard_map'd over 4 H200s crashed); in float64 it reproduces one device's batch to 1e-12 on every column.
     # (In float32 any change of compiled program, a batch size as much as a sharding,
     # moves post-contact poses by ~1e-4: see docs/study/fidelity.md, "Determinism".)
     r = subprocess.run([sys.executable, "-c", SHARD_SCRIPT, "jax"], capture_output=True, text=True, env=TWO_CPU_DEVICES)
@@ -107,8 +108,8 @@ def test_sweep_sharded_over_two_cpu_devices_gives_the_same_rows():
 @pytest.mark.slow
 @pytest.mark.warp
 def test_mjx_warp_sharded_over_two_devices_steps_each_shard_alone_and_gives_identical_rows():
-    # MJX-Warp is an FFI call that XLA cannot partition; under shard_map each device runs
-    # only its own worlds. Warp's kernels are per world, so the rows are bit-identical.
+    # MJX-Warp is an FFI call that XLA cannot partition: a program a device, each on its own worlds.
+    # Warp's kernels are per world, so the rows are bit-identical.
     r = subprocess.run([sys.executable, "-c", SHARD_SCRIPT, "warp"], capture_output=True, text=True, env=TWO_CPU_DEVICES)
     assert "SHARDED_OK" in r.stdout, r.stderr[-2000:]
 

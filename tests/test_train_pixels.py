@@ -62,6 +62,31 @@ def test_a_pixel_run_is_judged_alike_by_its_own_rollout_and_by_eval_which_render
     assert summary["curve"][-1]["coverage"] == np.mean(rows["final_coverage"])
 
 
+@pytest.mark.slow  # 2 MJX-JAX programs compiled on the CPU
+def test_on_mjx_jax_eval_shows_a_pixel_policy_the_raster_images_training_rolled_it_out_on(run):
+    """Where MJX-Warp's renderer cannot serve (MJX-JAX; a program a device), eval's backend draws a pixel
+    controller's images with the raster renderer, as DAgger's rollouts do: the same episodes, verdict by verdict."""
+    from dataclasses import replace
+
+    from mjx_pusht import Scenario, SceneSpec, make_backend
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.train.dagger import DaggerConfig, Rollouts
+
+    summary = json.loads((run / "summary.json").read_text())
+    cfg = DaggerConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in summary["config"].items()})
+    cfg = replace(cfg, max_steps=25)
+    params, meta = load_checkpoint(run / "policy.msgpack")
+    seeds = np.arange(1_000_000_000, 1_000_000_004)
+    rows = make_backend("mjx-jax", Scenario(SceneSpec(), reset=cfg.reset, controller=load(f"policy:{run / 'policy.msgpack'}"),
+                                            episode=cfg.episode())).run(seeds)
+    env = PushTEnv(backend="mjx-jax", reset_kind=cfg.reset, pixels=96, raster=True, keep_states=False,
+                   episode=cfg.episode())
+    norm = (np.asarray(meta["in_mean"]), np.asarray(meta["in_std"]))
+    trained = Rollouts(env, cfg)(params, norm, seeds, 0.0, 99, learn=0)[2]
+    np.testing.assert_allclose(rows.episode["coverage"], trained["coverage"], atol=1e-4)
+    assert [bool(x) for x in rows.episode["success"]] == [bool(x) for x in trained["success"]]
+
+
 def _assert_rendered_again_as_shown(env):
     import jax
 

@@ -1,4 +1,4 @@
-"""How one compiled rollout is laid over this process's devices: one device, shard_map, or a program per GPU.
+"""How one compiled rollout is laid over this process's devices: one program on one device, or a program per device.
 
 Each strategy returns `launch(qpos0, key, combo, drawn) -> host arrays` for a fixed batch shape (`drawn`: each
 row's physics factors, (n, k), k = 0 when nothing is randomised), and the time it spent compiling.
@@ -20,11 +20,12 @@ def _inputs(n: int, nq: int, dtype, k: int):
 
 
 def per_device(batched, devices, make_leaves, make_data, per_dev: int, nq: int, dtype, k: int):
-    """One single-device program per GPU, each run from its own thread on its own slice of the batch.
+    """One single-device program per device, each run from its own thread on its own slice of the batch.
 
     XLA cannot partition MJX-Warp's FFI call, and compiling it under shard_map crashed XLA on a
-    2 x H200 host (segfault in backend compile), while the single-device program is the one
-    every other path runs.
+    2 x H200 host (segfault in backend compile); MJX-JAX's rollout shard_map'd over 4 H200s crashed XLA's
+    compile too (jax 0.11.2, notebook lead12), while the single-device program is the one every other path runs.
+    Rows do not depend on the rows beside them, so the table is the one-device table.
     """
     import jax
 
@@ -51,26 +52,15 @@ def per_device(batched, devices, make_leaves, make_data, per_dev: int, nq: int, 
     return launch, time.perf_counter() - t0
 
 
-def one_program(batched, devices, leaves, d0, batch: int, nq: int, dtype, k: int):
-    """One program: on one device, or shard_map'd over several so each steps only its own worlds."""
+def one_program(batched, device, leaves, d0, batch: int, nq: int, dtype, k: int):
+    """One program on one device."""
     import jax
 
     t0 = time.perf_counter()
     fn = functools.partial(batched, leaves, d0)  # model and data as constants of the program
-    sharding = None
-    if len(devices) > 1:
-        from jax.sharding import Mesh, NamedSharding, PartitionSpec
-
-        sharding = NamedSharding(Mesh(np.array(devices), ("seeds",)), PartitionSpec("seeds"))
-        # check_vma is off because MJX-Warp's FFI drops the varying-axis type of its outputs,
-        # which lax.scan then rejects as a carry mismatch (mujoco#3426).
-        fn = jax.shard_map(fn, mesh=sharding.mesh, in_specs=(sharding.spec,) * 4, out_specs=sharding.spec,
-                           check_vma=False)
-    args = _inputs(batch, nq, dtype, k)
-    prog = jax.jit(fn).lower(*(args if sharding is None else jax.device_put(args, sharding))).compile()
+    prog = jax.jit(fn).lower(*jax.device_put(_inputs(batch, nq, dtype, k), device)).compile()
 
     def launch(*rows):
-        args = rows if sharding is None else jax.device_put(rows, sharding)
-        return jax.device_get(prog(*args))
+        return jax.device_get(prog(*jax.device_put(rows, device)))
 
     return launch, time.perf_counter() - t0

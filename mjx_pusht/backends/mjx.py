@@ -252,11 +252,11 @@ class MjxRunner:
         if n_dev > 1 and batch % n_dev:
             raise BackendError(f"a batch of {batch} does not divide over {n_dev} devices")
         per_dev = batch // n_dev
-        if warp and n_dev > 1:
+        if n_dev > 1:
             launch, seconds = launching.per_device(batched, self.devices, grid.leaves_on, lambda dev, n: self.initial_data(
                 n, dev), per_dev, model.nq, self.dtype, grid.n_drawn)
         else:
-            launch, seconds = launching.one_program(batched, self.devices, grid.leaves_on(), self.initial_data(
+            launch, seconds = launching.one_program(batched, self.devices[0], grid.leaves_on(), self.initial_data(
                 per_dev, self.devices[0]), batch, model.nq, self.dtype, grid.n_drawn)
         self.compile_seconds += seconds
         return launch

@@ -73,7 +73,9 @@ def cmd_train(args) -> int:
     _method_settings(args, name)
     from mjx_pusht.train.devices import check_divides, training_devices
 
-    devices = training_devices(args.devices, name)
+    # PPO: one device unless asked. Brax's pmapped training step segfaulted in XLA's compile on 2 and 4 H200s
+    # (jax 0.11.2, both MJX backends; notebook lead12), where one device trains: a crash must not be the default.
+    devices = training_devices(1 if args.algo == "ppo" and args.devices is None and name != "cpu" else args.devices, name)
     if args.algo == "ppo":
         check_divides(devices, envs=args.envs, batch=args.batch or 256)  # Brax gives each device its share of both
         return _cmd_ppo(args, name, why, devices)
