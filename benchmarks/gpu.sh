@@ -171,7 +171,8 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
   train-scaling) # one run each on DEVICES (default 1,2,4) GPUs of this host, the same run otherwise (issue 56;
           # benchmarks/train_scaling.py: control steps/s during training, x one GPU, and minutes to GOAL held-out, in
           # scaling.json/.md): RECIPE ppo (Brax PPO from state, 3 minutes) or dagger-state (DAgger from state, 5
-          # minutes); DAgger from pixels trains on one GPU so far (Warp's render context is one GPU's). Started in its
+          # minutes). PPO on 2 and 4 H200s segfaulted in XLA's compile of Brax's pmap (jax 0.11.2, notebook lead12):
+          # try dagger-state first, and PPO with the pinned jax carried (notebook lead12). Started in its
           # own session like train-seeds (about 5-7 minutes a run with compiling and eval), then
           # `watch-seeds NAMES=scaling-RECIPE` copies back the runs and scaling.json.
           run=$HOME/runs/seeds-scaling-${RECIPE:?RECIPE=ppo or dagger-state}; mkdir -p "$run"

@@ -194,7 +194,8 @@ def test_the_fit_teaches_the_pose_reader_the_pose_each_image_shows(env):
         return np.column_stack([r.uniform(-0.36, 0.36, (n, 2)), r.uniform(-0.27, 0.27, (n, 2)),
                                 r.uniform(-np.pi, np.pi, n)])
 
-    cfg = DaggerConfig(obs_type="pixels_agent_pos", batch=32, image_batch=16, fit_steps=150, hidden=(16,),
+    # 70 steps: the reader's error 47 mm against the blind 113 (measured 2026-11-26; 150 steps cost the suite 100 s)
+    cfg = DaggerConfig(obs_type="pixels_agent_pos", batch=32, image_batch=16, fit_steps=70, hidden=(16,),
                        max_samples=2048)
     learner = Learner(cfg, env.images(cfg.image_batch))
     train = states(2048, 0)
