@@ -23,9 +23,17 @@ from pathlib import Path
 
 STAMP = r"INFO (\d{4}-\d\d-\d\d \d\d:\d\d:\d\d) "
 START = re.compile(STAMP + r".*Start offline training")
-STEP = re.compile(STAMP + r".*? step:(\d+) .*?loss:([0-9.eE+-]+)")
+# LeRobot writes counts past 999 as format_big_number does ("step:5K", "step:1.2M"): the step of a log line is
+# that rounding; an eval's step ("Eval policy at step 5200") is exact
+STEP = re.compile(STAMP + r".*? step:(\d+(?:\.\d+)?[KMBT]?) .*?loss:([0-9.eE+-]+)")
 EVAL_AT = re.compile(STAMP + r".*Eval policy at step (\d+)")
 OVERALL = re.compile(STAMP + r".*Suite overall aggregated: (\{.*\})\s*$")
+
+
+def _count(text: str) -> int:
+    """'900' -> 900, '5K' -> 5000, '1.2M' -> 1200000: the inverse of LeRobot's format_big_number, to its rounding."""
+    scale = {"K": 10**3, "M": 10**6, "B": 10**9, "T": 10**12}.get(text[-1], 1)
+    return round(float(text.rstrip("KMBT")) * scale)
 
 
 def _t(stamp: str) -> datetime:
@@ -46,11 +54,12 @@ def parse_run(logs: list[Path]) -> dict:
             elif start is None:
                 continue
             elif m := STEP.search(line):
-                last_step = int(m[2])
-                losses.append({"step": last_step, "loss": float(m[3])})
+                last_step = max(last_step, _count(m[2]))
+                losses.append({"step": _count(m[2]), "loss": float(m[3])})
                 end_s = (_t(m[1]) - start).total_seconds()
             elif m := EVAL_AT.search(line):
                 step_at_eval = int(m[2])
+                last_step = max(last_step, step_at_eval)
             elif (m := OVERALL.search(line)) and step_at_eval is not None:
                 o = ast.literal_eval(m[2])  # LeRobot logs the dict's repr
                 end_s = (_t(m[1]) - start).total_seconds()

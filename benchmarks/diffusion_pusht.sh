@@ -40,11 +40,13 @@ OUT=${OUT:-outputs/bench-diffusion}
 RUNS=${RUNS:-$HOME/diffusion}  # the machine's disk: demos, runs, logs (gone with the hold)
 PY=${PY:-python3}
 SIZES=${SIZES:-200 2000}
-STEPS=${STEPS:-30000}            # the whole run's updates (the cosine schedule's length): size it with `rate`
+STEPS=${STEPS:-30000}            # the whole run's updates (the cosine schedule's length): size it with `rate`, or
+                                 # `rated`: each size's STEPS, EVAL_FREQ and SAVE_FREQ from the `rate` stage's JSON
 MINUTES=${MINUTES:-10}           # the training minutes `rate` sizes STEPS for (a hold's 30 take setup and evals too)
 RATE_STEPS=${RATE_STEPS:-400}
 SAVE_FREQ=${SAVE_FREQ:-2000}     # updates between checkpoints: size with `rate` so a hold's end loses a minute or two
 EVAL_FREQ=${EVAL_FREQ:-3000}     # the curve's points
+POINTS=${POINTS:-5}              # the curve's points `rate` sizes EVAL_FREQ for
 EVAL_EPISODES=${EVAL_EPISODES:-50}
 DOWN_DIMS=${DOWN_DIMS:-128,256,512}  # 28.5 M parameters, a 326 MiB resume state; LeRobot's pusht run: 512,1024,2048
                                      # (263 M, 3 GiB: no hold could carry it on)
@@ -73,11 +75,15 @@ env_args() {
     --eval.n_episodes="$EVAL_EPISODES" --eval.batch_size="$EVAL_EPISODES" --eval.use_async_envs=false
 }
 
-detach() {  # NAME CMD...: CMD in a session of its own, its output in $RUNS/logs/NAME-<time>.log
+detach() {  # NAME CMD...: CMD in a session of its own, its output in $RUNS/logs/NAME-<time>.log. The pid file is
+  # written from inside the new session: where the caller leads a process group (a shell with job control, as the
+  # device's runner is), setsid forks, `$!` names a process gone at once, and `wait` returned at once (notebook lead13)
   local name=$1; shift
-  setsid bash -c "$*" > "$RUNS/logs/$name-$(date +%s).log" 2>&1 < /dev/null &
-  echo $! > "$RUNS/pids/$name"
-  echo "$name started (pid $!)"
+  rm -f "$RUNS/pids/$name"
+  setsid bash -c 'echo $$ > "$0"; exec bash -c "$1"' "$RUNS/pids/$name" "$*" \
+    > "$RUNS/logs/$name-$(date +%s).log" 2>&1 < /dev/null &
+  for _ in 1 2 3 4 5 6 7 8 9 10; do [ -s "$RUNS/pids/$name" ] && break; sleep 0.2; done
+  echo "$name started (pid $(cat "$RUNS/pids/$name" 2>/dev/null))"
 }
 
 collect() {  # the logs, the curve and the results into $OUT (at most 8 files come back)
@@ -105,7 +111,7 @@ for stage in "$@"; do
 print(json.dumps({'command': 'mjx-pusht demos --task gym-pusht --seeds 10000:' + str(10000 + int(sys.argv[3]))
       + ' --successful-only', 'rc': int(sys.argv[2]), 'wall_s': float(sys.argv[5]) - float(sys.argv[4]),
       'episodes': i.get('total_episodes'), 'frames': i.get('total_frames')}))" \
-        "$RUNS/demos-$n/meta/info.json" "$rc" "$n" "$t0" "$t1" | tee -a "$OUT/results/diffusion-demos.jsonl" ;;
+        "$RUNS/demos-$n/meta/info.json" "$rc" "$n" "$t0" "$t1" | tee -a "$RUNS/results/diffusion-demos.jsonl" ;;
     rate)
       for s in $SIZES; do
         rm -rf "$RUNS/rate-$s"
@@ -114,9 +120,9 @@ print(json.dumps({'command': 'mjx-pusht demos --task gym-pusht --seeds 10000:' +
           --save_checkpoint=false --output_dir="$RUNS/rate-$s" > "$RUNS/logs/rate-$s.log" 2>&1 &
       done
       wait
-      $PY - "$RUNS" "$MINUTES" $SIZES > "$OUT/results/diffusion-rate.json" <<'PYEOF'
+      $PY - "$RUNS" "$MINUTES" "$POINTS" $SIZES > "$RUNS/results/diffusion-rate.json" <<'PYEOF'
 import json, re, sys
-runs, minutes, sizes = sys.argv[1], float(sys.argv[2]), sys.argv[3:]
+runs, minutes, points, sizes = sys.argv[1], float(sys.argv[2]), int(sys.argv[3]), sys.argv[4:]
 row = {"minutes": minutes, "side_by_side": sizes}
 for s in sizes:
     log = open(f"{runs}/logs/rate-{s}.log").read()
@@ -125,19 +131,23 @@ for s in sizes:
         sys.exit(f"rate-{s}.log has {len(t)} log lines: RATE_STEPS must be at least twice --log_freq (100)")
     per_step = sum(t[1:]) / len(t[1:])  # the first window holds the start-up
     steps = int(minutes * 60 / per_step)
-    # the values to run train-N with: STEPS for MINUTES of updates, 5 curve points, a checkpoint every ~2 minutes
-    row[s] = {"s_per_step": per_step, "STEPS": steps, "EVAL_FREQ": max(100, int(round(steps / 5, -2))),
+    # the values to run train-N with: STEPS for MINUTES of updates, POINTS curve points, a checkpoint every ~2 minutes
+    row[s] = {"s_per_step": per_step, "STEPS": steps, "EVAL_FREQ": max(100, int(round(steps / points, -2))),
               "SAVE_FREQ": max(100, int(round(120 / per_step, -2)))}
 print(json.dumps(row))
 PYEOF
-      cat "$OUT/results/diffusion-rate.json" ;;
+      cat "$RUNS/results/diffusion-rate.json" ;;
     train-*)
       last="$RUNS/train-$n/checkpoints/last/pretrained_model/train_config.json"
       if [ -f "$last" ]; then  # LeRobot's own resume: its config, optimizer, scheduler, RNG and data order
         detach "train-$n" "$PY -m lerobot.scripts.lerobot_train --config_path=$last --resume=true"
       else
+        if [ "$STEPS" = rated ]; then  # this size's row of the rate stage's JSON
+          read -r steps eval_freq save_freq < <($PY -c "import json, sys; r = json.load(open(sys.argv[1]))[sys.argv[2]]
+print(r['STEPS'], r['EVAL_FREQ'], r['SAVE_FREQ'])" "$RUNS/results/diffusion-rate.json" "$n") || exit 1
+        else steps=$STEPS eval_freq=$EVAL_FREQ save_freq=$SAVE_FREQ; fi
         detach "train-$n" "$PY -m lerobot.scripts.lerobot_train --dataset.repo_id=local/mjx_pusht_demos_$n \
-          --dataset.root=$RUNS/demos-$n $(policy_args) $(env_args) --steps=$STEPS --save_freq=$SAVE_FREQ \
+          --dataset.root=$RUNS/demos-$n $(policy_args) $(EVAL_FREQ=$eval_freq env_args) --steps=$steps --save_freq=$save_freq \
           --output_dir=$RUNS/train-$n"
       fi ;;
     eval-final-*)
@@ -180,7 +190,9 @@ PYEOF
     unpack-*)
       (cd "$CARRIED" && sha256sum -c "train-$n.sha256") || { echo "parts missing or damaged"; exit 1; }
       cat "$CARRIED"/train-"$n".tar.part.* | tar xf - -C "$RUNS" && ls "$RUNS/train-$n/checkpoints" ;;
-    *) echo "unknown stage $stage (demos-N rate train-N eval-final-N wait pack-N send unpack-N)"; exit 2 ;;
+    bundle)  # what `wait` collected as one file, diffusion.tgz (a call brings back at most 8)
+      collect; (cd "$OUT" && tar czf diffusion.tgz --remove-files logs.tgz results diffusion-curve.* 2>/dev/null); ls -l "$OUT" ;;
+    *) echo "unknown stage $stage (demos-N rate train-N eval-final-N wait bundle pack-N send unpack-N)"; exit 2 ;;
   esac
   echo "$stage done"
 done

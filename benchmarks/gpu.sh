@@ -177,13 +177,16 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # `watch-seeds NAMES=scaling-RECIPE` copies back the runs and scaling.json.
           run=$HOME/runs/seeds-scaling-${RECIPE:?RECIPE=ppo or dagger-state}; mkdir -p "$run"
           case "$RECIPE" in
-            ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes ${MINUTES:-3}" ;;
-            dagger-state) args="$dagger_fit --iterations ${ITERATIONS:-60} --minutes ${MINUTES:-5} $state_data" ;;
+            # PPO over several GPUs on mjx-warp fails in its CUDA-graph FFI call (pinned jax, notebook lead13): mjx-jax
+            ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes ${MINUTES:-3}"
+                 backend=${BACKEND:-mjx-jax} ;;
+            dagger-state) args="$dagger_fit --iterations ${ITERATIONS:-60} --minutes ${MINUTES:-5} $state_data"
+                 backend=${BACKEND:-mjx-warp} ;;
             *) echo "unknown RECIPE $RECIPE" >&2; exit 2 ;;
           esac
           # shellcheck disable=SC2086  # $args is a list of flags
           (cd "$HOME/runs" && setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' "$run.pid" python3 -m benchmarks.train_scaling \
-            --devices "${DEVICES:-1,2,4}" --goal "${GOAL:-0.95}" --out "$(basename "$run")" -- --backend mjx-warp \
+            --devices "${DEVICES:-1,2,4}" --goal "${GOAL:-0.95}" --out "$(basename "$run")" -- --backend "$backend" \
             --reset task $args --seed "${SEED:-0}" --keep best --no-progress --no-rerun --record 0 > "$run.log" 2>&1 < /dev/null &)
           sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
   issue55) # issue 55 in one hold, one after another in the background (watch with watch-seeds NAMES="goals rand"):
@@ -222,6 +225,22 @@ EOS
           (cd "$HOME/runs" && setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' "$HOME/runs/seeds-bench.pid" \
             bash "$HOME/bench.sh" > "$HOME/runs/seeds-bench.log" 2>&1 < /dev/null &)
           sleep "${WAIT:-60}"; cp "$HOME"/runs/seeds-*.log "$OUT/"; nvidia-smi > "$OUT/nvidia-smi.txt" 2>&1; true ;;
+  issue53-54) # one H100 hold for two issues at once, each run in the background: LeRobot's Diffusion Policy
+          # (benchmarks/diffusion_pusht.sh: the expert's 200 and 2,000 demos, the update rate, then both sizes' training
+          # side by side for DP_MINUTES, default 12, of updates) and DAgger from pixels on gym-pusht's task, seeds 0 and 1
+          # side by side, FIRST_FITS 4, MINUTES (default 18) each. They share the one GPU: LeRobot's training is bound by
+          # its dataloaders (2% of the GPU, 8 updates/s side by side, notebook lead13), so every figure of either is a
+          # lower bound on what it does alone. Then: `diffusion_pusht.sh wait` calls, `eval-final-200 eval-final-2000`,
+          # `watch-seeds NAMES="px-gym-0 px-gym-1"` and `diffusion_pusht.sh wait bundle` (the 8 files a call returns).
+          dp() { env OUT="$OUT" SIZES="200 2000" MINUTES="${DP_MINUTES:-12}" RATE_STEPS=300 POINTS=4 STEPS=rated \
+                   bash benchmarks/diffusion_pusht.sh "$@"; }
+          dp demos-200 demos-2000  # first, alone: Warp compiles its kernels once, into the cache the others read
+          for s in 0 1; do
+            TASK=gym-pusht RECIPE=dagger-pixels SEEDS=$s NAME=px-gym-$s FIRST_FITS=4 MINUTES=${MINUTES:-18} WAIT=0 \
+              bash benchmarks/gpu.sh train-seeds $tier
+          done
+          dp rate && dp train-200 train-2000
+          sleep 30; nvidia-smi > "$OUT/nvidia-smi.txt" 2>&1; tail -n 2 "$HOME"/runs/seeds-px-gym-*.log; true ;;
   watch-seeds) # wait up to WAIT seconds (default 570) for train-seeds' runs NAMES (default RECIPE; space-separated),
           # then copy back what they have: one tar a run (logs, curves, summaries; not the resume checkpoints' dataset
           # rings, 2.2 GB a state run, which made the tar too big to come back) and each finished seed's policy

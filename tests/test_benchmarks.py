@@ -227,3 +227,17 @@ def test_train_scaling_times_each_device_counts_run_against_one_devices(tmp_path
     first = next(r for r in s["curve"] if r["success"] >= 0.9)
     assert one["minutes_to_goal"] == pytest.approx(first["wall_seconds"] / 60) == 2 * two["minutes_to_goal"]
     assert "| 2 | " in (tmp_path / "scaling.md").read_text() and "| 2.00 |" in (tmp_path / "scaling.md").read_text()
+
+
+def test_the_diffusion_curve_reads_a_real_lerobot_train_log_past_a_thousand_steps():
+    """lerobot-train's own log of the H100 run (committed): past 999 it writes counts as format_big_number does
+    ("step:5K"); the curve reads them back, and its last step is the last eval's exact one (5200 of 5255)."""
+    from benchmarks.diffusion_curve import parse_run
+
+    log = Path(__file__).parents[1] / "outputs/reports/lerobot-diffusion-h100/logs/train-2000.log"
+    run = parse_run([log])
+    steps = [p["step"] for p in run["losses"]]
+    assert steps[:10] == list(range(100, 1001, 100)) and steps[-1] == 5000 and steps == sorted(steps)
+    assert [p["step"] for p in run["points"]] == [1300, 2600, 3900, 5200] and run["last_step"] == 5200
+    assert all(p["n_episodes"] == 50 and p["successes"] == 0 for p in run["points"])
+    assert 13 < run["train_min"] < run["wall_min"] < 20  # the evals' minutes left out of the training's

@@ -71,6 +71,9 @@ def test_bad_devices_are_one_line_before_anything_is_written(tmp_path, capsys):
     for argv, needle in ((["--devices", "0"], "must be an integer >= 1"),
                          (["--backend", "mjx-jax", "--devices", "64"], "--devices 64: this process has 1"),
                          (["--backend", "cpu", "--devices", "1"], "the cpu backend steps MuJoCo C"),
+                         # measured failing on 2 H200s with the pinned jax (notebook lead13): refused, not a hang
+                         (["--backend", "mjx-warp", "--algo", "ppo", "--devices", "2"],
+                          "--devices 2 with --algo ppo on mjx-warp"),
                          (["--num-processes", "2", "--coordinator", "127.0.0.1:1", "--algo", "ppo"],
                           "--algo ppo: not with --num-processes yet")):
         assert main(["train", "--no-rerun", "--out", str(out), *argv]) in (1, 2)

@@ -75,6 +75,12 @@ def cmd_train(args) -> int:
 
     # PPO: one device unless asked. Brax's pmapped training step segfaulted in XLA's compile on 2 and 4 H200s
     # (jax 0.11.2, both MJX backends; notebook lead12), where one device trains: a crash must not be the default.
+    # With the pinned jax (0.10.2) it compiles on 2 H200s, then MJX-Warp's FFI call fails to update its CUDA graph
+    # on one device and the other waits at the gradients' all-reduce until XLA aborts (notebook lead13): refused.
+    if args.algo == "ppo" and name == "mjx-warp" and (args.devices or 1) > 1:
+        raise TrainError(f"--devices {args.devices} with --algo ppo on mjx-warp: Brax's pmapped step fails in "
+                         "MJX-Warp's CUDA-graph call on several GPUs (docs/training.md); PPO trains on one device, "
+                         "DAgger on several")
     devices = training_devices(1 if args.algo == "ppo" and args.devices is None and name != "cpu" else args.devices, name)
     if args.algo == "ppo":
         check_divides(devices, envs=args.envs, batch=args.batch or 256)  # Brax gives each device its share of both
