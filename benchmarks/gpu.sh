@@ -178,7 +178,8 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # `watch-seeds NAMES=scaling-RECIPE` copies back the runs and scaling.json.
           run=$HOME/runs/seeds-scaling-${RECIPE:?RECIPE=ppo or dagger-state}; mkdir -p "$run"
           case "$RECIPE" in
-            # PPO over several GPUs on mjx-warp fails in its CUDA-graph FFI call (pinned jax, notebook lead13): mjx-jax
+            # PPO over several GPUs on mjx-warp fails in its CUDA-graph FFI call (pinned jax, notebook lead13): mjx-jax,
+            # or BACKEND=mjx-warp with MJX_PUSHT_ENV_GRAPH_MODE=JAX (XLA capturing the graph: not yet measured)
             ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes ${MINUTES:-3}"
                  backend=${BACKEND:-mjx-jax} ;;
             dagger-state) args="$dagger_fit --iterations ${ITERATIONS:-60} --minutes ${MINUTES:-5} $state_data"

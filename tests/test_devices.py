@@ -139,3 +139,17 @@ def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def test_ppo_over_several_gpus_on_mjx_warp_is_let_through_where_xla_captures_the_cuda_graph(tmp_path, capsys,
+                                                                                             monkeypatch):
+    """Refused where Warp captures the graph (the env's default, measured failing); with XLA capturing it the run
+    goes on to the next check (here: this CPU process has one device), so it can be measured on GPUs."""
+    argv = ["train", "--no-rerun", "--out", str(tmp_path / "run"), "--backend", "mjx-warp", "--algo", "ppo",
+            "--devices", "2"]
+    for mode, needle in (("WARP", "with --algo ppo on mjx-warp"), ("JAX", "--devices 2: this process has 1")):
+        monkeypatch.setenv("MJX_PUSHT_ENV_GRAPH_MODE", mode)
+        assert main(argv) in (1, 2)
+        err = capsys.readouterr().err
+        assert needle in err and err.count("\n") == 1, err
+    assert not (tmp_path / "run").exists()
