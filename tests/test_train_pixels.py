@@ -116,6 +116,7 @@ def test_on_mjx_warp_too_the_fit_renders_each_sample_as_the_rollout_showed_it():
     _assert_rendered_again_as_shown(PushTEnv(backend="mjx-warp", reset_kind="chapter", pixels=96, keep_states=False))
 
 
+@pytest.mark.slow  # the `run` fixture, a pixel training run: 38 s of the fast loop (notebook lead13)
 def test_a_saved_pixel_policy_acts_as_the_training_process_network_in_numpy_and_in_jax(run, env):
     import jax
     import jax.numpy as jnp
@@ -157,6 +158,7 @@ def test_a_pixel_policy_given_the_true_pose_reads_what_a_state_policy_reads():
     np.testing.assert_allclose(read[:, 4:6] * POSE_SCALE, full[:, 6:8], atol=1e-12)
 
 
+@pytest.mark.slow  # the `run` fixture, a pixel training run: 38 s of the fast loop (notebook lead13)
 def test_a_pixel_checkpoint_that_does_not_say_its_image_or_holds_another_trunk_is_one_line(run, tmp_path):
     params, meta = load_checkpoint(run / "policy.msgpack")
     no_image = tmp_path / "no_image.msgpack"
@@ -173,6 +175,7 @@ def test_a_pixel_checkpoint_that_does_not_say_its_image_or_holds_another_trunk_i
             load(f"policy:{path}")
 
 
+@pytest.mark.slow  # the `run` fixture, a pixel training run: 38 s of the fast loop (notebook lead13)
 def test_pixels_where_they_cannot_be_had_are_one_line(run, tmp_path):
     r = cli("train", "--algo", "ppo", "--backend", "mjx-jax", "--obs", "pixels_agent_pos", "--out", str(tmp_path / "p"))
     assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and "pixels_agent_pos" in r.stderr
@@ -287,6 +290,7 @@ def test_the_actions_and_the_reader_fitted_apart_are_the_one_scan_fit_they_repla
     assert moved == {"Conv_", "Pose_", "Dense"}  # both parts learned: not the agreement of two fits of nothing
 
 
+@pytest.mark.slow  # 17 s: the fast loop was at 2:58-3:05 (notebook lead13)
 def test_only_the_image_steps_render_and_the_actions_fit_does_not_depend_on_them(env):
     """--image-steps: the reader's steps an iteration, apart from the actions' --fit-steps. Only the reader's steps
     render (one render of --image-batch images each), and the acting layers end where they would with any number
