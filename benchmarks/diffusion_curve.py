@@ -54,8 +54,9 @@ def parse_run(logs: list[Path]) -> dict:
             elif start is None:
                 continue
             elif m := STEP.search(line):
-                last_step = max(last_step, _count(m[2]))
-                losses.append({"step": _count(m[2]), "loss": float(m[3])})
+                step = _count(m[2])
+                last_step = max(last_step, step)
+                losses.append({"step": step, "loss": float(m[3])})
                 end_s = (_t(m[1]) - start).total_seconds()
             elif m := EVAL_AT.search(line):
                 step_at_eval = int(m[2])

@@ -81,7 +81,9 @@ def cmd_train(args) -> int:
     # the env's graph modes where Warp captures the graph itself (WARP_STAGED, its default on a GPU, and WARP). XLA
     # capturing instead (MJX_PUSHT_ENV_GRAPH_MODE=JAX, or NONE) is not measured there: let through, to measure it
     # (gpu.sh train-scaling with that variable set).
-    graph_mode = os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE") or "WARP_STAGED"
+    from mjx_pusht.envs.functional import ENV_GRAPH_MODE
+
+    graph_mode = os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE") or ENV_GRAPH_MODE  # as the env resolves it
     if args.algo == "ppo" and name == "mjx-warp" and (args.devices or 1) > 1 and graph_mode.startswith("WARP"):
         raise TrainError(f"--devices {args.devices} with --algo ppo on mjx-warp: Brax's pmapped step fails in "
                          "MJX-Warp's CUDA-graph call on several GPUs (docs/training.md); PPO trains on one device, "
