@@ -188,6 +188,7 @@ print(r['STEPS'], r['EVAL_FREQ'], r['SAVE_FREQ'])" "$RUNS/results/diffusion-rate
         [ $k -ge 4 ] && { echo "more parts: send again"; break; }
         cp "$p" "$OUT/parts/" && echo "$p" >> "$RUNS/pack/sent"; k=$((k + 1))
       done
+      [ $k = 0 ] && echo "every part was sent already"
       ls "$OUT/parts" ;;
     unpack-*)
       (cd "$CARRIED" && sha256sum -c "train-$n.sha256") || { echo "parts missing or damaged"; exit 1; }
