@@ -191,7 +191,8 @@ print(r['STEPS'], r['EVAL_FREQ'], r['SAVE_FREQ'])" "$RUNS/results/diffusion-rate
       [ $k = 0 ] && echo "every part was sent already"
       ls "$OUT/parts" ;;
     unpack-*)
-      (cd "$CARRIED" && sha256sum -c "train-$n.sha256") || { echo "parts missing or damaged"; exit 1; }
+      (cd "$CARRIED" && sha256sum -c --quiet "train-$n.sha256") > /dev/null 2>&1 || {
+        echo "unpack-$n: parts missing or damaged in $CARRIED (sha256sum -c train-$n.sha256 there names them)" >&2; exit 1; }
       cat "$CARRIED"/train-"$n".tar.part.* | tar xf - -C "$RUNS" && ls "$RUNS/train-$n/checkpoints" ;;
     bundle)  # what `wait` collected as one file, diffusion.tgz (a call brings back at most 8)
       collect; (cd "$OUT" && tar czf diffusion.tgz --remove-files logs.tgz results diffusion-curve.* 2>/dev/null); ls -l "$OUT" ;;

@@ -119,7 +119,7 @@ def test_the_recipe_carries_a_run_across_holds_and_lerobot_resumes_it_from_the_c
         p = subprocess.run(["bash", "benchmarks/diffusion_pusht.sh", *names], cwd=ROOT, capture_output=True,
                            text=True, timeout=600, env={**env, "RUNS": str(runs), "OUT": str(tmp_path / "out")})
         assert (p.returncode == 0) == ok, p.stdout[-3000:] + p.stderr[-3000:]
-        return p.stdout
+        return p.stdout if ok else p.stderr
 
     runs = tmp_path / "runs"  # the same path on every machine ($HOME/diffusion): the checkpoint names it
     stages(runs, "demos-2", "train-2", "wait")
@@ -144,7 +144,8 @@ def test_the_recipe_carries_a_run_across_holds_and_lerobot_resumes_it_from_the_c
     assert sorted(p.name for p in carried.glob("*.part.*")) == [p.name for p in parts]
     last = carried / parts[-1].name
     last.rename(tmp_path / "held-back")
-    assert "parts missing or damaged" in stages(runs, "unpack-2", ok=False)
+    assert stages(runs, "unpack-2", ok=False).strip().splitlines() == [  # one line, on stderr
+        f"unpack-2: parts missing or damaged in {carried} (sha256sum -c train-2.sha256 there names them)"]
     assert not (runs / "train-2").exists()
     (tmp_path / "held-back").rename(last)
     stages(runs, "demos-2", "unpack-2", "train-2", "wait")
