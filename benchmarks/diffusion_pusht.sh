@@ -173,8 +173,9 @@ print(r['STEPS'], r['EVAL_FREQ'], r['SAVE_FREQ'])" "$RUNS/results/diffusion-rate
       for log in "$RUNS"/logs/*.log; do echo "== $log"; grep -a "INFO" "$log" | tail -n 2 | cut -c1-300; done
       collect ;;
     pack-*)
+      step=$(readlink "$RUNS/train-$n/checkpoints/last") || {
+        echo "pack-$n: $RUNS/train-$n has no checkpoint to pack" >&2; exit 1; }
       mkdir -p "$RUNS/pack" && rm -f "$RUNS/pack/train-$n".* "$RUNS/pack/sent"
-      step=$(readlink "$RUNS/train-$n/checkpoints/last")
       tar cf - -C "$RUNS" "train-$n/checkpoints/$step" "train-$n/checkpoints/last" logs \
         | split -b 15m -d -a 3 - "$RUNS/pack/train-$n.tar.part."
       (cd "$RUNS/pack" && sha256sum train-"$n".tar.part.* > "train-$n.sha256")

@@ -83,11 +83,11 @@ def cmd_train(args) -> int:
     # (gpu.sh train-scaling with that variable set).
     from mjx_pusht.envs.functional import ENV_GRAPH_MODE
 
-    graph_mode = os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE") or ENV_GRAPH_MODE  # as the env resolves it
+    graph_mode = os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE") or ENV_GRAPH_MODE  # as the env resolves it on a GPU
     if args.algo == "ppo" and name == "mjx-warp" and (args.devices or 1) > 1 and graph_mode.startswith("WARP"):
         raise TrainError(f"--devices {args.devices} with --algo ppo on mjx-warp: Brax's pmapped step fails in "
                          "MJX-Warp's CUDA-graph call on several GPUs (docs/training.md); PPO trains on one device, "
-                         "DAgger on several")
+                         "DAgger on several (MJX_PUSHT_ENV_GRAPH_MODE=JAX, XLA capturing the graph, is not measured)")
     devices = training_devices(1 if args.algo == "ppo" and args.devices is None and name != "cpu" else args.devices, name)
     if args.algo == "ppo":
         check_divides(devices, envs=args.envs, batch=args.batch or 256)  # Brax gives each device its share of both

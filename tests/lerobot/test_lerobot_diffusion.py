@@ -128,6 +128,7 @@ def test_the_recipe_carries_a_run_across_holds_and_lerobot_resumes_it_from_the_c
     shutil.rmtree(ckpts / "000004")  # the hold ended between the two checkpoints
     (ckpts / "last").unlink()
     (ckpts / "last").symlink_to("000002")
+    assert stages(runs, "pack-3", ok=False).strip() == f"pack-3: {runs}/train-3 has no checkpoint to pack"
     stages(runs, "pack-2")
     parts = sorted((runs / "pack").glob("train-2.tar.part.*"))
     carried = tmp_path / "carried"
