@@ -230,8 +230,9 @@ def test_train_scaling_times_each_device_counts_run_against_one_devices(tmp_path
 
 
 def test_the_diffusion_curve_reads_a_real_lerobot_train_log_past_a_thousand_steps():
-    """lerobot-train's own log of the H100 run (tests/data, from outputs/reports/lerobot-diffusion-h100): past 999 it writes counts as format_big_number does
-    ("step:5K"); the curve reads them back, and its last step is the last eval's exact one (5200 of 5255)."""
+    """lerobot-train's own log of the H100 run (tests/data, from outputs/reports/lerobot-diffusion-h100): past 999
+    it writes counts as format_big_number does ("step:5K"); the curve reads them back, and its last step is the last
+    eval's exact one (5200 of 5255)."""
     from benchmarks.diffusion_curve import parse_run
 
     log = Path(__file__).with_name("data") / "lerobot-train-diffusion-2000-h100.txt"

@@ -175,8 +175,7 @@ def test_a_pixel_checkpoint_that_does_not_say_its_image_or_holds_another_trunk_i
             load(f"policy:{path}")
 
 
-@pytest.mark.slow  # the `run` fixture, a pixel training run: 38 s of the fast loop (notebook lead13)
-def test_pixels_where_they_cannot_be_had_are_one_line(run, tmp_path):
+def test_pixels_where_they_cannot_be_had_are_one_line(tmp_path):
     r = cli("train", "--algo", "ppo", "--backend", "mjx-jax", "--obs", "pixels_agent_pos", "--out", str(tmp_path / "p"))
     assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and "pixels_agent_pos" in r.stderr
 
