@@ -4,10 +4,15 @@ training goes, and how much sooner it reaches its goal rate (issue 56).
     python -m benchmarks.train_scaling --devices 1,2,4 --goal 0.95 --out runs/scaling -- --backend mjx-warp ...
 
 Runs `mjx-pusht train ARGS --devices N --out OUT/devices-N` for each count in turn (a count whose folder already
-holds a finished run is read, not run again), then writes OUT/scaling.json and OUT/scaling.md: for each count the
-control steps a second during training (the env steps learned from over the training wall-clock; DAgger's also
-over its rollouts' seconds alone), each as a multiple of one device's, the minutes of training wall-clock to the
-first held-out judgement at or above --goal (None if never), and eval's held-out success of the kept policy.
+holds a finished run is read, not run again; `--collect` reads and runs nothing), then writes OUT/scaling.json and
+OUT/scaling.md: for each count the control steps a second during training (the env steps learned from over the
+training wall-clock; DAgger's also over its rollouts' seconds alone), each as a multiple of one device's, the
+minutes of training wall-clock to the first held-out judgement at or above --goal (None if never), and eval's
+held-out success of the kept policy.
+
+`--per-device envs,batch` makes the named train flags one device's share, multiplied by the count (weak scaling:
+every device does one device's work, the run's batches grow with the devices, as Brax's and Isaac Lab's scaling
+figures count); without it the one run's work is split over the devices (strong scaling). The mode is recorded.
 """
 
 from __future__ import annotations
@@ -41,6 +46,23 @@ def measure(run: Path, goal: float) -> dict:
             "held_out_success": r["held_out_success"], "held_out_ci95": r["held_out_ci95"]}
 
 
+def per_device(train_args: list[str], flags: list[str], n: int) -> list[str]:
+    """`train_args` with each of `flags` (names without dashes) multiplied by `n`; a flag that is not there, or
+    not an integer, is a one-line error (SystemExit 2), not a run of the wrong size."""
+    out = list(train_args)
+    for flag in flags:
+        opt = f"--{flag}"
+        where = [i for i, a in enumerate(out) if a == opt]
+        if not where or where[-1] + 1 >= len(out):
+            raise SystemExit(f"train_scaling: --per-device {flag}: no {opt} VALUE in the train arguments")
+        i = where[-1] + 1  # argparse keeps a flag's last value
+        try:
+            out[i] = str(int(out[i]) * n)
+        except ValueError:
+            raise SystemExit(f"train_scaling: --per-device {flag}: {opt} {out[i]!r} is not an integer") from None
+    return out
+
+
 def markdown(rows: list[dict], goal: float) -> str:
     base = rows[0]["steps_per_second"] if rows[0]["devices"] == 1 else None
     lines = [f"| devices | control steps/s in training | x one device | minutes to {goal:.0%} held-out | "
@@ -53,11 +75,19 @@ def markdown(rows: list[dict], goal: float) -> str:
     return "\n".join(lines + ["", f"{rows[0]['method']} from {rows[0]['obs_type']} on {rows[0]['device']}"]) + "\n"
 
 
+def scaling_mode(per: list[str]) -> str:
+    return (f"weak: {', '.join('--' + f for f in per)} per device" if per
+            else "strong: the one run's work split over the devices")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--devices", default="1,2,4", help="comma-separated device counts, one run each (default 1,2,4)")
     p.add_argument("--goal", type=float, required=True, help="the held-out rate to time (e.g. 0.95)")
     p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--per-device", default="", help="comma-separated train flags (e.g. envs,batch) given as one "
+                   "device's share, multiplied by the device count (weak scaling; default: none, strong scaling)")
+    p.add_argument("--collect", action="store_true", help="read the finished runs under --out, run none")
     args, train_args = p.parse_known_args(argv)
     train_args = [a for a in train_args if a != "--"]
     if any(a in ("--devices", "--out") for a in train_args):
@@ -66,12 +96,15 @@ def main(argv=None) -> int:
         counts = [int(n) for n in args.devices.split(",")]
     except ValueError:
         p.error(f"--devices takes comma-separated integers, got {args.devices!r}")
+    per = [f.strip().lstrip("-") for f in args.per_device.split(",") if f.strip()]
+    sized = {n: per_device(train_args, per, n) for n in counts}  # every count's flags checked before any run
     args.out.mkdir(parents=True, exist_ok=True)
     rows, failed = [], []
     for n in counts:
         run = args.out / f"devices-{n}"
-        if not ((run / "summary.json").is_file() and "eval" in json.loads((run / "summary.json").read_text())):
-            cmd = [sys.executable, "-m", "mjx_pusht", "train", *train_args, "--devices", str(n), "--out", str(run)]
+        finished = (run / "summary.json").is_file() and "eval" in json.loads((run / "summary.json").read_text())
+        if not finished and not args.collect:
+            cmd = [sys.executable, "-m", "mjx_pusht", "train", *sized[n], "--devices", str(n), "--out", str(run)]
             print("$", " ".join(cmd), flush=True)
             t = time.perf_counter()
             rc = subprocess.call(cmd)
@@ -80,10 +113,10 @@ def main(argv=None) -> int:
             rows.append(measure(run, args.goal))
         except (OSError, KeyError, ValueError) as e:  # unreadable, cut or unfinished: listed, not dropped
             failed.append(f"{run} ({e})")
-    atomic_write_json(args.out / "scaling.json", {"goal": args.goal, "train_args": train_args, "runs": rows,
-                                                  "failed": failed})
+    atomic_write_json(args.out / "scaling.json", {"goal": args.goal, "train_args": train_args, "per_device": per,
+                                                  "scaling": scaling_mode(per), "runs": rows, "failed": failed})
     if rows:
-        atomic_write_bytes(args.out / "scaling.md", markdown(rows, args.goal).encode())
+        atomic_write_bytes(args.out / "scaling.md", (markdown(rows, args.goal) + scaling_mode(per) + "\n").encode())
         print(markdown(rows, args.goal), end="")
     print("\n".join(f"failed: {f}" for f in failed), file=sys.stderr)
     return 0 if rows and not failed else 1

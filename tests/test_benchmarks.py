@@ -242,3 +242,19 @@ def test_the_diffusion_curve_reads_a_real_lerobot_train_log_past_a_thousand_step
     assert [p["step"] for p in run["points"]] == [1300, 2600, 3900, 5200] and run["last_step"] == 5200
     assert all(p["n_episodes"] == 50 and p["successes"] == 0 for p in run["points"])
     assert 13 < run["train_min"] < run["wall_min"] < 20  # the evals' minutes left out of the training's
+
+
+def test_train_scaling_per_device_flags_grow_with_the_devices_and_a_missing_one_is_refused(tmp_path):
+    """Weak scaling (`--per-device envs,batch`): each count's run gets those flags times the count, the last value
+    of a repeated flag being the one argparse keeps; a flag absent from the train arguments is a one-line error
+    before anything runs."""
+    from benchmarks import train_scaling
+
+    args = ["--algo", "ppo", "--envs", "8192", "--batch", "256", "--batch", "512", "--minutes", "3"]
+    assert train_scaling.per_device(args, ["envs", "batch"], 4) == [
+        "--algo", "ppo", "--envs", "32768", "--batch", "256", "--batch", "2048", "--minutes", "3"]
+    assert train_scaling.per_device(args, [], 4) == args
+    with pytest.raises(SystemExit, match="no --timesteps VALUE"):
+        train_scaling.main(["--devices", "1,2", "--goal", "0.9", "--out", str(tmp_path / "r"),
+                            "--per-device", "envs,timesteps", "--", *args])
+    assert not (tmp_path / "r").exists()
