@@ -145,13 +145,15 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_ppo_over_several_gpus_on_mjx_warp_is_let_through_where_xla_captures_the_cuda_graph(tmp_path, capsys,
-                                                                                             monkeypatch):
-    """Refused where Warp captures the graph (the env's default, measured failing); with XLA capturing it the run
-    goes on to the next check (here: this CPU process has one device), so it can be measured on GPUs."""
+def test_ppo_over_several_gpus_on_mjx_warp_is_refused_in_the_graph_modes_measured_failing(tmp_path, capsys,
+                                                                                          monkeypatch):
+    """Refused where Warp captures the graph (WARP, the env's default WARP_STAGED) and where XLA does (JAX): each
+    measured failing on 2 H200s (notebooks lead13, lead15), with MJX-JAX named as the way to several GPUs; without
+    a graph (NONE, not measured) the run goes on to the next check (here: this CPU process has one device)."""
     argv = ["train", "--no-rerun", "--out", str(tmp_path / "run"), "--backend", "mjx-warp", "--algo", "ppo",
             "--devices", "2"]
-    for mode, needle in (("WARP", "with --algo ppo on mjx-warp"), ("JAX", "--devices 2: this process has 1")):
+    for mode, needle in (("WARP", "--backend mjx-jax"), ("WARP_STAGED", "--backend mjx-jax"),
+                         ("JAX", "--backend mjx-jax"), ("NONE", "--devices 2: this process has 1")):
         monkeypatch.setenv("MJX_PUSHT_ENV_GRAPH_MODE", mode)
         assert main(argv) in (1, 2)
         err = capsys.readouterr().err

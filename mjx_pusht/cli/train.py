@@ -75,19 +75,19 @@ def cmd_train(args) -> int:
     from mjx_pusht.train.devices import check_divides, training_devices
 
     # PPO: one device unless asked. Brax's pmapped training step segfaulted in XLA's compile on 2 and 4 H200s
-    # (jax 0.11.2, both MJX backends; notebook lead12), where one device trains: a crash must not be the default.
-    # With the pinned jax (0.10.2) it compiles on 2 H200s, then MJX-Warp's FFI call fails to update its CUDA graph
-    # on one device and the other waits at the gradients' all-reduce until XLA aborts (notebook lead13): refused in
-    # the env's graph modes where Warp captures the graph itself (WARP_STAGED, its default on a GPU, and WARP). XLA
-    # capturing instead (MJX_PUSHT_ENV_GRAPH_MODE=JAX, or NONE) is not measured there: let through, to measure it
-    # (gpu.sh train-scaling with that variable set).
+    # (jax 0.11.2, both MJX backends; notebook lead12). With the pinned jax (0.10.2): on MJX-JAX it trains on 1, 2
+    # and 4 H200s (lead15: 3.8x one GPU's control steps on 4); on MJX-Warp the FFI call fails on several GPUs in
+    # every graph mode tried: Warp capturing (WARP_STAGED, its GPU default, and WARP: a graph update fails on one
+    # GPU, the other waits at the all-reduce until XLA aborts, lead13) and XLA capturing (JAX: "failed to create a
+    # child graph node", in the judgement's episode before Brax trained, lead15). Refused there; NONE (no graph) is
+    # let through, to measure it.
     from mjx_pusht.envs.functional import ENV_GRAPH_MODE
 
     graph_mode = os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE") or ENV_GRAPH_MODE  # as the env resolves it on a GPU
-    if args.algo == "ppo" and name == "mjx-warp" and (args.devices or 1) > 1 and graph_mode.startswith("WARP"):
-        raise TrainError(f"--devices {args.devices} with --algo ppo on mjx-warp: Brax's pmapped step fails in "
-                         "MJX-Warp's CUDA-graph call on several GPUs (docs/training.md); PPO trains on one device, "
-                         "DAgger on several (MJX_PUSHT_ENV_GRAPH_MODE=JAX, XLA capturing the graph, is not measured)")
+    if args.algo == "ppo" and name == "mjx-warp" and (args.devices or 1) > 1 and graph_mode != "NONE":
+        raise TrainError(f"--devices {args.devices} with --algo ppo on mjx-warp: MJX-Warp's CUDA-graph call fails "
+                         "under Brax's pmap on several GPUs (docs/training.md); train PPO on several GPUs with "
+                         "--backend mjx-jax, or on one with mjx-warp (MJX_PUSHT_ENV_GRAPH_MODE=NONE is not measured)")
     devices = training_devices(1 if args.algo == "ppo" and args.devices is None and name != "cpu" else args.devices, name)
     if args.algo == "ppo":
         check_divides(devices, envs=args.envs, batch=args.batch or 256)  # Brax gives each device its share of both

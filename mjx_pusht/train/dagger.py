@@ -319,12 +319,12 @@ class Rollouts:
         self._episodes_jit = self._episodes_jit or jax.jit(self._episodes)  # one, compiled for each device it runs on
 
         shared = spread.own_copy(shared)
-
-        def block(device, s0, rows):
-            return self._episodes_jit(*jax.device_put((*shared, s0, beta[rows], keys[rows]), device))
-
-        # the blocks' start states made here, on one thread: the env keeps its programs per batch size
-        parts = spread.each(block, [(dev, env.reset(seeds[rows]), rows) for dev, rows in spread.local(len(seeds))])
+        # every block's inputs on its device before any program runs (start states made on one thread: the env keeps
+        # its programs per batch size); then each thread runs its device's and waits for it, as the sweep's do. On 4
+        # H200s, copies made while another device's program captured Warp's graph broke it (error 904, lead15)
+        blocks = [(jax.block_until_ready(jax.device_put((*shared, env.reset(seeds[rows]), beta[rows], keys[rows]),
+                                                        dev)),) for dev, rows in spread.local(len(seeds))]
+        parts = spread.each(lambda args: jax.block_until_ready(self._episodes_jit(*args)), blocks)
         ends = [_outcomes(env.check(p[0])) for p in parts]
         outcome = {k: spread.gather(np.concatenate([e[k] for e in ends])) for k in ends[0]}
         x, y, live = (spread.join([p[i] for p in parts], axis=1) for i in (1, 2, 3))  # (T, N, ...): N over devices

@@ -86,7 +86,7 @@ class Spread:
 
     @staticmethod
     def each(fn, args: list) -> list:
-        """`fn(*args[i])` for each of this process's devices (`args[i]` begins with the device), from a thread each (a
+        """`fn(*args[i])` for each of this process's devices (`args[i]`: that device's), from a thread each (a
         rollout's scan dispatches from the host: one thread driving every device would run them one after another,
         as the sweep measured), results in order."""
         if len(args) == 1:
