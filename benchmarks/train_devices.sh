@@ -7,10 +7,11 @@
 # lead15): PPO on MJX-JAX scaled (3.8x on 4 H200s) but cannot reach 95% in 3 minutes; MJX-Warp failed on several GPUs
 # (PPO with XLA capturing the graph; DAgger from pixels with error 904, since changed). This plan:
 #   1. probes, 2 GPUs each, side by side: DAgger from pixels on MJX-Warp (a tiny run reaching a student rollout), and
-#      PPO on MJX-Warp without a CUDA graph (MJX_PUSHT_ENV_GRAPH_MODE=NONE);
+#      PPO on MJX-Warp with a graph per device (MJX_PUSHT_ENV_GRAPH_MODE=WARP: the staged default shares one graph
+#      between the devices, lead15), then, if that fails, without a graph (NONE);
 #   2. DAgger from pixels on gym-pusht's task, 4 GPUs, seed 0, 5 minutes (must reach 90%), if its probe trained;
-#   3. PPO from state on it, 4 GPUs, seed 0, 3 minutes (must reach 95%): MJX-Warp without a graph if its probe
-#      trained, else MJX-JAX;
+#   3. PPO from state on it, 4 GPUs, seed 0, 3 minutes (must reach 95%): MJX-Warp in the first graph mode whose
+#      probe trained, else MJX-JAX;
 #   4. side by side, against one GPU: pixels on GPU 0 and on GPUs 1-2, PPO on GPU 3 (its 2-GPU run in step 6);
 #   5. the second seeds on 4 GPUs; 6. PPO on 2 GPUs.
 # Weak scaling (benchmarks/train_scaling.py --per-device): each GPU one GPU's episodes and minibatch share.
@@ -46,15 +47,21 @@ case "${1:-}" in
     (run env CUDA_VISIBLE_DEVICES=0,1 timeout 400 python3 -m mjx_pusht train --backend mjx-warp $px --envs 2048 \
        --batch 2048 --image-batch 256 --first-fits 1 --fit-steps 200 --image-steps 100 --iterations 2 --eval-envs 1024 \
        --devices 2 --out probe-px > probe-px.log 2>&1; echo "exit $?" >> probe-px.log) &
-    # shellcheck disable=SC2086
-    (run env CUDA_VISIBLE_DEVICES=2,3 MJX_PUSHT_ENV_GRAPH_MODE=NONE timeout 400 python3 -m mjx_pusht train \
-       --backend mjx-warp $ppo --envs 16384 --batch 1024 --timesteps 800000000 --minutes 0.5 --devices 2 \
-       --out probe-ppo-none > probe-ppo-none.log 2>&1; echo "exit $?" >> probe-ppo-none.log) &
+    probe_ppo() {  # probe_ppo GRAPH-MODE: 30 s of PPO on MJX-Warp, GPUs 2 and 3, in that graph mode
+      # shellcheck disable=SC2086  # the recipe: a list of flags
+      run env CUDA_VISIBLE_DEVICES=2,3 MJX_PUSHT_ENV_GRAPH_MODE=$1 timeout 400 python3 -m mjx_pusht train \
+        --backend mjx-warp $ppo --envs 16384 --batch 1024 --timesteps 800000000 --minutes 0.5 --devices 2 \
+        --out "probe-ppo-$1" > "probe-ppo-$1.log" 2>&1; echo "exit $?" >> "probe-ppo-$1.log"
+    }
+    probe_ppo WARP &
     wait
+    grep -q "^exit 0" probe-ppo-WARP.log || probe_ppo NONE
     tail -n 3 probe-*.log
     px_ok=""; grep -q "^exit 0" probe-px.log && px_ok=1
-    if grep -q "^exit 0" probe-ppo-none.log; then ppo_backend=mjx-warp ppo_env=MJX_PUSHT_ENV_GRAPH_MODE=NONE
-    else ppo_backend=mjx-jax ppo_env=""; fi
+    ppo_backend=mjx-jax ppo_env=""
+    for mode in NONE WARP; do
+      grep -qs "^exit 0" "probe-ppo-$mode.log" && ppo_backend=mjx-warp ppo_env=MJX_PUSHT_ENV_GRAPH_MODE=$mode
+    done
     echo "pixels on several GPUs: $([ -n "$px_ok" ] && echo trained || echo failed); PPO on several GPUs: $ppo_backend $ppo_env"
     # shellcheck disable=SC2086  # the recipes: lists of flags
     {

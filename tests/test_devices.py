@@ -145,15 +145,17 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_ppo_over_several_gpus_on_mjx_warp_is_refused_in_the_graph_modes_measured_failing(tmp_path, capsys,
-                                                                                          monkeypatch):
-    """Refused where Warp captures the graph (WARP, the env's default WARP_STAGED) and where XLA does (JAX): each
-    measured failing on 2 H200s (notebooks lead13, lead15), with MJX-JAX named as the way to several GPUs; without
-    a graph (NONE, not measured) the run goes on to the next check (here: this CPU process has one device)."""
+def test_ppo_over_several_gpus_on_mjx_warp_is_refused_in_the_graph_modes_that_share_a_graph_or_failed(
+        tmp_path, capsys, monkeypatch):
+    """Refused in the staged modes, whose one captured graph per call site every device would replay (the env's
+    default WARP_STAGED failed so on 2 H200s, notebook lead13) and where XLA captures (JAX, failed, lead15), naming
+    MJX-JAX and the WARP escape; WARP (a graph per device) and NONE go on to the next check (here: this CPU process
+    has one device), so they can be measured on GPUs."""
     argv = ["train", "--no-rerun", "--out", str(tmp_path / "run"), "--backend", "mjx-warp", "--algo", "ppo",
             "--devices", "2"]
-    for mode, needle in (("WARP", "--backend mjx-jax"), ("WARP_STAGED", "--backend mjx-jax"),
-                         ("JAX", "--backend mjx-jax"), ("NONE", "--devices 2: this process has 1")):
+    for mode, needle in (("WARP_STAGED", "the WARP_STAGED CUDA-graph mode"), ("WARP_STAGED_EX", "--backend mjx-jax"),
+                         ("JAX", "MJX_PUSHT_ENV_GRAPH_MODE=WARP"), ("WARP", "--devices 2: this process has 1"),
+                         ("NONE", "--devices 2: this process has 1")):
         monkeypatch.setenv("MJX_PUSHT_ENV_GRAPH_MODE", mode)
         assert main(argv) in (1, 2)
         err = capsys.readouterr().err

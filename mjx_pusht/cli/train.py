@@ -75,19 +75,19 @@ def cmd_train(args) -> int:
     from mjx_pusht.train.devices import check_divides, training_devices
 
     # PPO: one device unless asked. Brax's pmapped training step segfaulted in XLA's compile on 2 and 4 H200s
-    # (jax 0.11.2, both MJX backends; notebook lead12). With the pinned jax (0.10.2): on MJX-JAX it trains on 1, 2
-    # and 4 H200s (lead15: 3.8x one GPU's control steps on 4); on MJX-Warp the FFI call fails on several GPUs in
-    # every graph mode tried: Warp capturing (WARP_STAGED, its GPU default, and WARP: a graph update fails on one
-    # GPU, the other waits at the all-reduce until XLA aborts, lead13) and XLA capturing (JAX: "failed to create a
-    # child graph node", in the judgement's episode before Brax trained, lead15). Refused there; NONE (no graph) is
-    # let through, to measure it.
+    # (jax 0.11.2, both MJX backends; notebook lead12). With the pinned jax (0.10.2) it trains on MJX-JAX over 1, 2
+    # and 4 H200s (3.8x one GPU's control steps on 4, lead15). On MJX-Warp the env's staged graph modes keep ONE
+    # captured graph per call site, whichever device calls it (warp/_src/jax/ffi.py; mujoco#3191: WARP_STAGED fails
+    # sharded), so Brax's second GPU replays the first's and fails (WARP_STAGED, the env's GPU default: lead13), and
+    # XLA capturing (JAX) failed too (lead15). Refused in those; WARP (graphs keyed on the device, as the sweep's
+    # programs per GPU use) and NONE (no graph) are let through, to measure them.
     from mjx_pusht.envs.functional import ENV_GRAPH_MODE
 
     graph_mode = os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE") or ENV_GRAPH_MODE  # as the env resolves it on a GPU
-    if args.algo == "ppo" and name == "mjx-warp" and (args.devices or 1) > 1 and graph_mode != "NONE":
-        raise TrainError(f"--devices {args.devices} with --algo ppo on mjx-warp: MJX-Warp's CUDA-graph call fails "
-                         "under Brax's pmap on several GPUs (docs/training.md); train PPO on several GPUs with "
-                         "--backend mjx-jax, or on one with mjx-warp (MJX_PUSHT_ENV_GRAPH_MODE=NONE is not measured)")
+    if args.algo == "ppo" and name == "mjx-warp" and (args.devices or 1) > 1 and graph_mode not in ("WARP", "NONE"):
+        raise TrainError(f"--devices {args.devices} with --algo ppo on mjx-warp: the {graph_mode} CUDA-graph mode "
+                         "fails under Brax's pmap on several GPUs (docs/training.md); train PPO on several GPUs with "
+                         "--backend mjx-jax, or set MJX_PUSHT_ENV_GRAPH_MODE=WARP (graphs per device, not measured)")
     devices = training_devices(1 if args.algo == "ppo" and args.devices is None and name != "cpu" else args.devices, name)
     if args.algo == "ppo":
         check_divides(devices, envs=args.envs, batch=args.batch or 256)  # Brax gives each device its share of both
