@@ -11,20 +11,25 @@ mkdir -p "$OUT/results"
 dagger_fit="--hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 --beta-decay 0.7"
 state_data="--envs ${ENVS:-16384} --max-samples ${MAX_SAMPLES:-32000000} --first-fits ${FIRST_FITS:-4}"
 case "$stage" in
-  unbundle) # both wheel sets in 7 calls, not 11: here, `tar cf - .gpu/[1-5] .gpu-jax/[1-6] | split -b 59M -d -
-          # .gpu-all/bundle.part.` with each part moved into .gpu-all/K/ and outputs/ moved aside for these calls (the
-          # tree is then 3 MB, a part 59 MiB: under the 64 MiB a call carries); there, every call but the last carries
-          # its part and runs `mkdir -p ~/b && cp .gpu-all/K/* ~/b/`, the last this stage: MuJoCo, Warp and Brax into
-          # ~/site, the pinned jax (0.10.2) into ~/jsite, first on the path
-          mkdir -p "$HOME/b" "$HOME/stash" "$HOME/jstash" && cp .gpu-all/*/* "$HOME/b/" && cd "$HOME/b" && \
-            cat bundle.part.* | tar x && cp .gpu/*/* "$HOME/stash/" && cp .gpu-jax/*/* "$HOME/jstash/" || exit 1
-          (cd "$HOME/stash" && cat warp.part* > "$(cat warp.name)" && python3 -m pip install -q --no-index --no-deps \
-            --no-compile --no-cache-dir --target "$HOME/site" ./*.whl) || exit 1
-          (cd "$HOME/jstash" && cat jaxlib.part0* > jaxlib-0.10.2-cp312-cp312-manylinux_2_27_x86_64.whl && \
+  unbundle) # the folders benchmarks/bundle.sh packed here (7 calls for MuJoCo, Warp, Brax and jax 0.10.2, not 11),
+          # every call but the last having run `mkdir -p ~/b && cp .gpu-all/K/* ~/b/`: each wheel set present installed
+          # (MuJoCo, Warp, Brax into ~/site; jax 0.10.2 into ~/jsite, first on the path; LeRobot into ~/site), demos
+          # into ~/diffusion (diffusion_pusht.sh's RUNS)
+          mkdir -p "$HOME/b" && cp .gpu-all/*/* "$HOME/b/" 2>/dev/null; cd "$HOME/b" && cat bundle.part.* | tar x || exit 1
+          if [ -d .gpu ]; then mkdir -p "$HOME/stash" && cp .gpu/*/* "$HOME/stash/" && (cd "$HOME/stash" && \
+            cat warp.part* > "$(cat warp.name)" && python3 -m pip install -q --no-index --no-deps --no-compile \
+            --no-cache-dir --target "$HOME/site" ./*.whl) || exit 1; fi
+          if [ -d .gpu-jax ]; then mkdir -p "$HOME/jstash" && cp .gpu-jax/*/* "$HOME/jstash/" && (cd "$HOME/jstash" && \
+            cat jaxlib.part0* > jaxlib-0.10.2-cp312-cp312-manylinux_2_27_x86_64.whl && \
             cat pjrt.part0* > jax_cuda13_pjrt-0.10.2-py3-none-manylinux_2_27_x86_64.whl && rm -f ./*.part0* && \
-            python3 -m pip install -q --no-index --no-deps --no-compile --target "$HOME/jsite" ./*.whl) || exit 1
-          PYTHONPATH=$HOME/jsite:$PYTHONPATH python3 -c "import jax, mujoco, warp, brax; from mujoco import mjx
-print(jax.__version__, mujoco.__version__, warp.__version__, jax.devices())" ;;
+            python3 -m pip install -q --no-index --no-deps --no-compile --target "$HOME/jsite" ./*.whl) || exit 1; fi
+          if [ -d .gpu-lerobot ]; then mkdir -p "$HOME/lr" && cp .gpu-lerobot/*/* "$HOME/lr/" && (cd "$HOME/lr" && \
+            cat part.* | tar x && python3 -m pip install -q --no-index --no-deps --no-compile --target "$HOME/site" \
+            "$HOME"/lr/*.whl) || exit 1; fi
+          if [ -d .gpu-demos ]; then mkdir -p "$HOME/diffusion" && cp -r .gpu-demos/* "$HOME/diffusion/"; fi
+          jsite=""; [ -d "$HOME/jsite" ] && jsite=$HOME/jsite:
+          PYTHONPATH=$jsite$PYTHONPATH python3 -c "import jax, mujoco, warp; from mujoco import mjx
+print(jax.__version__, mujoco.__version__, warp.__version__, jax.devices())"; ls "$HOME/diffusion" 2>/dev/null; true ;;
   warp)   python3 -m benchmarks.harness --tier "$tier-warp" --backends cpu,mjx-warp --cpu-batches 4096,65536 \
             --batches 1024,4096,16384,65536 --repeats 2 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
   warp-tight) python3 -m benchmarks.harness --tier "$tier-warp-tight" --backends cpu,mjx-warp --cpu-batches 65536 \
