@@ -55,6 +55,7 @@ DOWN_DIMS=${DOWN_DIMS:-128,256,512}  # 28.5 M parameters, a 326 MiB resume state
 WORKERS=${WORKERS:-$(( 14 / $(wc -w <<< "$SIZES") ))}
 DEVICE=${DEVICE:-cuda}           # cpu: a smoke run of the stages on a machine without a GPU
 BATCH=${BATCH:-64}
+LR=${LR:-}                       # LeRobot's optimizer_lr (its default 1e-4, for a batch of 64): set it with BATCH
 WAIT_MIN=${WAIT_MIN:-9}
 CARRIED=${CARRIED:-$HOME/carried}  # where the carried parts of a packed run are gathered
 mkdir -p "$OUT/results" "$RUNS/logs" "$RUNS/pids" "$RUNS/results"
@@ -69,6 +70,7 @@ policy_args() {
     --policy.crop_shape=[84,84] --policy.crop_is_random=true --policy.pretrained_backbone_weights=null \
     --policy.use_group_norm=true --policy.spatial_softmax_num_keypoints=32 "--policy.down_dims=[$DOWN_DIMS]" \
     --policy.num_train_timesteps=100 --policy.noise_scheduler_type=DDPM --batch_size="$BATCH" --seed=100000 \
+    ${LR:+--policy.optimizer_lr=$LR} \
     --num_workers="$WORKERS" --log_freq=100 --wandb.enable=false
 }
 # the curve's evals: the plugin's batch (the GPU's), seeds 100000.. (train's --seed), clear of the final eval's
