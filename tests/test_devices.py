@@ -161,3 +161,29 @@ def test_ppo_over_several_gpus_on_mjx_warp_is_refused_in_the_graph_modes_that_sh
         err = capsys.readouterr().err
         assert needle in err and err.count("\n") == 1, err
     assert not (tmp_path / "run").exists()
+
+
+def test_a_rollout_over_the_devices_runs_with_pythons_collector_paused_and_restores_it():
+    """Spread.each runs each device's block with the cycle collector off (a finalizer run mid-capture breaks Warp's
+    CUDA-graph capture), on one device as on several threads, and puts it back as it was, an error included."""
+    import gc
+
+    from mjx_pusht.train.devices import Spread
+
+    seen = []
+    assert Spread.each(lambda i: seen.append((i, gc.isenabled())) or i, [(0,), (1,), (2,)]) == [0, 1, 2]
+    assert Spread.each(lambda i: seen.append((i, gc.isenabled())) or i, [(3,)]) == [3]
+    assert sorted(seen) == [(0, False), (1, False), (2, False), (3, False)] and gc.isenabled()
+
+    def boom(i):
+        raise RuntimeError("device lost")
+
+    with pytest.raises(RuntimeError, match="device lost"):
+        Spread.each(boom, [(0,), (1,)])
+    assert gc.isenabled()
+    gc.disable()
+    try:  # a caller that had it off keeps it off
+        Spread.each(lambda i: i, [(0,)])
+        assert not gc.isenabled()
+    finally:
+        gc.enable()

@@ -9,7 +9,9 @@ of every minibatch, the shares averaged: one set of weights, the mean gradient o
 
 from __future__ import annotations
 
+import gc
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -46,6 +48,22 @@ def check_divides(devices: list, **sizes: int) -> None:
         if n % len(devices):
             raise TrainError(f"--{name.replace('_', '-')} ({n}) must be a multiple of the {len(devices)} devices it "
                              "is split over (--devices)")
+
+
+@contextmanager
+def collector_paused():
+    """Python's cycle collector off for the block (after one collection), back as it was after. The collector runs in
+    whichever thread allocates, and a Warp array or graph it finalizes in the middle of a CUDA-graph capture (MJX-Warp
+    captures its step in the rollout's first call on each device) lands in, or breaks, that capture (warp#1641,
+    warp#1714; mjlab#821 pauses it during captures): a rollout on several GPUs is several threads capturing."""
+    was = gc.isenabled()
+    gc.collect()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
 
 
 class Spread:
@@ -89,10 +107,11 @@ class Spread:
         """`fn(*args[i])` for each of this process's devices (`args[i]`: that device's), from a thread each (a
         rollout's scan dispatches from the host: one thread driving every device would run them one after another,
         as the sweep measured), results in order."""
-        if len(args) == 1:
-            return [fn(*args[0])]
-        with ThreadPoolExecutor(len(args)) as pool:
-            return list(pool.map(lambda a: fn(*a), args))
+        with collector_paused():
+            if len(args) == 1:
+                return [fn(*args[0])]
+            with ThreadPoolExecutor(len(args)) as pool:
+                return list(pool.map(lambda a: fn(*a), args))
 
     def join(self, parts: list, axis: int):
         """This process's devices' arrays (each on its own device, in order) as one global array over every device,
