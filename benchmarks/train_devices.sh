@@ -12,8 +12,8 @@
 #   2. DAgger from pixels on gym-pusht's task, 4 GPUs, seed 0, 5 minutes (must reach 90%), if its probe trained;
 #   3. PPO from state on it, 4 GPUs, seed 0, 3 minutes (must reach 95%): MJX-Warp in the first graph mode whose
 #      probe trained, else MJX-JAX;
-#   4. side by side, against one GPU: pixels on GPU 0 and on GPUs 1-2, PPO on GPU 3 (its 2-GPU run in step 6);
-#   5. the second seeds on 4 GPUs; 6. PPO on 2 GPUs.
+#   4. the second seeds on 4 GPUs (each must-show is two seeds);
+#   5. side by side, against one GPU: pixels on GPU 0 and on GPUs 1-2, PPO on GPU 3; 6. PPO on 2 GPUs.
 # Weak scaling (benchmarks/train_scaling.py --per-device): each GPU one GPU's episodes and minibatch share.
 # DRY=1 prints the commands instead of running them (a check of the plan's order and choices on any machine).
 set -uo pipefail
@@ -67,14 +67,14 @@ case "${1:-}" in
     {
     [ -n "$px_ok" ] && scale "" 0.9 px-s0 4 $px_per "" --backend mjx-warp $px --seed 0 > px-s0.log 2>&1
     scale "" 0.95 ppo-s0 4 $ppo_per "$ppo_env" --backend $ppo_backend $ppo --seed 0 > ppo-s0.log 2>&1
+    [ -n "$px_ok" ] && scale "" 0.9 px-s1 4 $px_per "" --backend mjx-warp $px --seed 1 > px-s1.log 2>&1
+    scale "" 0.95 ppo-s1 4 $ppo_per "$ppo_env" --backend $ppo_backend $ppo --seed 1 > ppo-s1.log 2>&1
     if [ -n "$px_ok" ]; then
       scale 0 0.9 px-s0 1 $px_per "" --backend mjx-warp $px --seed 0 > px-s0-1.log 2>&1 &
       scale 1,2 0.9 px-s0 2 $px_per "" --backend mjx-warp $px --seed 0 > px-s0-2.log 2>&1 &
     fi
     scale 3 0.95 ppo-s0 1 $ppo_per "$ppo_env" --backend $ppo_backend $ppo --seed 0 > ppo-s0-1.log 2>&1 &
     wait
-    [ -n "$px_ok" ] && scale "" 0.9 px-s1 4 $px_per "" --backend mjx-warp $px --seed 1 > px-s1.log 2>&1
-    scale "" 0.95 ppo-s1 4 $ppo_per "$ppo_env" --backend $ppo_backend $ppo --seed 1 > ppo-s1.log 2>&1
     scale 0,1 0.95 ppo-s0 2 $ppo_per "$ppo_env" --backend $ppo_backend $ppo --seed 0 > ppo-s0-2.log 2>&1
     }
     echo "$(date +%T) plan done" ;;
