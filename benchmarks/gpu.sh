@@ -198,7 +198,8 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           run=$HOME/runs/seeds-scaling-${RECIPE:?RECIPE=ppo or dagger-state}; mkdir -p "$run"
           case "$RECIPE" in
             # PPO over several GPUs on mjx-warp fails in its CUDA-graph FFI call, Warp or XLA capturing it (pinned jax,
-            # notebooks lead13, lead15): mjx-jax, or BACKEND=mjx-warp with MJX_PUSHT_ENV_GRAPH_MODE=NONE (not measured).
+            # notebooks lead13, lead15): mjx-jax, or BACKEND=mjx-warp with MJX_PUSHT_ENV_GRAPH_MODE=WARP or NONE (not
+            # measured; the staged default shares one graph between devices).
             # Issue 56's whole 4-GPU plan, weak scaling, is benchmarks/train_devices.sh
             ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes ${MINUTES:-3}"
                  backend=${BACKEND:-mjx-jax} ;;

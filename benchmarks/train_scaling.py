@@ -48,7 +48,7 @@ def measure(run: Path, goal: float) -> dict:
 
 def per_device(train_args: list[str], flags: list[str], n: int) -> list[str]:
     """`train_args` with each of `flags` (names without dashes) multiplied by `n`; a flag that is not there, or
-    not an integer, is a one-line error (SystemExit 2), not a run of the wrong size."""
+    not an integer, is a one-line error (exit 1), not a run of the wrong size."""
     out = list(train_args)
     for flag in flags:
         opt = f"--{flag}"
