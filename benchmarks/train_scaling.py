@@ -98,7 +98,10 @@ def main(argv=None) -> int:
         p.error(f"--devices takes comma-separated integers, got {args.devices!r}")
     per = [f.strip().lstrip("-") for f in args.per_device.split(",") if f.strip()]
     sized = {n: per_device(train_args, per, n) for n in counts}  # every count's flags checked before any run
-    args.out.mkdir(parents=True, exist_ok=True)
+    try:
+        args.out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        p.error(f"--out {args.out}: {e.strerror}")
     rows, failed = [], []
     for n in counts:
         run = args.out / f"devices-{n}"

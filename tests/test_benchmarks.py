@@ -258,3 +258,7 @@ def test_train_scaling_per_device_flags_grow_with_the_devices_and_a_missing_one_
         train_scaling.main(["--devices", "1,2", "--goal", "0.9", "--out", str(tmp_path / "r"),
                             "--per-device", "envs,timesteps", "--", *args])
     assert not (tmp_path / "r").exists()
+    (tmp_path / "file").write_text("kept")
+    with pytest.raises(SystemExit):  # --out under a file: argparse's one line, the file kept
+        train_scaling.main(["--devices", "1", "--goal", "0.9", "--out", str(tmp_path / "file" / "r"), "--collect"])
+    assert (tmp_path / "file").read_text() == "kept"
