@@ -23,12 +23,12 @@
 #                machine; each a row (wall-clock, Wilson 95% interval) in $OUT/results/diffusion-eval-N.json.
 #   wait         waits until the detached jobs end or WAIT_MIN minutes (default 9) pass, then returns the logs
 #                ($OUT/logs.tgz), the curve ($OUT/diffusion-curve.json, .png) and the results: one call per 9 minutes.
-#   pack-N       train-N's last checkpoint (model, optimizer, scheduler, RNG: LeRobot's whole resume state) and its
+#   pack-N       (stopping a train-N still running) train-N's last checkpoint (model, optimizer, scheduler, RNG: LeRobot's whole resume state) and its
 #                logs as 15 MiB parts in $RUNS/pack; then `send` returns 4 of them a call (60 MiB
 #                of the 64 that come back).
 #   unpack-N     puts back a run carried in .gpu-diffusion/ (see below) as $RUNS/train-N with its logs.
 # Carrying a packed run into a new hold: here, copy each call's parts (files_at/parts/*) into .gpu-diffusion/K/
-# folders of at most 2 parts (30 MiB: the tree itself is ~22 MiB of the 64 a call carries), and run
+# folders of at most 3 parts (45 MiB: a call carries 64 with the tree, ~3 MiB with outputs/ moved aside), and run
 #   mkdir -p $HOME/carried && cp .gpu-diffusion/K/* $HOME/carried/       # carry [".gpu-diffusion/K"], one call each
 # then `bash benchmarks/diffusion_pusht.sh unpack-N train-N wait` in the last one (once, here:
 # echo /.gpu-diffusion/ >> "$(git rev-parse --git-path info/exclude)", so the parts never travel uncarried).
@@ -56,6 +56,10 @@ WORKERS=${WORKERS:-$(( 14 / $(wc -w <<< "$SIZES") ))}
 DEVICE=${DEVICE:-cuda}           # cpu: a smoke run of the stages on a machine without a GPU
 BATCH=${BATCH:-64}
 LR=${LR:-}                       # LeRobot's optimizer_lr (its default 1e-4, for a batch of 64): set it with BATCH
+# the sampler the policy acts with (training is the same for both: the noise schedule's add_noise). LeRobot's run:
+# DDPM's 100 steps, 100 denoisings a chunk of 8 actions, which alone kept 500 batch episodes above 60 s (lead13)
+SCHED=${SCHED:-DDPM}
+INFER_STEPS=${INFER_STEPS:-}     # num_inference_steps (unset: num_train_timesteps, 100)
 WAIT_MIN=${WAIT_MIN:-9}
 CARRIED=${CARRIED:-$HOME/carried}  # where the carried parts of a packed run are gathered
 mkdir -p "$OUT/results" "$RUNS/logs" "$RUNS/pids" "$RUNS/results"
@@ -69,7 +73,8 @@ policy_args() {
     --policy.n_obs_steps=2 --policy.horizon=16 --policy.n_action_steps=8 --policy.drop_n_last_frames=7 \
     --policy.crop_shape=[84,84] --policy.crop_is_random=true --policy.pretrained_backbone_weights=null \
     --policy.use_group_norm=true --policy.spatial_softmax_num_keypoints=32 "--policy.down_dims=[$DOWN_DIMS]" \
-    --policy.num_train_timesteps=100 --policy.noise_scheduler_type=DDPM --batch_size="$BATCH" --seed=100000 \
+    --policy.num_train_timesteps=100 --policy.noise_scheduler_type="$SCHED" \
+    ${INFER_STEPS:+--policy.num_inference_steps=$INFER_STEPS} --batch_size="$BATCH" --seed=100000 \
     ${LR:+--policy.optimizer_lr=$LR} \
     --num_workers="$WORKERS" --log_freq=100 --wandb.enable=false
 }
@@ -175,6 +180,13 @@ print(r['STEPS'], r['EVAL_FREQ'], r['SAVE_FREQ'])" "$RUNS/results/diffusion-rate
       for log in "$RUNS"/logs/*.log; do echo "== $log"; grep -a "INFO" "$log" | tail -n 2 | cut -c1-300; done
       collect ;;
     pack-*)
+      # a training still running would write a checkpoint under tar's feet: stop it first (its last checkpoint is
+      # what a resume restarts from, so call pack-N just after one: SAVE_FREQ's line in the log)
+      if [ -f "$RUNS/pids/train-$n" ] && kill -0 "$(cat "$RUNS/pids/train-$n")" 2>/dev/null; then
+        kill -TERM -- "-$(cat "$RUNS/pids/train-$n")"
+        for _ in $(seq 60); do kill -0 "$(cat "$RUNS/pids/train-$n")" 2>/dev/null || break; sleep 0.5; done
+        echo "pack-$n: stopped the running train-$n"
+      fi
       step=$(readlink "$RUNS/train-$n/checkpoints/last") || {
         echo "pack-$n: $RUNS/train-$n has no checkpoint to pack" >&2; exit 1; }
       mkdir -p "$RUNS/pack" && rm -f "$RUNS/pack/train-$n".* "$RUNS/pack/sent"

@@ -12,6 +12,7 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -157,3 +158,34 @@ def test_the_recipe_carries_a_run_across_holds_and_lerobot_resumes_it_from_the_c
     resumed = max((runs / "logs").glob("train-2-*.log"), key=lambda p: p.stat().st_mtime).read_text()
     assert "'resume': True" in resumed and "Resuming data order at epoch 0, sample 4" in resumed
     assert "End of training" in resumed
+
+
+def test_pack_stops_a_training_still_running_before_it_cuts_the_checkpoint(tmp_path):
+    """A hold ends while lerobot-train still runs (it is detached): `pack-N` stops it first, so no checkpoint is
+    written under tar's feet, then packs the last one. The training here is a stand-in process group, as `detach`
+    starts it (its own session, the pid file written from inside), since what is tested is the script, not LeRobot."""
+    runs = tmp_path / "runs"
+    ckpt = runs / "train-5" / "checkpoints"
+    (ckpt / "000002" / "pretrained_model").mkdir(parents=True)
+    (ckpt / "000002" / "pretrained_model" / "model.safetensors").write_bytes(b"weights")
+    (ckpt / "last").symlink_to("000002")
+    (runs / "logs").mkdir()
+    (runs / "pids").mkdir()
+    pidfile = runs / "pids" / "train-5"
+    # started from a shell that exits at once, as `detach`'s caller does: the stand-in is then no child of this test
+    # (a child of ours, unreaped, would stay a zombie that `kill -0` still finds)
+    subprocess.run(["bash", "-c", 'setsid bash -c \'echo $$ > "$0"; exec sleep 300\' "$0" &', str(pidfile)], check=True)
+    for _ in range(50):
+        if pidfile.exists() and pidfile.read_text().strip():
+            break
+        time.sleep(0.1)
+    pid = int(pidfile.read_text())
+    p = subprocess.run(["bash", "benchmarks/diffusion_pusht.sh", "pack-5"], cwd=ROOT, capture_output=True, text=True,
+                       timeout=60, env={**os.environ, "RUNS": str(runs), "OUT": str(tmp_path / "out")})
+    assert p.returncode == 0, p.stderr
+    assert "pack-5: stopped the running train-5" in p.stdout
+    with pytest.raises(ProcessLookupError):
+        os.kill(pid, 0)
+    packed = b"".join(f.read_bytes() for f in sorted((runs / "pack").glob("train-5.tar.part.*")))
+    listing = subprocess.run(["tar", "tf", "-"], input=packed, capture_output=True, check=True).stdout.decode()
+    assert "train-5/checkpoints/000002/pretrained_model/model.safetensors" in listing.splitlines()
