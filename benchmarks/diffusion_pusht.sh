@@ -62,6 +62,10 @@ SCHED=${SCHED:-DDPM}
 INFER_STEPS=${INFER_STEPS:-}     # num_inference_steps (unset: num_train_timesteps, 100)
 WAIT_MIN=${WAIT_MIN:-9}
 CARRIED=${CARRIED:-$HOME/carried}  # where the carried parts of a packed run are gathered
+# found here in one line, not in a detached training's log minutes later
+case "$SCHED" in DDPM|DDIM) ;; *) echo "SCHED must be DDPM or DDIM (LeRobot's samplers), got '$SCHED'" >&2; exit 2 ;; esac
+[[ -z "$INFER_STEPS" || "$INFER_STEPS" =~ ^[1-9][0-9]*$ ]] || {
+  echo "INFER_STEPS must be a whole number of denoising steps, got '$INFER_STEPS'" >&2; exit 2; }
 mkdir -p "$OUT/results" "$RUNS/logs" "$RUNS/pids" "$RUNS/results"
 
 # LeRobot's published diffusion_pusht settings (lerobot/diffusion_pusht's config) where they are not 0.6.1's

@@ -189,3 +189,15 @@ def test_pack_stops_a_training_still_running_before_it_cuts_the_checkpoint(tmp_p
     packed = b"".join(f.read_bytes() for f in sorted((runs / "pack").glob("train-5.tar.part.*")))
     listing = subprocess.run(["tar", "tf", "-"], input=packed, capture_output=True, check=True).stdout.decode()
     assert "train-5/checkpoints/000002/pretrained_model/model.safetensors" in listing.splitlines()
+
+
+@pytest.mark.parametrize("var, value, line", [
+    ("SCHED", "ddim", "SCHED must be DDPM or DDIM (LeRobot's samplers), got 'ddim'"),
+    ("INFER_STEPS", "0", "INFER_STEPS must be a whole number of denoising steps, got '0'")])
+def test_a_bad_sampler_setting_is_one_line_before_anything_starts(tmp_path, var, value, line):
+    """A sampler LeRobot does not have would otherwise surface minutes later in a detached training's log."""
+    p = subprocess.run(["bash", "benchmarks/diffusion_pusht.sh", "train-2"], cwd=ROOT, capture_output=True, text=True,
+                       timeout=60, env={**os.environ, var: value, "RUNS": str(tmp_path / "runs"),
+                                        "OUT": str(tmp_path / "out")})
+    assert (p.returncode, p.stderr.strip().splitlines(), p.stdout) == (2, [line], "")
+    assert not (tmp_path / "runs").exists()
