@@ -322,9 +322,9 @@ class Rollouts:
         # every block's inputs on its device before any program runs (start states made on one thread: the env keeps
         # its programs per batch size); then each thread runs its device's and waits for it, as the sweep's do. On 4
         # H200s, copies made while another device's program captured Warp's graph broke it (error 904, lead15)
-        blocks = [(jax.block_until_ready(jax.device_put((*shared, env.reset(seeds[rows]), beta[rows], keys[rows]),
-                                                        dev)),) for dev, rows in spread.local(len(seeds))]
-        parts = spread.each(lambda args: jax.block_until_ready(self._episodes_jit(*args)), blocks)
+        blocks = [jax.block_until_ready(jax.device_put((*shared, env.reset(seeds[rows]), beta[rows], keys[rows]),
+                                                      dev)) for dev, rows in spread.local(len(seeds))]
+        parts = spread.each(lambda *block: jax.block_until_ready(self._episodes_jit(*block)), blocks)
         ends = [_outcomes(env.check(p[0])) for p in parts]
         outcome = {k: spread.gather(np.concatenate([e[k] for e in ends])) for k in ends[0]}
         x, y, live = (spread.join([p[i] for p in parts], axis=1) for i in (1, 2, 3))  # (T, N, ...): N over devices
