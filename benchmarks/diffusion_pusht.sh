@@ -64,8 +64,15 @@ WAIT_MIN=${WAIT_MIN:-9}
 CARRIED=${CARRIED:-$HOME/carried}  # where the carried parts of a packed run are gathered
 # found here in one line, not in a detached training's log minutes later
 case "$SCHED" in DDPM|DDIM) ;; *) echo "SCHED must be DDPM or DDIM (LeRobot's samplers), got '$SCHED'" >&2; exit 2 ;; esac
-[[ -z "$INFER_STEPS" || "$INFER_STEPS" =~ ^[1-9][0-9]*$ ]] || {
-  echo "INFER_STEPS must be a whole number of denoising steps, got '$INFER_STEPS'" >&2; exit 2; }
+whole() {  # NAME VALUE: a one-line error unless VALUE is a whole number above 0 (or empty, where $3 is "optional")
+  [[ ( -z "$2" && "${3:-}" = optional ) || "$2" =~ ^[1-9][0-9]*$ ]] || {
+    echo "$1 must be a whole number above 0, got '$2'" >&2; exit 2; }
+}
+whole INFER_STEPS "$INFER_STEPS" optional
+for v in BATCH SAVE_FREQ EVAL_FREQ EVAL_EPISODES RATE_STEPS WAIT_MIN; do whole "$v" "${!v}"; done
+[ "$STEPS" = rated ] || whole STEPS "$STEPS"
+[[ "$WORKERS" =~ ^[0-9]+$ ]] || { echo "WORKERS must be a whole number (0: load in the training process), got '$WORKERS'" >&2; exit 2; }
+[[ -z "$LR" || "$LR" =~ ^[0-9]*\.?[0-9]+([eE][-+]?[0-9]+)?$ ]] || { echo "LR must be a number (e.g. 1e-4), got '$LR'" >&2; exit 2; }
 mkdir -p "$OUT/results" "$RUNS/logs" "$RUNS/pids" "$RUNS/results"
 
 # LeRobot's published diffusion_pusht settings (lerobot/diffusion_pusht's config) where they are not 0.6.1's
