@@ -21,6 +21,7 @@
 #   eval-final-N detached: lerobot-eval of train-N's last checkpoint, 500 episodes on --env.type=mjx_pusht (one batch
 #                of 500) then on --env.type=pusht (gym-pusht, LeRobot's SyncVectorEnv), one after the other on the same
 #                machine; each a row (wall-clock, Wilson 95% interval) in $OUT/results/diffusion-eval-N.json.
+#                EVAL_GPUS="G1 G2" (a host of several GPUs): the two at once, the batch on G1, gym-pusht on G2.
 #   wait         waits until the detached jobs end or WAIT_MIN minutes (default 9) pass, then returns the logs
 #                ($OUT/logs.tgz), the curve ($OUT/diffusion-curve.json, .png) and the results: one call per 9 minutes.
 #   pack-N       (stopping a train-N still running) train-N's last checkpoint (model, optimizer, scheduler, RNG: LeRobot's whole resume state) and its
@@ -61,6 +62,8 @@ LR=${LR:-}                       # LeRobot's optimizer_lr (its default 1e-4, for
 SCHED=${SCHED:-DDPM}
 INFER_STEPS=${INFER_STEPS:-}     # num_inference_steps (unset: num_train_timesteps, 100)
 WAIT_MIN=${WAIT_MIN:-9}
+EVAL_GPUS=${EVAL_GPUS:-}         # eval-final-N on a host of several GPUs: "G1 G2", the batch's GPU and gym-pusht's,
+                                 # both at once (unset: one after the other on the GPU the call sees)
 CARRIED=${CARRIED:-$HOME/carried}  # where the carried parts of a packed run are gathered
 # found here in one line, not in a detached training's log minutes later
 case "$SCHED" in DDPM|DDIM) ;; *) echo "SCHED must be DDPM or DDIM (LeRobot's samplers), got '$SCHED'" >&2; exit 2 ;; esac
@@ -71,6 +74,7 @@ whole() {  # NAME VALUE: a one-line error unless VALUE is a whole number above 0
 whole INFER_STEPS "$INFER_STEPS" optional
 for v in BATCH SAVE_FREQ EVAL_FREQ EVAL_EPISODES RATE_STEPS WAIT_MIN; do whole "$v" "${!v}"; done
 [ "$STEPS" = rated ] || whole STEPS "$STEPS"
+[[ "$EVAL_GPUS" =~ ^([0-9]+( [0-9]+)?)?$ ]] || { echo "EVAL_GPUS must be one or two GPU numbers (e.g. \"2 3\"), got '$EVAL_GPUS'" >&2; exit 2; }
 [[ "$WORKERS" =~ ^[0-9]+$ ]] || { echo "WORKERS must be a whole number (0: load in the training process), got '$WORKERS'" >&2; exit 2; }
 [[ -z "$LR" || "$LR" =~ ^[0-9]*\.?[0-9]+([eE][-+]?[0-9]+)?$ ]] || { echo "LR must be a number (e.g. 1e-4), got '$LR'" >&2; exit 2; }
 mkdir -p "$OUT/results" "$RUNS/logs" "$RUNS/pids" "$RUNS/results"
@@ -174,7 +178,11 @@ print(r['STEPS'], r['EVAL_FREQ'], r['SAVE_FREQ'])" "$RUNS/results/diffusion-rate
       ckpt="$RUNS/train-$n/checkpoints/last/pretrained_model"
       ev="$PY -m benchmarks.lerobot_eval --policy $ckpt --device $DEVICE --episodes 500 --batch 500 \
           --out $RUNS/eval-$n --json $RUNS/results/diffusion-eval-$n.json"
-      detach "eval-final-$n" "$ev --env mjx_pusht; $ev --env pusht" ;;  # the second runs whatever the first gave
+      if [ -n "$EVAL_GPUS" ]; then  # a host of several GPUs: each env on a GPU of its own, at the same time (a
+        read -r g1 g2 <<< "$EVAL_GPUS"  # hold's minutes; neither shares a GPU, and the host's cores far outnumber two)
+        CUDA_VISIBLE_DEVICES=$g1 detach "eval-final-$n-mjx_pusht" "$ev --env mjx_pusht"
+        CUDA_VISIBLE_DEVICES=${g2:-$g1} detach "eval-final-$n-pusht" "$ev --env pusht"
+      else detach "eval-final-$n" "$ev --env mjx_pusht; $ev --env pusht"; fi ;;  # the second runs whatever the first gave
     wait)
       end=$(( $(date +%s) + WAIT_MIN * 60 ))
       while [ "$(date +%s)" -lt "$end" ]; do

@@ -248,6 +248,22 @@ EOS
           (cd "$HOME/runs" && setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' "$HOME/runs/seeds-bench.pid" \
             bash "$HOME/bench.sh" > "$HOME/runs/seeds-bench.log" 2>&1 < /dev/null &)
           sleep "${WAIT:-60}"; cp "$HOME"/runs/seeds-*.log "$OUT/"; nvidia-smi > "$OUT/nvidia-smi.txt" 2>&1; true ;;
+  issue54-hold) # issue 54 whole in one hold of a 4-GPU host (nvidia-h100-x4: 64 cores), since nothing off git outlives a
+          # session (session 16's checkpoint did not): LeRobot's training is bound by its loader, ~93 samples a second a
+          # worker (notebook lead16), so the 2,000 episodes train on GPU 0 with WORKERS_BIG (46) workers at a batch of
+          # 256 (the update's 0.055 s on the GPU then meets the loader); the 200 episodes on GPU 1 at the same settings
+          # with 14 (fewer updates in the same minutes: the sizes compare at the curve's points, equal updates); Warp's
+          # kernels compile meanwhile on GPU 3 for the curve's evals. Then: `diffusion_pusht.sh wait` calls with
+          # SIZES="200 2000", `eval-final-2000` with EVAL_GPUS="2 3", `wait bundle`.
+          dp() { env OUT="$OUT" BATCH="${BATCH:-256}" LR="${LR:-2e-4}" STEPS="${STEPS:-12000}" SAVE_FREQ="${SAVE_FREQ:-2000}" \
+                   EVAL_FREQ="${EVAL_FREQ:-3000}" SCHED=DDIM INFER_STEPS=10 "$@"; }
+          CUDA_VISIBLE_DEVICES=0 dp SIZES=2000 WORKERS="${WORKERS_BIG:-46}" bash benchmarks/diffusion_pusht.sh train-2000
+          [ "${SMALL:-1}" = 1 ] && CUDA_VISIBLE_DEVICES=1 dp SIZES=200 WORKERS=14 bash benchmarks/diffusion_pusht.sh train-200
+          CUDA_VISIBLE_DEVICES=3 python3 -m mjx_pusht demos --task gym-pusht --seeds 0:4 --replace --out "$HOME/warm" \
+            --no-progress > "$OUT/warm.log" 2>&1; tail -n 2 "$OUT/warm.log"
+          sleep "${WAIT:-30}"; nproc; nvidia-smi > "$OUT/nvidia-smi.txt" 2>&1
+          for l in "$HOME"/diffusion/logs/train-*.log; do echo "== $l"; grep -a "updt_s" "$l" | tail -n 3 | cut -c1-240; done
+          true ;;
   issue53-54) # one H100 hold for two issues at once, each run in the background: LeRobot's Diffusion Policy
           # (benchmarks/diffusion_pusht.sh: the expert's 200 and 2,000 demos, the update rate, then both sizes' training
           # side by side for DP_MINUTES, default 12, of updates) and DAgger from pixels on gym-pusht's task, seeds 0 and 1
