@@ -196,7 +196,8 @@ def test_pack_stops_a_training_still_running_before_it_cuts_the_checkpoint(tmp_p
     ("INFER_STEPS", "0", "INFER_STEPS must be a whole number above 0, got '0'"),
     ("BATCH", "abc", "BATCH must be a whole number above 0, got 'abc'"),
     ("STEPS", "rate", "STEPS must be a whole number above 0, got 'rate'"),
-    ("LR", "1e-4x", "LR must be a number (e.g. 1e-4), got '1e-4x'")])
+    ("LR", "1e-4x", "LR must be a number (e.g. 1e-4), got '1e-4x'"),
+    ("EVAL_GPUS", "2,3", 'EVAL_GPUS must be one or two GPU numbers (e.g. "2 3"), got \'2,3\'')])
 def test_a_bad_setting_is_one_line_before_anything_starts(tmp_path, var, value, line):
     """A value LeRobot cannot take would otherwise surface minutes later in a detached training's log."""
     p = subprocess.run(["bash", "benchmarks/diffusion_pusht.sh", "train-2"], cwd=ROOT, capture_output=True, text=True,
