@@ -33,11 +33,8 @@ $(RUN_STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install -q -e '.$(RUN_EXTRAS)'
 	touch $(RUN_STAMP)
 
-# --no-compile (here, for the docs and in LeRobot's venv): pip byte-compiles every module it installs, ~16,700 files
-# here and ~19,200 there, ~4 ms each on this 2-core machine (a measured 9.9 s for torch's 2,285), where the suite
-# imports a fraction of them, compiled once on first import; `make test` is CPU-bound on 2 cores (notebook lead17)
 $(STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install -q --no-compile -e '.[warp,gym,video,train,test]'
+	$(BIN)/python -m pip install -q -e '.[warp,gym,video,train,test]'
 	touch $(STAMP) $(RUN_STAMP)
 
 run: $(RUN_STAMP)
@@ -63,7 +60,7 @@ pytest: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 $(VENV)/.docs-installed: $(STAMP)
-	$(BIN)/python -m pip install -q --no-compile -e '.[docs]'
+	$(BIN)/python -m pip install -q -e '.[docs]'
 	touch $@
 
 docs: $(VENV)/.docs-installed
@@ -73,7 +70,7 @@ $(LEROBOT_STAMP): pyproject.toml plugins/lerobot_env_mjx_pusht/pyproject.toml
 	@test -n "$(PYTHON312)" || { echo "make test-lerobot needs Python 3.12 (lerobot 0.6.1 requires it): set PYTHON312=/path/to/python3.12"; exit 2; }
 	$(PYTHON312) -m venv $(LEROBOT_VENV)
 	$(LEROBOT_VENV)/bin/python -m pip install -q --upgrade pip
-	$(LEROBOT_VENV)/bin/python -m pip install -q --no-compile 'lerobot[pusht,training,evaluation,diffusion]==0.6.1' 'torch<2.12' 'numpy<2.3' \
+	$(LEROBOT_VENV)/bin/python -m pip install -q 'lerobot[pusht,training,evaluation,diffusion]==0.6.1' 'torch<2.12' 'numpy<2.3' \
 		'pytest>=8' 'pytest-timeout>=2.3' 'pytest-xdist>=3.6' -e '.[warp,gym]' -e plugins/lerobot_env_mjx_pusht
 	touch $(LEROBOT_STAMP)
 
