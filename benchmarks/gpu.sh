@@ -254,13 +254,15 @@ EOS
           # 256 (the update's 0.055 s on the GPU then meets the loader); the 200 episodes on GPU 1 at the same settings
           # with 14 (fewer updates in the same minutes: the sizes compare at the curve's points, equal updates); Warp's
           # kernels compile meanwhile on GPU 3 for the curve's evals. STEPS 10,000: the ~10.7 updates a second measured
-          # (session 17: 12,000 did not fit, the hold ending mid-save of step 10,000) end the schedule inside the hold,
+          # (session 17: 12,000 did not fit, the run stopped for the final evals mid-save of step 10,000) end the schedule inside the hold,
           # a checkpoint every 1,000 so a stop loses little. Then: `diffusion_pusht.sh wait` calls with
           # SIZES="200 2000", `eval-final-2000` with EVAL_GPUS="2 3", `wait bundle`.
           dp() { env OUT="$OUT" BATCH="${BATCH:-256}" LR="${LR:-2e-4}" STEPS="${STEPS:-10000}" SAVE_FREQ="${SAVE_FREQ:-1000}" \
                    EVAL_FREQ="${EVAL_FREQ:-3000}" SCHED=DDIM INFER_STEPS=10 "$@"; }
-          CUDA_VISIBLE_DEVICES=0 dp SIZES=2000 WORKERS="${WORKERS_BIG:-46}" bash benchmarks/diffusion_pusht.sh train-2000
-          [ "${SMALL:-1}" = 1 ] && CUDA_VISIBLE_DEVICES=1 dp SIZES=200 WORKERS=14 bash benchmarks/diffusion_pusht.sh train-200
+          # a setting diffusion_pusht.sh refuses (its one line, exit 2) ends the stage there, before any GPU work
+          CUDA_VISIBLE_DEVICES=0 dp SIZES=2000 WORKERS="${WORKERS_BIG:-46}" bash benchmarks/diffusion_pusht.sh train-2000 || exit
+          if [ "${SMALL:-1}" = 1 ]; then
+            CUDA_VISIBLE_DEVICES=1 dp SIZES=200 WORKERS=14 bash benchmarks/diffusion_pusht.sh train-200 || exit; fi
           CUDA_VISIBLE_DEVICES=3 python3 -m mjx_pusht demos --task gym-pusht --seeds 0:4 --replace --out "$HOME/warm" \
             --no-progress > "$OUT/warm.log" 2>&1; tail -n 2 "$OUT/warm.log"
           sleep "${WAIT:-30}"; nproc; nvidia-smi > "$OUT/nvidia-smi.txt" 2>&1
