@@ -90,7 +90,8 @@ def plot(runs: dict, png: Path) -> None:
     for name, run in runs.items():
         p = run["points"]
         x = [q["train_min"] for q in p]
-        ax.plot(x, [q["pc_success"] for q in p], marker="o", label=f"{name} episodes")
+        label = f"{name} episodes" if name.isdigit() else name  # a size, or a run's own name
+        ax.plot(x, [q["pc_success"] for q in p], marker="o", label=label)
         ax.fill_between(x, [q["wilson95"][0] for q in p], [q["wilson95"][1] for q in p], alpha=0.2)
     ax.axhline(80, color="grey", lw=0.8, ls="--")
     ax.set(xlabel="training minutes (evals left out)", ylabel="success % on --env.type=mjx_pusht", ylim=(0, 100),
@@ -105,6 +106,10 @@ def main(argv=None) -> int:
     p.add_argument("runs", nargs="+", help="NAME=LOG[,LOG...] per run, its logs in hold order")
     p.add_argument("--json", type=Path, required=True)
     p.add_argument("--png", type=Path, default=None)
+    p.add_argument("--after", action="append", default=[], metavar="NAME=MINUTES,STEPS",
+                   help="run NAME started from another run's checkpoint (diffusion_pusht.sh FROM=) taken after MINUTES "
+                        "of training and STEPS updates: its points are placed after them, so the curve reads as the "
+                        "policy's whole training")
     a = p.parse_args(argv)
     runs = {}
     for spec in a.runs:
@@ -112,6 +117,22 @@ def main(argv=None) -> int:
         if not sep or not logs:
             p.error(f"{spec!r}: give NAME=LOG[,LOG...]")
         runs[name] = parse_run([Path(x) for x in logs.split(",")])
+    for spec in a.after:
+        name, _, offset = spec.partition("=")
+        try:
+            minutes, steps = (float(offset.split(",")[0]), int(offset.split(",")[1]))
+        except (ValueError, IndexError):
+            p.error(f"--after {spec!r}: give NAME=MINUTES,STEPS (e.g. 2000=12.9,8000)")
+        if name not in runs:
+            p.error(f"--after {spec!r}: no run named {name!r}")
+        run = runs[name]
+        run["after"] = {"train_min": minutes, "steps": steps}
+        for q in run["points"]:
+            q["step"] += steps
+            q["train_min"] += minutes
+            q["wall_min"] += minutes
+        run["last_step"] += steps
+        run["train_min"] += minutes
     a.json.parent.mkdir(parents=True, exist_ok=True)
     a.json.write_text(json.dumps(runs, indent=1) + "\n")
     if a.png:

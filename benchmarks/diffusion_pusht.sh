@@ -26,7 +26,7 @@
 #                ($OUT/logs.tgz), the curve ($OUT/diffusion-curve.json, .png) and the results: one call per 9 minutes.
 #   pack-N       (stopping a train-N still running) train-N's last checkpoint (model, optimizer, scheduler, RNG: LeRobot's whole resume state) and its
 #                logs as 15 MiB parts in $RUNS/pack; then `send` returns 4 of them a call (60 MiB
-#                of the 64 that come back).
+#                of the 64 that come back). PACK=model: the policy's pretrained_model folder alone (8 parts).
 #   unpack-N     puts back a run carried in .gpu-diffusion/ (see below) as $RUNS/train-N with its logs.
 # Carrying a packed run into a new hold: here, copy each call's parts (files_at/parts/*) into .gpu-diffusion/K/
 # folders of at most 3 parts (45 MiB: a call carries 64 with the tree, ~3 MiB with outputs/ moved aside), and run
@@ -65,6 +65,11 @@ WAIT_MIN=${WAIT_MIN:-9}
 EVAL_GPUS=${EVAL_GPUS:-}         # eval-final-N on a host of several GPUs: "G1 G2", the batch's GPU and gym-pusht's,
                                  # both at once (unset: one after the other on the GPU the call sees)
 CARRIED=${CARRIED:-$HOME/carried}  # where the carried parts of a packed run are gathered
+# a pretrained_model folder (a checkpoint's weights, config and normalizers, not its optimizer): train-N starts from
+# it with LeRobot's --policy.path, a new optimizer and schedule (STEPS, LR). For a run whose whole resume state did
+# not survive the hold it came from (the optimizer's 2 x 114 MB): --resume is the way when it did
+FROM=${FROM:-}
+[ -z "$FROM" ] || [ -f "$FROM/config.json" ] || { echo "FROM must be a pretrained_model folder (with config.json), got '$FROM'" >&2; exit 2; }
 # found here in one line, not in a detached training's log minutes later
 case "$SCHED" in DDPM|DDIM) ;; *) echo "SCHED must be DDPM or DDIM (LeRobot's samplers), got '$SCHED'" >&2; exit 2 ;; esac
 whole() {  # NAME VALUE: a one-line error unless VALUE is a whole number above 0 (or empty, where $3 is "optional")
@@ -83,8 +88,9 @@ mkdir -p "$OUT/results" "$RUNS/logs" "$RUNS/pids" "$RUNS/results"
 # defaults (which are horizon 64, 32 action steps and an ImageNet backbone fetched from the network), on the
 # features of LeRobot's lerobot/pusht (observation.image 96 x 96, observation.state, action): what differs from
 # that run is DOWN_DIMS, the demos and the budget (docs/lerobot-diffusion.md).
-policy_args() {
-  echo --policy.type=diffusion --policy.device="$DEVICE" --policy.push_to_hub=false --policy.use_amp=false \
+policy_args() {  # FROM set: LeRobot's own fine-tuning (--policy.path) from that policy's weights, the same settings
+  local policy=--policy.type=diffusion; [ -z "$FROM" ] || policy=--policy.path=$FROM
+  echo "$policy" --policy.device="$DEVICE" --policy.push_to_hub=false --policy.use_amp=false \
     --policy.n_obs_steps=2 --policy.horizon=16 --policy.n_action_steps=8 --policy.drop_n_last_frames=7 \
     --policy.crop_shape=[84,84] --policy.crop_is_random=true --policy.pretrained_backbone_weights=null \
     --policy.use_group_norm=true --policy.spatial_softmax_num_keypoints=32 "--policy.down_dims=[$DOWN_DIMS]" \
@@ -209,7 +215,10 @@ print(r['STEPS'], r['EVAL_FREQ'], r['SAVE_FREQ'])" "$RUNS/results/diffusion-rate
       step=$(readlink "$RUNS/train-$n/checkpoints/last") || {
         echo "pack-$n: $RUNS/train-$n has no checkpoint to pack" >&2; exit 1; }
       mkdir -p "$RUNS/pack" && rm -f "$RUNS/pack/train-$n".* "$RUNS/pack/sent"
-      tar cf - -C "$RUNS" "train-$n/checkpoints/$step" "train-$n/checkpoints/last" logs \
+      what=("train-$n/checkpoints/$step" "train-$n/checkpoints/last" logs)
+      # PACK=model: the policy alone (114 MB, 2 send calls), to score it elsewhere or start a run FROM it
+      [ "${PACK:-resume}" = model ] && what=("train-$n/checkpoints/$step/pretrained_model")
+      tar cf - -C "$RUNS" "${what[@]}" \
         | split -b 15m -d -a 3 - "$RUNS/pack/train-$n.tar.part."
       (cd "$RUNS/pack" && sha256sum train-"$n".tar.part.* > "train-$n.sha256")
       ls -l "$RUNS/pack"; echo "then: send, once per 4 parts" ;;

@@ -257,12 +257,18 @@ EOS
           # (session 17: 12,000 did not fit, the run stopped for the final evals mid-save of step 10,000) end the schedule inside the hold,
           # a checkpoint every 1,000 so a stop loses little. Then: `diffusion_pusht.sh wait` calls with
           # SIZES="200 2000", `eval-final-2000` with EVAL_GPUS="2 3", `wait bundle`.
+          # SMALL=0: the 2,000 alone (WORKERS_BIG=60: 11.3 updates a second, session 18, where the update itself,
+          # not the loader, was then the wait). FROM=~/diffusion/NAME/pretrained_model (bundled in .gpu-demos/NAME):
+          # the run starts from that policy's weights with a new optimizer and schedule (diffusion_pusht.sh FROM).
+          # The sizes at equal updates: WORKERS_BIG=30 WORKERS_SMALL=30, the loader split evenly
           dp() { env OUT="$OUT" BATCH="${BATCH:-256}" LR="${LR:-2e-4}" STEPS="${STEPS:-10000}" SAVE_FREQ="${SAVE_FREQ:-1000}" \
                    EVAL_FREQ="${EVAL_FREQ:-3000}" SCHED=DDIM INFER_STEPS=10 "$@"; }
+          [ -n "${FROM:-}" ] && [ "${SMALL:-1}" = 1 ] && {  # dp passes FROM to both sizes' runs
+            echo "issue54-hold: FROM starts the 2,000-episode run from a policy; give SMALL=0 with it" >&2; exit 2; }
           # a setting diffusion_pusht.sh refuses (its one line, exit 2) ends the stage there, before any GPU work
           CUDA_VISIBLE_DEVICES=0 dp SIZES=2000 WORKERS="${WORKERS_BIG:-46}" bash benchmarks/diffusion_pusht.sh train-2000 || exit
           if [ "${SMALL:-1}" = 1 ]; then
-            CUDA_VISIBLE_DEVICES=1 dp SIZES=200 WORKERS=14 bash benchmarks/diffusion_pusht.sh train-200 || exit; fi
+            CUDA_VISIBLE_DEVICES=1 dp SIZES=200 WORKERS="${WORKERS_SMALL:-14}" bash benchmarks/diffusion_pusht.sh train-200 || exit; fi
           CUDA_VISIBLE_DEVICES=3 python3 -m mjx_pusht demos --task gym-pusht --seeds 0:4 --replace --out "$HOME/warm" \
             --no-progress > "$OUT/warm.log" 2>&1; tail -n 2 "$OUT/warm.log"
           sleep "${WAIT:-30}"; nproc; nvidia-smi > "$OUT/nvidia-smi.txt" 2>&1

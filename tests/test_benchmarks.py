@@ -244,6 +244,29 @@ def test_the_diffusion_curve_reads_a_real_lerobot_train_log_past_a_thousand_step
     assert 13 < run["train_min"] < run["wall_min"] < 20  # the evals' minutes left out of the training's
 
 
+def test_a_run_started_from_another_runs_checkpoint_continues_its_curve(tmp_path, capsys):
+    """`--after NAME=MINUTES,STEPS` (a run started FROM a checkpoint taken after that much training): the run's
+    points sit that much later in minutes and updates, the same successes; a malformed offset or an unknown run is
+    a one-line error and no file is written."""
+    from benchmarks.diffusion_curve import main, parse_run
+
+    log = Path(__file__).with_name("data") / "lerobot-train-diffusion-2000-h100.txt"
+    alone = parse_run([log])
+    out = tmp_path / "curve.json"
+    assert main([f"2000={log}", "--after", "2000=12.5,8000", "--json", str(out)]) == 0
+    run = json.loads(out.read_text())["2000"]
+    assert run["after"] == {"train_min": 12.5, "steps": 8000}
+    assert [p["step"] for p in run["points"]] == [8000 + p["step"] for p in alone["points"]] == [9300, 10600, 11900, 13200]
+    assert [p["train_min"] for p in run["points"]] == pytest.approx([12.5 + p["train_min"] for p in alone["points"]])
+    assert [p["successes"] for p in run["points"]] == [p["successes"] for p in alone["points"]]
+    assert run["last_step"] == 13200 and run["train_min"] == pytest.approx(12.5 + alone["train_min"])
+    for bad in ("2000=12.5", "2000=x,8000", "200=12.5,8000"):
+        with pytest.raises(SystemExit):
+            main([f"2000={log}", "--after", bad, "--json", str(tmp_path / "bad.json")])
+        assert "--after" in capsys.readouterr().err.splitlines()[-1]
+    assert not (tmp_path / "bad.json").exists()
+
+
 def test_train_scaling_per_device_flags_grow_with_the_devices_and_a_missing_one_is_refused(tmp_path):
     """Weak scaling (`--per-device envs,batch`): each count's run gets those flags times the count, the last value
     of a repeated flag being the one argparse keeps; a flag absent from the train arguments is a one-line error

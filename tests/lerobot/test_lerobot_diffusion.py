@@ -111,7 +111,8 @@ def test_the_recipe_carries_a_run_across_holds_and_lerobot_resumes_it_from_the_c
     parts, `send` returns at most 4 a call; a part missing on the new machine stops `unpack-2` in one line with
     nothing unpacked; with every part, the new hold's `unpack-2 train-2` puts the checkpoint back byte for byte and
     LeRobot's own --resume goes on from it to step 4. (LeRobot 0.6.1's resume is not bit-exact: its data order
-    is, but restarting the loader draws once more from the restored torch RNG; a run from scratch is.)"""
+    is, but restarting the loader draws once more from the restored torch RNG; a run from scratch is.) Where only
+    the policy comes back (`PACK=model`), a later run starts FROM its weights."""
     env = {**os.environ, "PY": sys.executable, "DEVICE": "cpu", "SIZES": "2", "STEPS": "4", "SAVE_FREQ": "2",
            "EVAL_FREQ": "100", "DOWN_DIMS": "16,32", "BATCH": "2", "WORKERS": "0", "WAIT_MIN": "5",
            "CARRIED": str(tmp_path / "carried"), "MJX_PUSHT_JAX_CACHE": str(tmp_path / "cache")}
@@ -159,6 +160,32 @@ def test_the_recipe_carries_a_run_across_holds_and_lerobot_resumes_it_from_the_c
     assert "'resume': True" in resumed and "Resuming data order at epoch 0, sample 4" in resumed
     assert "End of training" in resumed
 
+    # where only the policy came back (PACK=model: its weights, config and normalizers, not the optimizer), a run
+    # in a third hold starts FROM it with LeRobot's --policy.path: at a learning rate of ~0 its one update leaves
+    # those weights as they were (a policy made afresh would differ from them by Adam's first steps, ~1e-4)
+    p = subprocess.run(["bash", "benchmarks/diffusion_pusht.sh", "pack-2"], cwd=ROOT, capture_output=True, text=True,
+                       timeout=60, env={**env, "RUNS": str(first), "OUT": str(tmp_path / "out"), "PACK": "model"})
+    assert p.returncode == 0, p.stderr
+    packed = b"".join(f.read_bytes() for f in sorted((first / "pack").glob("train-2.tar.part.*")))
+    listing = subprocess.run(["tar", "tf", "-"], input=packed, capture_output=True, check=True).stdout.decode()
+    assert {n for n in listing.splitlines() if not n.endswith("/")} == {
+        f"train-2/checkpoints/000002/pretrained_model/{f.name}"
+        for f in (first / "train-2/checkpoints/000002/pretrained_model").iterdir()}
+    third = tmp_path / "hold3"
+    third.mkdir()
+    subprocess.run(["tar", "xf", "-", "-C", str(third)], input=packed, check=True)
+    shutil.copytree(runs / "demos-2", third / "demos-2")
+    policy = third / "train-2/checkpoints/000002/pretrained_model"
+    policy.rename(third / "policy")
+    shutil.rmtree(third / "train-2")
+    env.update(FROM=str(third / "policy"), LR="1e-12", STEPS="1", SAVE_FREQ="1")
+    stages(third, "train-2", "wait")
+    ckpt = third / "train-2/checkpoints/000001/pretrained_model"
+    assert json.loads((ckpt / "train_config.json").read_text())["policy"]["pretrained_path"] == str(third / "policy")
+    before, after = load_file(third / "policy/model.safetensors"), load_file(ckpt / "model.safetensors")
+    assert before.keys() == after.keys()
+    assert max(float((after[k].float() - before[k].float()).abs().max()) for k in before) < 1e-8
+
 
 def test_pack_stops_a_training_still_running_before_it_cuts_the_checkpoint(tmp_path):
     """A hold ends while lerobot-train still runs (it is detached): `pack-N` stops it first, so no checkpoint is
@@ -197,7 +224,8 @@ def test_pack_stops_a_training_still_running_before_it_cuts_the_checkpoint(tmp_p
     ("BATCH", "abc", "BATCH must be a whole number above 0, got 'abc'"),
     ("STEPS", "rate", "STEPS must be a whole number above 0, got 'rate'"),
     ("LR", "1e-4x", "LR must be a number (e.g. 1e-4), got '1e-4x'"),
-    ("EVAL_GPUS", "2,3", 'EVAL_GPUS must be one or two GPU numbers (e.g. "2 3"), got \'2,3\'')])
+    ("EVAL_GPUS", "2,3", 'EVAL_GPUS must be one or two GPU numbers (e.g. "2 3"), got \'2,3\''),
+    ("FROM", "nowhere", "FROM must be a pretrained_model folder (with config.json), got 'nowhere'")])
 def test_a_bad_setting_is_one_line_before_anything_starts(tmp_path, var, value, line):
     """A value LeRobot cannot take would otherwise surface minutes later in a detached training's log."""
     p = subprocess.run(["bash", "benchmarks/diffusion_pusht.sh", "train-2"], cwd=ROOT, capture_output=True, text=True,
@@ -205,3 +233,15 @@ def test_a_bad_setting_is_one_line_before_anything_starts(tmp_path, var, value, 
                                         "OUT": str(tmp_path / "out")})
     assert (p.returncode, p.stderr.strip().splitlines(), p.stdout) == (2, [line], "")
     assert not (tmp_path / "runs").exists()
+
+
+
+@pytest.mark.parametrize("settings, line", [
+    ({"FROM": "x"}, "issue54-hold: FROM starts the 2,000-episode run from a policy; give SMALL=0 with it"),
+    ({"SMALL": "0", "BATCH": "abc"}, "BATCH must be a whole number above 0, got 'abc'")])
+def test_the_one_hold_stage_refuses_a_bad_setting_before_any_run_starts(tmp_path, settings, line):
+    """gpu.sh issue54-hold on the lent host: a refused setting is its one line and exit 2, no run folder made."""
+    p = subprocess.run(["bash", "benchmarks/gpu.sh", "issue54-hold", "h200"], cwd=ROOT, capture_output=True, text=True,
+                       timeout=60, env={**os.environ, **settings, "HOME": str(tmp_path), "OUT": str(tmp_path / "out")})
+    assert (p.returncode, p.stderr.strip().splitlines()) == (2, [line])
+    assert not (tmp_path / "diffusion").exists()
