@@ -170,6 +170,7 @@ PYEOF
     train-*)
       last="$RUNS/train-$n/checkpoints/last/pretrained_model/train_config.json"
       if [ -f "$last" ]; then  # LeRobot's own resume: its config, optimizer, scheduler, RNG and data order
+        [ -z "$FROM" ] || echo "train-$n: resuming its own checkpoint in $RUNS/train-$n; FROM is not used" >&2
         detach "train-$n" "$PY -m lerobot.scripts.lerobot_train --config_path=$last --resume=true"
       else
         if [ "$STEPS" = rated ]; then  # this size's row of the rate stage's JSON
