@@ -116,7 +116,10 @@ def main(argv=None) -> int:
         name, sep, logs = spec.partition("=")
         if not sep or not logs:
             p.error(f"{spec!r}: give NAME=LOG[,LOG...]")
-        runs[name] = parse_run([Path(x) for x in logs.split(",")])
+        paths = [Path(x) for x in logs.split(",")]
+        if missing := [str(x) for x in paths if not x.is_file()]:
+            p.error(f"{spec!r}: no log file {', '.join(missing)}")
+        runs[name] = parse_run(paths)
     for spec in a.after:
         name, _, offset = spec.partition("=")
         try:

@@ -265,6 +265,10 @@ def test_a_run_started_from_another_runs_checkpoint_continues_its_curve(tmp_path
             main([f"2000={log}", "--after", bad, "--json", str(tmp_path / "bad.json")])
         assert "--after" in capsys.readouterr().err.splitlines()[-1]
     assert not (tmp_path / "bad.json").exists()
+    with pytest.raises(SystemExit):  # a log that is not there: one line, not a traceback
+        main([f"2000={tmp_path / 'none.log'}", "--json", str(tmp_path / "bad.json")])
+    assert "no log file" in capsys.readouterr().err.splitlines()[-1]
+    assert not (tmp_path / "bad.json").exists()
 
 
 def test_train_scaling_per_device_flags_grow_with_the_devices_and_a_missing_one_is_refused(tmp_path):
