@@ -123,8 +123,9 @@ def main(argv=None) -> int:
     for spec in a.after:
         name, _, offset = spec.partition("=")
         try:
-            minutes, steps = (float(offset.split(",")[0]), int(offset.split(",")[1]))
-        except (ValueError, IndexError):
+            minutes, steps = offset.split(",")
+            minutes, steps = float(minutes), int(steps)
+        except ValueError:  # not two values, or not numbers
             p.error(f"--after {spec!r}: give NAME=MINUTES,STEPS (e.g. 2000=12.9,8000)")
         if name not in runs:
             p.error(f"--after {spec!r}: no run named {name!r}")

@@ -64,7 +64,7 @@ def view_model(model, size: int = IMAGE_SIZE):
     # No light of these scenes casts a shadow (they have none; the headlight casts none), yet each render context
     # MuJoCo makes allocates a shadowsize^2 shadow map, 4096^2 by default: ~70 MB a context with Mesa, never drawn
     # into. LeRobot's vector of 500 drop-in envs, a context each, went past 24 GB for it (notebook lead18)
-    if not view.light_castshadow[:view.nlight].any():
+    if not view.light_castshadow.any():
         view.vis.quality.shadowsize = 0
     view.vis.global_.offwidth = max(int(view.vis.global_.offwidth), size)
     view.vis.global_.offheight = max(int(view.vis.global_.offheight), size)

@@ -163,12 +163,10 @@ def test_the_recipe_carries_a_run_across_holds_and_lerobot_resumes_it_from_the_c
     # where only the policy came back (PACK=model: its weights, config and normalizers, not the optimizer), a run
     # in a third hold starts FROM it with LeRobot's --policy.path: at a learning rate of ~0 its one update leaves
     # those weights as they were (a policy made afresh would differ from them by Adam's first steps, ~1e-4)
-    p = subprocess.run(["bash", "benchmarks/diffusion_pusht.sh", "pack-2"], cwd=ROOT, capture_output=True, text=True,
-                       timeout=60, env={**env, "RUNS": str(first), "OUT": str(tmp_path / "out"), "PACK": "model"})
-    assert p.returncode == 0, p.stderr
-    packed = b"".join(f.read_bytes() for f in sorted((first / "pack").glob("train-2.tar.part.*")))
-    listing = subprocess.run(["tar", "tf", "-"], input=packed, capture_output=True, check=True).stdout.decode()
-    assert {n for n in listing.splitlines() if not n.endswith("/")} == {
+    env["PACK"] = "model"
+    stages(first, "pack-2")
+    packed, listing = _packed(first, 2)
+    assert {n for n in listing if not n.endswith("/")} == {
         f"train-2/checkpoints/000002/pretrained_model/{f.name}"
         for f in (first / "train-2/checkpoints/000002/pretrained_model").iterdir()}
     third = tmp_path / "hold3"
@@ -213,9 +211,14 @@ def test_pack_stops_a_training_still_running_before_it_cuts_the_checkpoint(tmp_p
     assert "pack-5: stopped the running train-5" in p.stdout
     with pytest.raises(ProcessLookupError):
         os.kill(pid, 0)
-    packed = b"".join(f.read_bytes() for f in sorted((runs / "pack").glob("train-5.tar.part.*")))
+    assert "train-5/checkpoints/000002/pretrained_model/model.safetensors" in _packed(runs, 5)[1]
+
+
+def _packed(runs, n):
+    """`pack-N`'s parts joined again, and the names their tar holds."""
+    packed = b"".join(f.read_bytes() for f in sorted((runs / "pack").glob(f"train-{n}.tar.part.*")))
     listing = subprocess.run(["tar", "tf", "-"], input=packed, capture_output=True, check=True).stdout.decode()
-    assert "train-5/checkpoints/000002/pretrained_model/model.safetensors" in listing.splitlines()
+    return packed, listing.splitlines()
 
 
 @pytest.mark.parametrize("var, value, line", [
@@ -233,7 +236,6 @@ def test_a_bad_setting_is_one_line_before_anything_starts(tmp_path, var, value, 
                                         "OUT": str(tmp_path / "out")})
     assert (p.returncode, p.stderr.strip().splitlines(), p.stdout) == (2, [line], "")
     assert not (tmp_path / "runs").exists()
-
 
 
 @pytest.mark.parametrize("settings, line", [
