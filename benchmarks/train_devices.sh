@@ -31,9 +31,11 @@ case "${1:-}" in
     cd "$runs" || exit 1
     run() { echo "$(date +%T) \$ $*"; [ -n "${DRY:-}" ] && return "${DRY_RC:-0}"; "$@"; }
     common="--task gym-pusht --keep best --no-progress --no-rerun --record 0"
-    ppo="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes 3 $common"
+    # each run ends at its goal rate (--until) or its budget: the minutes to the goal are the figure, and a run
+    # that stops there leaves the hold's time to the next one
+    ppo="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes 3 --until 0.95 $common"
     px="--obs pixels_agent_pos --hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 --beta-decay 0.7 --first-fits 4"
-    px="$px --iterations 300 --minutes 5 --image-steps 4000 --image-batch 512 --envs 4096 --max-samples 8000000 $common"
+    px="$px --iterations 300 --minutes 5 --until 0.9 --image-steps 4000 --image-batch 512 --envs 4096 --max-samples 8000000 $common"
     # scale GPUS GOAL OUT COUNT PER-DEVICE-FLAGS ENV-ASSIGNMENTS TRAIN-ARGS...: one train_scaling run
     scale() {
       local gpus=$1 goal=$2 out=$3 n=$4 per=$5 extra=$6; shift 6

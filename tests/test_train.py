@@ -387,6 +387,34 @@ def test_train_minutes_1_on_a_cpu_ends_within_a_minute_and_a_half_of_wall_clock(
         assert re.search(r"judging iteration \d+'s policy on the 64 held-out seeds: about \d+ s", said), said[-2000:]
 
 
+@pytest.mark.slow  # two 13-s DAgger runs, one after the other (the second's goal is read from the first)
+def test_until_stops_at_the_first_judgement_reaching_it_as_the_full_run_was_there(tmp_path):
+    """`--until RATE` ends training at the first held-out judgement at or above RATE: the same run without it (MuJoCo
+    C and the CPU's fits are deterministic) judged the same policies up to there, and went on past a judgement below
+    RATE. Easy starts judged at coverage 0.5 give an untrained student some successes, so the curve moves early."""
+    args = ["train", "--backend", "cpu", "--task", "gym-pusht-easy", "--success-threshold", "0.5", "--envs", "16",
+            "--iterations", "3", "--fit-steps", "50", "--batch", "128", "--hidden", "32,32", "--eval-envs", "8",
+            "--max-samples", "20000", "--no-rerun", "--record", "0", "--no-progress"]
+    r = cli(*args, "--out", str(tmp_path / "full"))
+    assert r.returncode == 0, r.stderr
+    full = json.loads((tmp_path / "full" / "summary.json").read_text())["curve"]
+    rates = [c["success"] for c in full]
+    # the goal: a rate first reached by a judgement that is neither the first nor the last
+    j = next((j for j in range(1, len(rates) - 1) if rates[j] > max(rates[:j])), None)
+    assert j is not None, f"no judgement inside the run rose above those before it: {rates}"
+    r = cli(*args, "--out", str(tmp_path / "until"), "--until", str(rates[j]))
+    assert r.returncode == 0, r.stderr
+    assert f"stopped after iteration {j}: its held-out success {rates[j]:.1%} reached --until {rates[j]:g}" in r.stdout + r.stderr
+    summary = json.loads((tmp_path / "until" / "summary.json").read_text())
+    same = ("iteration", "env_steps", "samples", "loss", "success", "coverage")
+    assert [[c[k] for k in same] for c in summary["curve"]] == [[c[k] for k in same] for c in full[:j + 1]]
+    assert summary["iterations_run"] == j + 1 and summary["eval"]["success_rate"] == rates[j]
+    kept = (tmp_path / "full" / "checkpoints" / f"policy_{j:03d}.msgpack").read_bytes()
+    assert (tmp_path / "until" / "policy.msgpack").read_bytes() == kept
+    r = cli(*args, "--out", str(tmp_path / "zero"), "--until", "0")  # met before training: refused by argparse
+    assert r.returncode == 2 and "--until: must be a success rate in (0, 1], got 0" in r.stderr, r.stderr
+
+
 @pytest.mark.slow
 def test_on_mjx_every_rollout_is_one_batch_shape_and_the_last_judgement_is_the_held_out_seeds(tmp_path):
     """MJX compiles a rollout per batch shape: every iteration's batch, the first and the final judgement

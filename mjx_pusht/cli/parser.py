@@ -78,6 +78,17 @@ def _fraction(text: str) -> float:
     return v
 
 
+def _rate(text: str) -> float:
+    """An argparse type: a success rate in (0, 1] (train --until: a rate of 0 is met before training starts)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0.0 < v <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be a success rate in (0, 1], got {text}")
+    return v
+
+
 def _threshold(text: str) -> float:
     """An argparse type: a success threshold, a coverage in (0, 1] (validate.fraction's rule: 0, NaN and 1.5 refused)."""
     try:
@@ -312,6 +323,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "300, the task's; eval --max-steps judges a policy at the same length)")
     t.add_argument("--minutes", type=_positive_float, default=None,
                    help="training's budget, its last judgement included: no rollout or fit starts that would pass it")
+    t.add_argument("--until", type=_rate, default=None, metavar="SUCCESS",
+                   help="stop at the first held-out judgement at or above this success rate, in (0, 1] (the time "
+                        "to a goal rate; the stop chose that judgement, so judge the policy again on other seeds, "
+                        "eval --seeds, for a rate the stop did not pick)")
     t.add_argument("--seed", type=_nonneg, default=0, help="initialisation and sampling seed (default 0)")
     t.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     t.add_argument("--record", type=_nonneg, default=4, help="held-out episodes in eval/eval.rrd (default 4)")

@@ -122,7 +122,7 @@ def cmd_train(args) -> int:
     from mjx_pusht.train.run import train_dagger
 
     summary = train_dagger(cfg, name, out, resume=args.resume, minutes=args.minutes, progress=args.progress,
-                           rerun=args.rerun, keep=args.keep, devices=devices)
+                           rerun=args.rerun, keep=args.keep, devices=devices, until=args.until)
     return _finish(args, name, out, summary, banner)
 
 
@@ -137,7 +137,7 @@ def _follow(cfg, backend: str, devices: list, processes, args) -> int:
     out = Path(tempfile.mkdtemp(prefix=f"mjx-pusht-train-process-{processes.process_id}-"))
     try:
         train_dagger(cfg, backend, out, minutes=args.minutes, progress=False, rerun=False, keep=args.keep,
-                     devices=devices)
+                     devices=devices, until=args.until)
     finally:
         shutil.rmtree(out, ignore_errors=True)
     mine = sum(d.process_index == processes.process_id for d in devices)
@@ -188,7 +188,7 @@ def _cmd_ppo(args, name: str, why: str, devices: list) -> int:
     print(f"backend: {name} ({why}); Brax PPO from {cfg.obs_type} on the {cfg.the_task.name} task: {cfg.envs} envs, "
           f"{cfg.timesteps:,} env steps, held-out judgement {cfg.evals} times on seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
     curve = train_ppo(cfg, name, out, resume=args.resume, progress=args.progress, minutes=args.minutes, keep=args.keep,
-                      devices=len(devices))
+                      devices=len(devices), until=args.until)
     summary = write_summary(cfg, name, out, curve, args.rerun, method="ppo", kept=kept_row(curve, args.keep),
                             keep=args.keep, devices=len(devices))
     return _finish(args, name, out, summary, banner)

@@ -35,6 +35,14 @@ def kept(curve: list[dict], keep: str) -> dict | None:
     return max(reversed(rows), key=lambda r: r["validation_success"])  # a tie: the later fit
 
 
+def reached(curve: list[dict], until: float | None) -> str | None:
+    """--until: why training ends at the curve's last judgement (its held-out success at least `until`), or None.
+    Both trainers stop so, DAgger before learning the samples of the rollout that judged, PPO between Brax's epochs."""
+    if until is None or not curve or curve[-1]["success"] < until:
+        return None
+    return f"its held-out success {curve[-1]['success']:.1%} reached --until {until:g}"
+
+
 def write_curve(out: Path, curve: list[dict], title: str, rerun: bool = True) -> None:
     """curve.csv, curve.png (held-out success with its 95% band, by env steps and by wall-clock), train.rrd."""
     import io

@@ -237,13 +237,15 @@ def _finite(tree) -> bool:
     return all(bool(np.isfinite(np.asarray(x)).all()) for x in jax.tree.leaves(tree))
 
 
-class _BudgetSpent(Exception):
-    """Raised from Brax's `progress_fn` once --minutes is spent: Brax's trainer has no stop of its own, and that
-    callback runs on the host between training epochs, after `policy_params_fn` judged and saved the policy."""
+class _Stop(Exception):
+    """Raised from Brax's `progress_fn` once --minutes is spent or --until reached: Brax's trainer has no stop of its
+    own, and that callback runs on the host between training epochs, after `policy_params_fn` judged and saved the
+    policy. Its message is the line the run ends with."""
 
 
 def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, progress: bool = True,
-              minutes: float | None = None, keep: str = "last", devices: int | None = None) -> list[dict]:
+              minutes: float | None = None, keep: str = "last", devices: int | None = None,
+              until: float | None = None) -> list[dict]:
     """Brax PPO on the adapter, judged on the held-out seeds at every evaluation; returns the curve.
 
     Each curve row has the held-out success of the action the policy is saved with (`cfg.act`) and of both
@@ -252,7 +254,8 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     sigma, its largest and least pre-tanh mean), and norm_std_change (`_std_change`).
     `resume`: go on from the last judged policy in `out` (Brax's `restore_params`: the normaliser, policy and
     value networks; Brax restores no optimiser state, so Adam starts afresh) up to `cfg.timesteps`.
-    `minutes`: stop at the first judgement past this much training wall-clock (resumable from there).
+    `minutes`: stop at the first judgement past this much training wall-clock (resumable from there). `until`: stop at
+    the first judgement whose held-out success is at least this.
     `keep`: "best": policy.msgpack is the judged policy with the highest validation success (never chosen by
     the held-out seeds); "last": the last judged. `devices`: this host's devices Brax maps its training over
     (its max_devices_per_host; None: every one), each its share of the envs and of every minibatch. A non-finite network, observation statistic or judged episode
@@ -269,7 +272,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     from mjx_pusht.study.stats import wilson
     from mjx_pusht.train.policy import save
     from mjx_pusht.train.curve import kept as kept_row
-    from mjx_pusht.train.curve import write_curve
+    from mjx_pusht.train.curve import reached, write_curve
 
     ckpt = out / "checkpoints"
     restored, curve = _load_resume(ckpt / RESUME, cfg) if resume else (None, [])
@@ -328,6 +331,8 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
         _save_resume(ckpt / RESUME, cfg, params, curve)
         bar.update(1)
         bar.set_postfix(success=f"{k / n:.1%}", steps=int(step))
+        if len(curve) == 1 and reached(curve, until):  # the untrained policy: no epoch's metrics to wait for
+            raise _Stop(reached(curve, until))
 
     def on_metrics(step, metrics):
         """Brax's loss metrics of the epoch that made the last judged policy (called after on_params)."""
@@ -339,8 +344,10 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
                               if f"training/{k}" in metrics})
             write_curve(out, curve, f"Brax PPO from {cfg.obs_type} (running)", rerun=False)
             _save_resume(ckpt / RESUME, cfg, last["params"], curve)
+        if reached(curve, until):
+            raise _Stop(reached(curve, until))
         if minutes is not None and curve and curve[-1]["wall_seconds"] > 60 * minutes:
-            raise _BudgetSpent
+            raise _Stop(f"the {minutes:g}-minute budget is spent")
 
     try:
         brax_ppo.train(
@@ -353,8 +360,8 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
             restore_params=restored, max_grad_norm=cfg.max_grad_norm, max_devices_per_host=devices,
             **({"learning_rate_schedule": "ADAPTIVE_KL"} if cfg.lr_schedule == "adaptive-kl" else {}),
             network_factory=functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=cfg.hidden))
-    except _BudgetSpent:
-        bar.write(f"stopping after judgement {len(curve) - 1}: the {minutes:g}-minute budget is spent")
+    except _Stop as why:
+        bar.write(f"stopping after judgement {len(curve) - 1}: {why}")
     bar.close()
     kept = kept_row(curve, keep)
     if kept is not None and kept["iteration"] != curve[-1]["iteration"]:

@@ -23,6 +23,7 @@ from mjx_pusht.errors import needs
 from mjx_pusht.study.stats import wilson
 from mjx_pusht.task.memory import CHAPTER
 from mjx_pusht.train.curve import kept as kept_fit
+from mjx_pusht.train.curve import reached
 from mjx_pusht.train.resume import TrainError, checkpoint, config_dict, restore, resume_every_s
 from mjx_pusht.train.summary import write_summary
 
@@ -35,14 +36,16 @@ def _meta(cfg, iteration: int, env_steps: int, norm) -> dict:
 
 
 def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes: float | None = None,
-                 progress: bool = True, rerun: bool = True, keep: str = "last", devices=None) -> dict:
+                 progress: bool = True, rerun: bool = True, keep: str = "last", devices=None,
+                 until: float | None = None) -> dict:
     """Run DAgger on `backend` into `out`; returns the summary (also written as summary.json).
 
     `keep`: which fit is the run's policy.msgpack: the last one, or ("best") the one whose next rollout
     succeeded most on that iteration's fresh training seeds with the expert's share at most
     VALIDATION_BETA (`curve.kept`); never chosen by the held-out seeds, so its held-out rate is not a maximum
     taken over the curve's noise. `minutes`: the budget of the training and its last judgement (`Budget`).
-    `devices`: those the rollouts and the learner spread over (devices.py; None: JAX's default device)."""
+    `devices`: those the rollouts and the learner spread over (devices.py; None: JAX's default device). `until`: stop
+    at the first held-out judgement at or above this success rate (its samples are not learned from)."""
     needs("train_dagger", "train", ("flax", "optax"))  # one line naming the extra, before any work
     import jax
     from tqdm import tqdm
@@ -120,9 +123,10 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
                       f"the {minutes:g}-minute budget: its samples so far are learned from")
         _stop_if_non_finite(non_finite(outcome, seeds, x, y), f"iteration {i}'s rollout", curve, out)
         if pending is not None:
-            stop = clock.spent(clock.fit + clock.judge)  # a fit now would leave no time to judge it
-            judged({k: v[cfg.envs:] for k, v in outcome.items()}, 0.0,
-                   {k: v[:cfg.envs] for k, v in outcome.items()}, float(cfg.beta(i)), last=stop)
+            held = {k: v[cfg.envs:] for k, v in outcome.items()}
+            goal = until is not None and clock.agree(float(np.mean(held["success"])) >= until)
+            stop = goal or clock.spent(clock.fit + clock.judge)  # a fit now would leave no time to judge it
+            judged(held, 0.0, {k: v[:cfg.envs] for k, v in outcome.items()}, float(cfg.beta(i)), last=stop)
             pending = None
             if stop:
                 curve[-1]["sim_seconds"] += sim  # spent, though the samples go unlearned: the judged policy is the run's
@@ -155,8 +159,9 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
     if writer[0] is not None:
         writer[0].join()
     if curve and curve[-1]["iteration"] < cfg.iterations - 1:
-        bar.write(f"stopped after iteration {curve[-1]['iteration']}: another would pass the {minutes:g}-minute "
-                  f"budget ({curve[-1]['wall_seconds']:.0f} s used)")
+        why = reached(curve, until) or (f"another would pass the {minutes:g}-minute budget "
+                                        f"({curve[-1]['wall_seconds']:.0f} s used)")
+        bar.write(f"stopped after iteration {curve[-1]['iteration']}: {why}")
     bar.close()
     jax.block_until_ready(learner.params)
     kept = kept_fit(curve, keep)
@@ -186,16 +191,20 @@ class Budget:
     def spent(self, seconds: float) -> bool:
         """Whether `seconds` more from now would pass the budget: by process 0's clock, where several processes train
         one run (each would otherwise stop at its own iteration, and the others wait for it)."""
-        import jax
-
         if self.deadline is None:
             return False
-        over = time.perf_counter() + seconds > self.deadline
+        return self.agree(time.perf_counter() + seconds > self.deadline)
+
+    @staticmethod
+    def agree(stop: bool) -> bool:
+        """Process 0's `stop`, on every process of a run over several (each must end at the same iteration)."""
+        import jax
+
         if jax.process_count() == 1:
-            return over
+            return stop
         from jax.experimental import multihost_utils
 
-        return bool(multihost_utils.broadcast_one_to_all(np.bool_(over)))
+        return bool(multihost_utils.broadcast_one_to_all(np.bool_(stop)))
 
     def rolled(self, seconds: float, episodes: int, steps: int) -> None:
         self.last, self.step, self.episodes = seconds, seconds / max(steps, 1), episodes
