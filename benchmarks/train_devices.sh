@@ -23,9 +23,9 @@ mkdir -p "$runs"
 case "${1:-}" in
   start)
     (cd "$runs" && setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' "$runs/devices.pid" \
-      bash "$root/benchmarks/train_devices.sh" plan > "$runs/devices.log" 2>&1 < /dev/null &)
+      bash "$root/benchmarks/train_devices.sh" "${2:-plan}" > "$runs/devices.log" 2>&1 < /dev/null &)
     sleep "${WAIT:-20}"; cp "$runs/devices.log" "${OUT:-/tmp}/" ;;
-  plan)
+  plan|ppo-wide)
     export PYTHONPATH=$HOME/jsite:$HOME/site:$root PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
     export MJX_PUSHT_JAX_CACHE=$HOME/jax_cache NCCL_NVLS_ENABLE=0 TORCH_SYMM_MEM_DISABLE_MULTICAST=1 NVSHMEM_DISABLE_NVLS=1
     cd "$runs" || exit 1
@@ -44,6 +44,20 @@ case "${1:-}" in
         --out "$out" --devices "$n" --per-device "$per" -- "$@"
     }
     ppo_per=envs,batch,timesteps px_per=envs,batch,image-batch,max-samples
+    if [ "$1" = ppo-wide ]; then
+      # PPO on MJX-Warp at ENVS worlds a GPU (default 16,384, twice the plan's), MINUTES long with no --until, for a
+      # steady rate: the plan's 4-GPU PPO ran 2.85x one GPU's (its runs ended in under a minute, compiles included)
+      e=${ENVS:-16384}
+      w="--algo ppo --envs $e --batch $((e / 16)) --timesteps $((e * 48828)) --iterations 80 --minutes ${MINUTES:-1.5}"
+      # shellcheck disable=SC2086  # the recipe: a list of flags
+      {
+      scale 0 0.95 wide 1 $ppo_per MJX_PUSHT_ENV_GRAPH_MODE=WARP --backend mjx-warp $w $common > wide-1.log 2>&1 &
+      scale 1,2 0.95 wide 2 $ppo_per MJX_PUSHT_ENV_GRAPH_MODE=WARP --backend mjx-warp $w $common > wide-2.log 2>&1 &
+      wait
+      scale "" 0.95 wide 4 $ppo_per MJX_PUSHT_ENV_GRAPH_MODE=WARP --backend mjx-warp $w $common > wide-4.log 2>&1
+      }
+      echo "$(date +%T) plan done"; exit 0
+    fi
     # 1. the probes, 2 GPUs each (one GPU's share each), a hang ended by timeout
     # shellcheck disable=SC2086  # the recipes: lists of flags
     (run env CUDA_VISIBLE_DEVICES=0,1 timeout 400 python3 -m mjx_pusht train --backend mjx-warp $px --envs 2048 \
@@ -86,7 +100,7 @@ case "${1:-}" in
     out=${OUT:?watch copies into \$OUT}; t=0
     while :; do
       (cd "$runs" && tar czf "$out/devices.tgz" --exclude='*.msgpack' --exclude='*.f32' --exclude='*.parquet' \
-        --exclude='*.rrd' --exclude='checkpoint*' ./*.log $(ls -d probe-* px-* ppo-* 2>/dev/null | grep -v '\.log$') 2>/dev/null)
+        --exclude='*.rrd' --exclude='checkpoint*' ./*.log $(ls -d probe-* px-* ppo-* wide 2>/dev/null | grep -v '\.log$') 2>/dev/null)
       for p in "$runs"/*/devices-*/policy.msgpack; do
         [ -f "$p" ] && [ -f "$(dirname "$p")/summary.json" ] && grep -q '"eval"' "$(dirname "$p")/summary.json" && \
           cp "$p" "$out/$(basename "$(dirname "$(dirname "$p")")")-$(basename "$(dirname "$p")").msgpack"
@@ -97,5 +111,5 @@ case "${1:-}" in
     done
     nvidia-smi --query-gpu=index,utilization.gpu,memory.used --format=csv > "$out/nvidia-smi.csv" 2>&1
     tail -n 4 "$runs/devices.log"; true ;;
-  *) echo "usage: train_devices.sh start|watch (issue 56's plan on a 4-GPU machine)" >&2; exit 2 ;;
+  *) echo "usage: train_devices.sh start [plan|ppo-wide]|watch (issue 56's plans on a 4-GPU machine)" >&2; exit 2 ;;
 esac
