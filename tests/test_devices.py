@@ -71,9 +71,8 @@ def test_bad_devices_are_one_line_before_anything_is_written(tmp_path, capsys):
     for argv, needle in ((["--devices", "0"], "must be an integer >= 1"),
                          (["--backend", "mjx-jax", "--devices", "64"], "--devices 64: this process has 1"),
                          (["--backend", "cpu", "--devices", "1"], "the cpu backend steps MuJoCo C"),
-                         # measured failing on 2 H200s with the pinned jax (notebook lead13): refused, not a hang
                          (["--backend", "mjx-warp", "--algo", "ppo", "--devices", "2"],
-                          "--devices 2 with --algo ppo on mjx-warp"),
+                          "--devices 2: this process has 1"),
                          (["--num-processes", "2", "--coordinator", "127.0.0.1:1", "--algo", "ppo"],
                           "--algo ppo: not with --num-processes yet")):
         assert main(["train", "--no-rerun", "--out", str(out), *argv]) in (1, 2)
@@ -147,20 +146,40 @@ def _free_port() -> int:
 
 def test_ppo_over_several_gpus_on_mjx_warp_is_refused_in_the_graph_modes_that_share_a_graph_or_failed(
         tmp_path, capsys, monkeypatch):
-    """Refused in the staged modes, whose one captured graph per call site every device would replay (the env's
-    default WARP_STAGED failed so on 2 H200s, notebook lead13) and where XLA captures (JAX, failed, lead15), naming
-    MJX-JAX and the WARP escape; WARP (a graph per device) and NONE go on to the next check (here: this CPU process
-    has one device), so they can be measured on GPUs."""
+    """Refused where MJX_PUSHT_ENV_GRAPH_MODE names a staged mode, whose one captured graph per call site every device
+    would replay (the env's default WARP_STAGED failed so on 2 H200s, notebook lead13), or XLA capturing (JAX, failed,
+    lead15), naming the way out; unset (a graph per device, WARP, trained on 2 and 4 H200s, lead19), WARP and NONE go
+    on to the next check (here: this CPU process has one device)."""
     argv = ["train", "--no-rerun", "--out", str(tmp_path / "run"), "--backend", "mjx-warp", "--algo", "ppo",
             "--devices", "2"]
-    for mode, needle in (("WARP_STAGED", "the WARP_STAGED CUDA-graph mode"), ("WARP_STAGED_EX", "--backend mjx-jax"),
-                         ("JAX", "MJX_PUSHT_ENV_GRAPH_MODE=WARP"), ("WARP", "--devices 2: this process has 1"),
+    for mode, needle in (("WARP_STAGED", "MJX_PUSHT_ENV_GRAPH_MODE=WARP_STAGED fails"),
+                         ("WARP_STAGED_EX", "--backend mjx-jax"), ("JAX", "unset it"),
+                         (None, "--devices 2: this process has 1"), ("WARP", "--devices 2: this process has 1"),
                          ("NONE", "--devices 2: this process has 1")):
-        monkeypatch.setenv("MJX_PUSHT_ENV_GRAPH_MODE", mode)
+        if mode is None:
+            monkeypatch.delenv("MJX_PUSHT_ENV_GRAPH_MODE", raising=False)
+        else:
+            monkeypatch.setenv("MJX_PUSHT_ENV_GRAPH_MODE", mode)
         assert main(argv) in (1, 2)
         err = capsys.readouterr().err
         assert needle in err and err.count("\n") == 1, err
     assert not (tmp_path / "run").exists()
+
+
+def test_brax_trains_on_several_gpus_of_mjx_warp_with_a_graph_per_device_unless_told_otherwise(monkeypatch):
+    """PPO's env on several MJX-Warp GPUs: WARP (graphs keyed on the device); on one, or on MJX-JAX, or with no GPU
+    to capture on, the env's own default; a mode the user names is theirs (the CLI refused those that failed)."""
+    from mjx_pusht.train import ppo
+
+    monkeypatch.delenv("MJX_PUSHT_ENV_GRAPH_MODE", raising=False)
+    monkeypatch.setattr("mjx_pusht.backends.base.has_gpu", lambda: True)
+    assert ppo.graph_mode("mjx-warp", 4) == "WARP" and ppo.graph_mode("mjx-warp", 2) == "WARP"
+    assert ppo.graph_mode("mjx-warp", 1) is None and ppo.graph_mode("mjx-jax", 4) is None
+    monkeypatch.setenv("MJX_PUSHT_ENV_GRAPH_MODE", "NONE")
+    assert ppo.graph_mode("mjx-warp", 4) is None  # the env reads the variable itself
+    monkeypatch.delenv("MJX_PUSHT_ENV_GRAPH_MODE")
+    monkeypatch.setattr("mjx_pusht.backends.base.has_gpu", lambda: False)
+    assert ppo.graph_mode("mjx-warp", 4) is None  # Warp captures graphs on CUDA only
 
 
 def test_a_rollout_over_the_devices_runs_with_pythons_collector_paused_and_restores_it():

@@ -256,8 +256,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
     t.add_argument("--devices", type=_positive, default=None,
                    help="mjx backends: this many of the host's devices (GPUs) roll out and learn, each its share of "
-                        "the episodes and of every minibatch, gradients averaged (default: every one for DAgger; "
-                        "one for PPO, whose Brax pmap crashed XLA's compile on 2 and 4 GPUs: docs/training.md)")
+                        "the episodes and of every minibatch, gradients averaged (default: every one)")
     _process_args(t, "training run (its episodes and minibatches split over every process's devices)",
                   "the run's files")
     t.add_argument("--out", type=_folder, default=Path("outputs/train"), help="the run's folder (default outputs/train)")

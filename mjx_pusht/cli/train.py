@@ -74,21 +74,22 @@ def cmd_train(args) -> int:
     _method_settings(args, name)
     from mjx_pusht.train.devices import check_divides, training_devices
 
-    # PPO: one device unless asked. Brax's pmapped training step segfaulted in XLA's compile on 2 and 4 H200s
-    # (jax 0.11.2, both MJX backends; notebook lead12). With the pinned jax (0.10.2) it trains on MJX-JAX over 1, 2
-    # and 4 H200s (3.8x one GPU's control steps on 4, lead15). On MJX-Warp the env's staged graph modes keep ONE
-    # captured graph per call site, whichever device calls it (warp/_src/jax/ffi.py; mujoco#3191: WARP_STAGED fails
-    # sharded), so Brax's second GPU replays the first's and fails (WARP_STAGED, the env's GPU default: lead13), and
-    # XLA capturing (JAX) failed too (lead15). Refused in those; WARP (graphs keyed on the device, as the sweep's
-    # programs per GPU use) and NONE (no graph) are let through, to measure them.
-    from mjx_pusht.envs.functional import ENV_GRAPH_MODE
+    # PPO, as DAgger, on every local GPU unless asked (Brax's pmap; jax 0.11.2's compile of it segfaulted, lead12: the
+    # pinned 0.10.2 trains, lead15, lead19). On MJX-Warp the env's staged graph modes keep ONE captured graph per call
+    # site, whichever device calls it (warp/_src/jax/ffi.py; mujoco#3191), so Brax's second GPU replays the first's
+    # and fails (WARP_STAGED, lead13), as XLA capturing (JAX) failed (lead15): on several GPUs PPO's env runs in
+    # WARP (a graph per device: 96-100% on 2 and 4 H200s, lead19; train/ppo.py graph_mode), and a
+    # MJX_PUSHT_ENV_GRAPH_MODE naming a mode that failed is refused.
+    graph_mode = os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE")
+    if args.algo == "ppo" and name == "mjx-warp" and graph_mode not in (None, "WARP", "NONE"):
+        import jax
 
-    graph_mode = os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE") or ENV_GRAPH_MODE  # as the env resolves it on a GPU
-    if args.algo == "ppo" and name == "mjx-warp" and (args.devices or 1) > 1 and graph_mode not in ("WARP", "NONE"):
-        raise TrainError(f"--devices {args.devices} with --algo ppo on mjx-warp: the {graph_mode} CUDA-graph mode "
-                         "fails under Brax's pmap on several GPUs (docs/training.md); train PPO on several GPUs with "
-                         "--backend mjx-jax, or set MJX_PUSHT_ENV_GRAPH_MODE=WARP (graphs per device, not measured)")
-    devices = training_devices(1 if args.algo == "ppo" and args.devices is None and name != "cpu" else args.devices, name)
+        n = args.devices or len(jax.local_devices())  # the count asked for (checked next) or every one
+        if n > 1:
+            raise TrainError(f"--algo ppo on mjx-warp over {n} devices: MJX_PUSHT_ENV_GRAPH_MODE={graph_mode} fails "
+                             "under Brax's pmap on several GPUs (docs/training.md); unset it (a graph per device, "
+                             "WARP, is the default there), or --devices 1, or --backend mjx-jax")
+    devices = training_devices(args.devices, name)
     if args.algo == "ppo":
         check_divides(devices, envs=args.envs, batch=args.batch or 256)  # Brax gives each device its share of both
         return _cmd_ppo(args, name, why, devices)

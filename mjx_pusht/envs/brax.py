@@ -81,9 +81,11 @@ class BraxPushT(Env):
 
     def __init__(self, backend: str = "mjx-warp", obs_type: str = "state", reset_kind: str | None = None,
                  episode: Episode | None = None, max_worlds: int = 4096, table: int = 65536, first_seed: int = 0,
-                 reward_fn=None, starts: np.ndarray | None = None, randomize=None, task: str = "chapter"):
+                 reward_fn=None, starts: np.ndarray | None = None, randomize=None, task: str = "chapter",
+                 graph_mode: str | None = None):
         """`starts`: a (table, 5) array of starts (tee x, y, yaw, pusher x, y) to draw from instead of the task
-        seeds' own (row i is still keyed and reported as seed `first_seed + i`)."""
+        seeds' own (row i is still keyed and reported as seed `first_seed + i`). `graph_mode`: MJX-Warp's CUDA-graph
+        mode (PushTEnv's; None: the env's default)."""
         if obs_type not in OBS_TYPES:
             raise ConfigError(f"the Brax adapter observes {' or '.join(OBS_TYPES)}, not {obs_type!r}")
         if backend == "cpu":
@@ -95,7 +97,7 @@ class BraxPushT(Env):
         reset_kind = self.task.check_reset(reset_kind)
         self.env = PushTEnv(backend=backend, reset_kind=reset_kind, action_type=self.task.action_type,
                             episode=self.task.episode() if episode is None else episode, scene=self.task.scene(),
-                            randomize=randomize)
+                            randomize=randomize, graph_mode=graph_mode)
         self.obs_type, self.reward_fn = obs_type, reward_fn
         seeds = np.arange(self.first_seed, self.first_seed + self.table, dtype=np.int64)
         if starts is None:

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import shutil
 import time
 from pathlib import Path
@@ -243,6 +244,21 @@ class _Stop(Exception):
     policy. Its message is the line the run ends with."""
 
 
+def graph_mode(backend: str, devices: int | None) -> str | None:
+    """MJX-Warp's CUDA-graph mode for Brax's training env: on several GPUs "WARP", a graph per device (the env's
+    staged default keeps one graph per call site, which Brax's pmap replays on every GPU and fails: lead13, lead15;
+    WARP trained PPO on 2 and 4 H200s to 96-100%: lead19), unless MJX_PUSHT_ENV_GRAPH_MODE names one (the CLI refuses
+    the modes that failed); else the env's default (None)."""
+    import jax
+
+    from mjx_pusht.backends.base import has_gpu
+
+    several = (len(jax.local_devices()) if devices is None else devices) > 1
+    if backend == "mjx-warp" and several and has_gpu() and not os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE"):
+        return "WARP"
+    return None
+
+
 def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, progress: bool = True,
               minutes: float | None = None, keep: str = "last", devices: int | None = None,
               until: float | None = None) -> list[dict]:
@@ -285,7 +301,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     task = cfg.the_task
     env = BraxPushT(backend=backend, obs_type=cfg.obs_type, reset_kind=cfg.reset, episode=episode,
                     max_worlds=max(cfg.envs, 128), table=TABLE, reward_fn=cfg.reward(), randomize=cfg.randomize,
-                    task=task.name)
+                    task=task.name, graph_mode=graph_mode(backend, devices))
     judge_env = PushTEnv(backend=backend, reset_kind=cfg.reset, action_type=task.action_type, episode=episode,
                          scene=task.scene(), keep_states=False, randomize=cfg.randomize)
     judge = _judge(judge_env, cfg)

@@ -46,7 +46,8 @@ def write_summary(cfg, backend, out: Path, curve, rerun: bool = True, method: st
         summary["wall_clock_note"] = ("simulation_seconds is the held-out judging; learning_seconds is Brax's training "
                                       "epochs, whose rollouts (simulation) and updates run in one program")
     title = {"dagger": "DAgger", "ppo": "Brax PPO"}[method]
-    write_curve(out, curve, f"{title} from {cfg.obs_type}, {backend} on {summary['device']}", rerun)
+    on = f"{devices} x {summary['device']}" if devices > 1 else summary["device"]  # a 4-GPU curve says so
+    write_curve(out, curve, f"{title} from {cfg.obs_type}, {backend} on {on}", rerun)
     atomic_write_json(out / "summary.json", summary)
     return summary
 
