@@ -37,9 +37,21 @@ def measure(run: Path, goal: float) -> dict:
     # its rollouts, fits and judgements, its simulation_seconds the rollouts alone
     train_s = s["learning_seconds"] if s["method"] == "ppo" else s["wall_seconds"]
     at_goal = next((c for c in curve if c["success"] >= goal), None)
+    # after the first epoch or iteration (XLA's compiles, Warp's captures, DAgger's first fits): a run stopped at its
+    # goal in under a minute spends a third of it there, which the whole run's rate counts against the devices.
+    # PPO: Brax's epochs after its first (rows from 2: row 0 judges the untrained network), judgements left out;
+    # DAgger: the wall-clock from its first judgement to its last, rollouts, fits and judgements together.
+    if s["method"] == "ppo":
+        later = curve[2:]
+        steady = ((later[-1]["env_steps"] - curve[1]["env_steps"], sum(c["learn_seconds"] for c in later))
+                  if later else (0, 0.0))
+    else:
+        steady = ((curve[-1]["env_steps"] - curve[0]["env_steps"], curve[-1]["wall_seconds"] - curve[0]["wall_seconds"])
+                  if len(curve) > 1 else (0, 0.0))
     return {"devices": s.get("devices", 1), "device": s["device"], "method": s["method"], "obs_type": s["obs_type"],
             "env_steps": s["env_steps"], "training_seconds": train_s,
             "steps_per_second": s["env_steps"] / train_s if train_s else None,
+            "steady_steps_per_second": steady[0] / steady[1] if steady[1] > 0 else None,
             "rollout_steps_per_second": (s["env_steps"] / s["simulation_seconds"]
                                          if s["method"] == "dagger" and s["simulation_seconds"] else None),
             "minutes_to_goal": None if at_goal is None else at_goal["wall_seconds"] / 60,
@@ -64,14 +76,19 @@ def per_device(train_args: list[str], flags: list[str], n: int) -> list[str]:
 
 
 def markdown(rows: list[dict], goal: float) -> str:
-    base = rows[0]["steps_per_second"] if rows[0]["devices"] == 1 else None
-    lines = [f"| devices | control steps/s in training | x one device | minutes to {goal:.0%} held-out | "
-             "held-out (eval) |", "|---|---|---|---|---|"]
+    one = rows[0] if rows[0]["devices"] == 1 else None
+
+    def rate(r: dict, key: str) -> tuple[str, str]:
+        """A rate and its multiple of one device's, as table cells."""
+        v, base = r.get(key), one and one.get(key)
+        return ("n/a" if v is None else f"{v:,.0f}"), (f"{v / base:.2f}" if v is not None and base else "n/a")
+
+    lines = [f"| devices | control steps/s in training | x one device | after the first epoch | x one device | "
+             f"minutes to {goal:.0%} held-out | held-out (eval) |", "|---|---|---|---|---|---|---|"]
     for r in rows:
-        times = f"{r['steps_per_second'] / base:.2f}" if base else "n/a"
         mins = "never" if r["minutes_to_goal"] is None else f"{r['minutes_to_goal']:.1f}"
-        lines.append(f"| {r['devices']} | {r['steps_per_second']:,.0f} | {times} | {mins} | "
-                     f"{r['held_out_success']:.1%} |")
+        lines.append(f"| {r['devices']} | {' | '.join(rate(r, 'steps_per_second'))} | "
+                     f"{' | '.join(rate(r, 'steady_steps_per_second'))} | {mins} | {r['held_out_success']:.1%} |")
     return "\n".join(lines + ["", f"{rows[0]['method']} from {rows[0]['obs_type']} on {rows[0]['device']}"]) + "\n"
 
 
@@ -97,7 +114,13 @@ def main(argv=None) -> int:
     except ValueError:
         p.error(f"--devices takes comma-separated integers, got {args.devices!r}")
     per = [f.strip().lstrip("-") for f in args.per_device.split(",") if f.strip()]
-    sized = {n: per_device(train_args, per, n) for n in counts}  # every count's flags checked before any run
+    earlier = args.out / "scaling.json"
+    if args.collect and not train_args and earlier.is_file():
+        # runs made apart (one process a count, side by side) each wrote the recipe they ran: their train arguments
+        # and per-device flags are the collection's, so its scaling mode is the one they ran in
+        made = json.loads(earlier.read_text())
+        train_args, per = made["train_args"], made["per_device"]
+    sized = {n: per_device(train_args, per, n) for n in counts} if not args.collect else {}  # checked before any run
     try:
         args.out.mkdir(parents=True, exist_ok=True)
     except OSError as e:

@@ -226,7 +226,37 @@ def test_train_scaling_times_each_device_counts_run_against_one_devices(tmp_path
     assert two["steps_per_second"] == pytest.approx(2 * one["steps_per_second"])
     first = next(r for r in s["curve"] if r["success"] >= 0.9)
     assert one["minutes_to_goal"] == pytest.approx(first["wall_seconds"] / 60) == 2 * two["minutes_to_goal"]
+    assert two["steady_steps_per_second"] == pytest.approx(2 * one["steady_steps_per_second"])
     assert "| 2 | " in (tmp_path / "scaling.md").read_text() and "| 2.00 |" in (tmp_path / "scaling.md").read_text()
+    # counts run apart (a process each) are collected in the mode they ran in, read from the recipe they wrote
+    made = json.loads((tmp_path / "scaling.json").read_text())
+    (tmp_path / "scaling.json").write_text(json.dumps(made | {"train_args": ["--envs", "64"], "per_device": ["envs"]}))
+    assert train_scaling.main(["--devices", "1,2", "--goal", "0.9", "--out", str(tmp_path), "--collect"]) == 0
+    again = json.loads((tmp_path / "scaling.json").read_text())
+    assert again["scaling"] == "weak: --envs per device" and again["train_args"] == ["--envs", "64"]
+    assert again["runs"] == made["runs"] and (tmp_path / "scaling.md").read_text().endswith("weak: --envs per device\n")
+
+
+def test_the_rate_after_the_first_epoch_leaves_its_compile_out_and_nothing_else(tmp_path):
+    """A committed PPO run (Brax on 4 H200s) and the same run whose first epoch took 100 s longer (a slower compile):
+    the whole run's rate drops, the rate after the first epoch is unchanged, and it is the later epochs' own steps
+    over their own seconds."""
+    from benchmarks import train_scaling
+
+    s = json.loads((Path(__file__).resolve().parents[1] / "outputs" / "reports" / "train" / "devices-warp-h200" /
+                    "ppo-s1" / "devices-4" / "summary.json").read_text())
+    (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir()
+    (tmp_path / "a" / "summary.json").write_text(json.dumps(s))
+    slow = [dict(c) for c in s["curve"]]
+    slow[1]["learn_seconds"] += 100
+    (tmp_path / "b" / "summary.json").write_text(json.dumps(s | {"curve": slow,
+                                                                  "learning_seconds": s["learning_seconds"] + 100}))
+    a, b = train_scaling.measure(tmp_path / "a", 0.95), train_scaling.measure(tmp_path / "b", 0.95)
+    assert b["steps_per_second"] < 0.5 * a["steps_per_second"]
+    assert b["steady_steps_per_second"] == a["steady_steps_per_second"]
+    epochs = s["curve"][2:]
+    assert a["steady_steps_per_second"] == pytest.approx(
+        (len(epochs) * (s["curve"][1]["env_steps"] - s["curve"][0]["env_steps"])) / sum(c["learn_seconds"] for c in epochs))
 
 
 def test_the_diffusion_curve_reads_a_real_lerobot_train_log_past_a_thousand_steps():
