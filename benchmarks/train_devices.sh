@@ -25,7 +25,7 @@ case "${1:-}" in
     (cd "$runs" && setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' "$runs/devices.pid" \
       bash "$root/benchmarks/train_devices.sh" "${2:-plan}" > "$runs/devices.log" 2>&1 < /dev/null &)
     sleep "${WAIT:-20}"; cp "$runs/devices.log" "${OUT:-/tmp}/" ;;
-  plan|ppo-wide)
+  plan|ppo-wide|ppo-apart)
     export PYTHONPATH=$HOME/jsite:$HOME/site:$root PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
     export MJX_PUSHT_JAX_CACHE=$HOME/jax_cache NCCL_NVLS_ENABLE=0 TORCH_SYMM_MEM_DISABLE_MULTICAST=1 NVSHMEM_DISABLE_NVLS=1
     cd "$runs" || exit 1
@@ -57,6 +57,18 @@ case "${1:-}" in
       scale "" 0.95 wide 4 $ppo_per MJX_PUSHT_ENV_GRAPH_MODE=WARP --backend mjx-warp $w $common > wide-4.log 2>&1
       }
       echo "$(date +%T) plan done"; exit 0
+    fi
+    if [ "$1" = ppo-apart ]; then
+      # four one-GPU PPO runs at once, a process a GPU (seeds 0-3, MINUTES long, no --until): if each keeps one GPU's
+      # rate alone, what caps 4 GPUs of one run is inside its process (Brax's pmap over Warp's FFI calls); if each
+      # slows as the 4-GPU run did, it is the host's
+      w="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes ${MINUTES:-1}"
+      for k in 0 1 2 3; do
+        # shellcheck disable=SC2086  # the recipe: a list of flags
+        scale $k 0.95 "apart-$k" 1 "" MJX_PUSHT_ENV_GRAPH_MODE=WARP --backend mjx-warp $w $common --seed $k \
+          > "apart-$k.log" 2>&1 &
+      done
+      wait; echo "$(date +%T) plan done"; exit 0
     fi
     # 1. the probes, 2 GPUs each (one GPU's share each), a hang ended by timeout
     # shellcheck disable=SC2086  # the recipes: lists of flags
@@ -100,7 +112,7 @@ case "${1:-}" in
     out=${OUT:?watch copies into \$OUT}; t=0
     while :; do
       (cd "$runs" && tar czf "$out/devices.tgz" --exclude='*.msgpack' --exclude='*.f32' --exclude='*.parquet' \
-        --exclude='*.rrd' --exclude='checkpoint*' ./*.log $(ls -d probe-* px-* ppo-* wide 2>/dev/null | grep -v '\.log$') 2>/dev/null)
+        --exclude='*.rrd' --exclude='checkpoint*' ./*.log $(ls -d probe-* px-* ppo-* wide apart-? 2>/dev/null | grep -v '\.log$') 2>/dev/null)
       for p in "$runs"/*/devices-*/policy.msgpack; do
         [ -f "$p" ] && [ -f "$(dirname "$p")/summary.json" ] && grep -q '"eval"' "$(dirname "$p")/summary.json" && \
           cp "$p" "$out/$(basename "$(dirname "$(dirname "$p")")")-$(basename "$(dirname "$p")").msgpack"
@@ -111,5 +123,5 @@ case "${1:-}" in
     done
     nvidia-smi --query-gpu=index,utilization.gpu,memory.used --format=csv > "$out/nvidia-smi.csv" 2>&1
     tail -n 4 "$runs/devices.log"; true ;;
-  *) echo "usage: train_devices.sh start [plan|ppo-wide]|watch (issue 56's plans on a 4-GPU machine)" >&2; exit 2 ;;
+  *) echo "usage: train_devices.sh start [plan|ppo-wide|ppo-apart]|watch (issue 56's plans on a 4-GPU machine)" >&2; exit 2 ;;
 esac
