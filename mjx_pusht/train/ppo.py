@@ -239,9 +239,9 @@ def _finite(tree) -> bool:
 
 
 class _Stop(Exception):
-    """Raised from Brax's `progress_fn` once --minutes is spent or --until reached: Brax's trainer has no stop of its
-    own, and that callback runs on the host between training epochs, after `policy_params_fn` judged and saved the
-    policy. Its message is the line the run ends with."""
+    """Raised from Brax's `progress_fn` once --minutes is spent or --until reached (or from `policy_params_fn`, when
+    the untrained policy's judgement reaches --until): Brax's trainer has no stop of its own, and those callbacks run
+    on the host between training epochs, the policy judged and saved. Its message is the line the run ends with."""
 
 
 def graph_mode(backend: str, devices: int | None) -> str | None:
