@@ -118,8 +118,12 @@ def main(argv=None) -> int:
     if args.collect and not train_args and earlier.is_file():
         # runs made apart (one process a count, side by side) each wrote the recipe they ran: their train arguments
         # and per-device flags are the collection's, so its scaling mode is the one they ran in
-        made = json.loads(earlier.read_text())
-        train_args, per = made["train_args"], made["per_device"]
+        try:
+            made = json.loads(earlier.read_text())
+            train_args, per = list(made["train_args"]), list(made["per_device"])
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            p.error(f"--collect: {earlier} is not a scaling record this script wrote ({type(e).__name__}: {e}); "
+                    "pass the runs' train arguments after -- instead")
     sized = {n: per_device(train_args, per, n) for n in counts} if not args.collect else {}  # checked before any run
     try:
         args.out.mkdir(parents=True, exist_ok=True)

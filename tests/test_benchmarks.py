@@ -235,6 +235,9 @@ def test_train_scaling_times_each_device_counts_run_against_one_devices(tmp_path
     again = json.loads((tmp_path / "scaling.json").read_text())
     assert again["scaling"] == "weak: --envs per device" and again["train_args"] == ["--envs", "64"]
     assert again["runs"] == made["runs"] and (tmp_path / "scaling.md").read_text().endswith("weak: --envs per device\n")
+    (tmp_path / "scaling.json").write_text("{")  # cut short: argparse's one line, not a traceback
+    with pytest.raises(SystemExit):
+        train_scaling.main(["--devices", "1,2", "--goal", "0.9", "--out", str(tmp_path), "--collect"])
 
 
 def test_the_rate_after_the_first_epoch_leaves_its_compile_out_and_nothing_else(tmp_path):
