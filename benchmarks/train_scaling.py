@@ -41,17 +41,15 @@ def measure(run: Path, goal: float) -> dict:
     # goal in under a minute spends a third of it there, which the whole run's rate counts against the devices.
     # PPO: Brax's epochs after its first (rows from 2: row 0 judges the untrained network), judgements left out;
     # DAgger: the wall-clock from its first judgement to its last, rollouts, fits and judgements together.
-    if s["method"] == "ppo":
-        later = curve[2:]
-        steady = ((later[-1]["env_steps"] - curve[1]["env_steps"], sum(c["learn_seconds"] for c in later))
-                  if later else (0, 0.0))
-    else:
-        steady = ((curve[-1]["env_steps"] - curve[0]["env_steps"], curve[-1]["wall_seconds"] - curve[0]["wall_seconds"])
-                  if len(curve) > 1 else (0, 0.0))
+    first = 1 if s["method"] == "ppo" else 0  # the row the steady rate counts from
+    later = curve[first + 1:]
+    steady_s = (sum(c["learn_seconds"] for c in later) if s["method"] == "ppo"
+                else curve[-1]["wall_seconds"] - curve[first]["wall_seconds"] if later else 0.0)
     return {"devices": s.get("devices", 1), "device": s["device"], "method": s["method"], "obs_type": s["obs_type"],
             "env_steps": s["env_steps"], "training_seconds": train_s,
             "steps_per_second": s["env_steps"] / train_s if train_s else None,
-            "steady_steps_per_second": steady[0] / steady[1] if steady[1] > 0 else None,
+            "steady_steps_per_second": ((curve[-1]["env_steps"] - curve[first]["env_steps"]) / steady_s
+                                        if steady_s > 0 else None),
             "rollout_steps_per_second": (s["env_steps"] / s["simulation_seconds"]
                                          if s["method"] == "dagger" and s["simulation_seconds"] else None),
             "minutes_to_goal": None if at_goal is None else at_goal["wall_seconds"] / 60,

@@ -78,23 +78,18 @@ def _fraction(text: str) -> float:
     return v
 
 
-def _rate(text: str) -> float:
-    """An argparse type: a success rate in (0, 1] (train --until: a rate of 0 is met before training starts)."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not 0.0 < v <= 1.0:
-        raise argparse.ArgumentTypeError(f"must be a success rate in (0, 1], got {text}")
-    return v
+def _in_unit(what: str):
+    """An argparse type: a number in (0, 1] (validate.fraction's rule: 0, NaN and 1.5 refused), named `what` in the
+    error: a coverage (--success-threshold) or a success rate (train --until: a rate of 0 is met before training)."""
+    def parse(text: str) -> float:
+        try:
+            return validate.fraction(what, float(text))
+        except (ValueError, MjxPushtError):
+            raise argparse.ArgumentTypeError(f"must be {what} in (0, 1], got {text}") from None
+    return parse
 
 
-def _threshold(text: str) -> float:
-    """An argparse type: a success threshold, a coverage in (0, 1] (validate.fraction's rule: 0, NaN and 1.5 refused)."""
-    try:
-        return validate.fraction("--success-threshold", float(text))
-    except (ValueError, MjxPushtError):
-        raise argparse.ArgumentTypeError(f"must be a coverage in (0, 1], got {text}") from None
+_threshold, _rate = _in_unit("a coverage"), _in_unit("a success rate")
 
 
 def success_arg(p: argparse.ArgumentParser) -> None:

@@ -4,7 +4,6 @@ policy with `evaluate` on the held-out seeds (out/eval) and print where everythi
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 from mjx_pusht.io.outputs import atomic_write_json, remove_own
@@ -78,17 +77,12 @@ def cmd_train(args) -> int:
     # pinned 0.10.2 trains, lead15, lead19). On MJX-Warp the env's staged graph modes keep ONE captured graph per call
     # site, whichever device calls it (warp/_src/jax/ffi.py; mujoco#3191), so Brax's second GPU replays the first's
     # and fails (WARP_STAGED, lead13), as XLA capturing (JAX) failed (lead15): on several GPUs PPO's env runs in
-    # WARP (a graph per device: 96-100% on 2 and 4 H200s, lead19; train/ppo.py graph_mode), and a
-    # MJX_PUSHT_ENV_GRAPH_MODE naming a mode that failed is refused.
-    graph_mode = os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE")
-    if args.algo == "ppo" and name == "mjx-warp" and graph_mode not in (None, "WARP", "NONE"):
-        import jax
+    # WARP (a graph per device: 96-100% on 2 and 4 H200s, lead19), and a MJX_PUSHT_ENV_GRAPH_MODE naming a mode that
+    # failed is refused (train/ppo.py graph_mode).
+    if args.algo == "ppo":
+        from mjx_pusht.train.ppo import graph_mode
 
-        n = args.devices or len(jax.local_devices())  # the count asked for (checked next) or every one
-        if n > 1:
-            raise TrainError(f"--algo ppo on mjx-warp over {n} devices: MJX_PUSHT_ENV_GRAPH_MODE={graph_mode} fails "
-                             "under Brax's pmap on several GPUs (docs/training.md); unset it (a graph per device, "
-                             "WARP, is the default there), or --devices 1, or --backend mjx-jax")
+        graph_mode(name, args.devices)  # a graph mode that failed on several GPUs: one line, before anything is written
     devices = training_devices(args.devices, name)
     if args.algo == "ppo":
         check_divides(devices, envs=args.envs, batch=args.batch or 256)  # Brax gives each device its share of both

@@ -247,16 +247,21 @@ class _Stop(Exception):
 def graph_mode(backend: str, devices: int | None) -> str | None:
     """MJX-Warp's CUDA-graph mode for Brax's training env: on several GPUs "WARP", a graph per device (the env's
     staged default keeps one graph per call site, which Brax's pmap replays on every GPU and fails: lead13, lead15;
-    WARP trained PPO on 2 and 4 H200s to 96-100%: lead19), unless MJX_PUSHT_ENV_GRAPH_MODE names one (the CLI refuses
-    the modes that failed); else the env's default (None)."""
+    WARP trained PPO on 2 and 4 H200s to 96-100%: lead19); else the env's default (None). An
+    MJX_PUSHT_ENV_GRAPH_MODE the env reads itself is the user's, unless it names a mode that failed on several GPUs:
+    a one-line TrainError (`train` asks before it writes anything)."""
     import jax
 
     from mjx_pusht.backends.base import has_gpu
 
-    several = (len(jax.local_devices()) if devices is None else devices) > 1
-    if backend == "mjx-warp" and several and has_gpu() and not os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE"):
-        return "WARP"
-    return None
+    several = backend == "mjx-warp" and (len(jax.local_devices()) if devices is None else devices) > 1
+    asked = os.environ.get("MJX_PUSHT_ENV_GRAPH_MODE")
+    if several and asked not in (None, "WARP", "NONE"):
+        raise TrainError(f"--algo ppo on mjx-warp over {devices or len(jax.local_devices())} devices: "
+                         f"MJX_PUSHT_ENV_GRAPH_MODE={asked} fails under Brax's pmap on several GPUs "
+                         "(docs/training.md); unset it (a graph per device, WARP, is the default there), or "
+                         "--devices 1, or --backend mjx-jax")
+    return "WARP" if several and asked is None and has_gpu() else None
 
 
 def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, progress: bool = True,
@@ -347,8 +352,9 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
         _save_resume(ckpt / RESUME, cfg, params, curve)
         bar.update(1)
         bar.set_postfix(success=f"{k / n:.1%}", steps=int(step))
-        if len(curve) == 1 and reached(curve, until):  # the untrained policy: no epoch's metrics to wait for
-            raise _Stop(reached(curve, until))
+        why = reached(curve, until) if len(curve) == 1 else None  # the untrained policy: no epoch's metrics to wait for
+        if why:
+            raise _Stop(why)
 
     def on_metrics(step, metrics):
         """Brax's loss metrics of the epoch that made the last judged policy (called after on_params)."""
@@ -360,8 +366,9 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
                               if f"training/{k}" in metrics})
             write_curve(out, curve, f"Brax PPO from {cfg.obs_type} (running)", rerun=False)
             _save_resume(ckpt / RESUME, cfg, last["params"], curve)
-        if reached(curve, until):
-            raise _Stop(reached(curve, until))
+        why = reached(curve, until)
+        if why:
+            raise _Stop(why)
         if minutes is not None and curve and curve[-1]["wall_seconds"] > 60 * minutes:
             raise _Stop(f"the {minutes:g}-minute budget is spent")
 
