@@ -260,7 +260,8 @@ EOS
           # SMALL=0: the 2,000 alone (WORKERS_BIG=60: 11.3 updates a second, session 18, where the update itself,
           # not the loader, was then the wait). FROM=~/diffusion/NAME/pretrained_model (bundled in .gpu-demos/NAME):
           # the run starts from that policy's weights with a new optimizer and schedule (diffusion_pusht.sh FROM).
-          # The sizes at equal updates: WORKERS_BIG=30 WORKERS_SMALL=30, the loader split evenly
+          # The sizes at equal updates: the loader split evenly, WORKERS_BIG=WORKERS_SMALL= half the cores less one
+          # (30 on a 4-GPU host, 15 on nvidia-h100-x2's 32 cores)
           dp() { env OUT="$OUT" BATCH="${BATCH:-256}" LR="${LR:-2e-4}" STEPS="${STEPS:-10000}" SAVE_FREQ="${SAVE_FREQ:-1000}" \
                    EVAL_FREQ="${EVAL_FREQ:-3000}" SCHED=DDIM INFER_STEPS=10 "$@"; }
           [ -n "${FROM:-}" ] && [ "${SMALL:-1}" = 1 ] && {  # dp passes FROM to both sizes' runs
@@ -269,7 +270,8 @@ EOS
           CUDA_VISIBLE_DEVICES=0 dp SIZES=2000 WORKERS="${WORKERS_BIG:-46}" bash benchmarks/diffusion_pusht.sh train-2000 || exit
           if [ "${SMALL:-1}" = 1 ]; then
             CUDA_VISIBLE_DEVICES=1 dp SIZES=200 WORKERS="${WORKERS_SMALL:-14}" bash benchmarks/diffusion_pusht.sh train-200 || exit; fi
-          CUDA_VISIBLE_DEVICES=3 python3 -m mjx_pusht demos --task gym-pusht --seeds 0:4 --replace --out "$HOME/warm" \
+          # the last GPU (3 on a 4-GPU host, 1 on a 2-GPU one, where it shares with the 200 episodes' run)
+          CUDA_VISIBLE_DEVICES=$(( $(nvidia-smi -L | wc -l) - 1 )) python3 -m mjx_pusht demos --task gym-pusht --seeds 0:4 --replace --out "$HOME/warm" \
             --no-progress > "$OUT/warm.log" 2>&1; tail -n 2 "$OUT/warm.log"
           sleep "${WAIT:-30}"; nproc; nvidia-smi > "$OUT/nvidia-smi.txt" 2>&1
           for l in "$HOME"/diffusion/logs/train-*.log; do echo "== $l"; grep -a "updt_s" "$l" | tail -n 3 | cut -c1-240; done

@@ -73,8 +73,13 @@ def test_bad_devices_are_one_line_before_anything_is_written(tmp_path, capsys):
                          (["--backend", "cpu", "--devices", "1"], "the cpu backend steps MuJoCo C"),
                          (["--backend", "mjx-warp", "--algo", "ppo", "--devices", "2"],
                           "--devices 2: this process has 1"),
-                         (["--num-processes", "2", "--coordinator", "127.0.0.1:1", "--algo", "ppo"],
-                          "--algo ppo: not with --num-processes yet")):
+                         (["--num-processes", "2", "--coordinator", "127.0.0.1:1", "--resume"],
+                          "--resume: not with --num-processes yet"),
+                         # PPO's stop is raised from Brax's callbacks, which run on process 0 alone
+                         (["--num-processes", "2", "--coordinator", "127.0.0.1:1", "--algo", "ppo", "--minutes", "3"],
+                          "--minutes: not with --algo ppo over --num-processes"),
+                         (["--num-processes", "2", "--coordinator", "127.0.0.1:1", "--algo", "ppo", "--until", "0.9"],
+                          "--until: not with --algo ppo over --num-processes")):
         assert main(["train", "--no-rerun", "--out", str(out), *argv]) in (1, 2)
         err = capsys.readouterr().err
         assert needle in err and err.count("\n") == 1, err
@@ -136,6 +141,41 @@ def test_two_processes_joined_by_jax_distributed_train_the_policy_two_devices_of
     for a, b in zip(jax_leaves(two), jax_leaves(one), strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
     assert runs[0]["eval"]["n_episodes"] == 2  # process 0 judged it with eval, as one process does
+
+
+@pytest.mark.slow
+def test_ppo_over_two_processes_joined_by_jax_distributed_is_one_run_process_0_writes(tmp_path):
+    """Brax's own PPO over two processes on localhost (one CPU device each, ~2.2 minutes here): Brax maps its epochs
+    over both (its gradients all-reduced through gloo), so both end with the same weights, which process 0 judged,
+    wrote and evaluated; process 1 says the digest of the weights it ended with. Two processes that trained apart
+    (different envs, keys fold_in(process)) would end with different ones."""
+    pytest.importorskip("brax")
+    port = _free_port()
+    out = tmp_path / "two"
+    args = ["train", "--algo", "ppo", "--task", "gym-pusht", "--backend", "mjx-jax", "--envs", "8", "--batch", "8",
+            "--timesteps", "10240", "--iterations", "1", "--eval-envs", "8", "--hidden", "32,32", "--max-steps", "50",
+            "--keep", "last", "--no-rerun", "--record", "0", "--no-progress", "--out", str(out), "--num-processes", "2",
+            "--coordinator", f"127.0.0.1:{port}"]
+    (tmp_path / "tmp").mkdir()  # where process 1 keeps its files while it trains (TMPDIR)
+    env = {**ENV, "JAX_PLATFORMS": "cpu", "MJX_PUSHT_JAX_CACHE": str(tmp_path / "cache"), "TMPDIR": str(tmp_path / "tmp")}
+    procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *args, "--process-id", str(i)], env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for i in (1, 0)]
+    logs = [p.communicate(timeout=600)[0] for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], logs
+    said = re.search(r"process 1: trained on 1 of the run's 2 devices \(its final weights' digest ([0-9a-f]{16})", logs[0])
+    assert said, logs[0]
+    assert not any(p.name.startswith("mjx-pusht-train-process-") for p in (tmp_path / "tmp").iterdir())  # removed
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["devices"] == 2 and summary["method"] == "ppo"
+    assert [r["env_steps"] for r in summary["curve"]] == [0, 10240]  # Brax's steps over both processes' envs
+    assert summary["eval"]["n_episodes"] == 8  # process 0 judged the policy with eval, as one process does
+    import hashlib
+
+    final = load_checkpoint(out / "policy.msgpack")[0]
+    mine = hashlib.sha256(b"".join(np.asarray(a, np.float32).tobytes() for a in jax_leaves(final))).hexdigest()[:16]
+    assert said.group(1) == mine  # process 1 ended on the weights process 0 wrote: one run's
+    untrained = load_checkpoint(out / "checkpoints" / "policy_000.msgpack")[0]
+    assert max(np.max(np.abs(np.subtract(a, b))) for a, b in zip(jax_leaves(final), jax_leaves(untrained))) > 1e-4
 
 
 def _free_port() -> int:

@@ -54,11 +54,14 @@ def cmd_train(args) -> int:
     from mjx_pusht.task.tasks import get as get_task
 
     processes = Processes(args.process_id, args.num_processes, args.coordinator, args.peer_timeout)
-    if processes.many and (args.resume or args.algo == "ppo"):
-        # the processes other than 0 write into folders of their own (`_follow`), and PPO's callbacks would judge and
-        # write in every process: not built yet
-        raise TrainError(f"{'--resume' if args.resume else '--algo ppo'}: not with --num-processes yet (DAgger on "
-                         "several processes trains from the start)")
+    if processes.many and args.resume:  # the processes other than 0 write into folders of their own (`_follow`)
+        raise TrainError("--resume: not with --num-processes yet (training on several processes starts afresh)")
+    if processes.many and args.algo == "ppo" and (args.minutes is not None or args.until is not None):
+        # PPO stops from Brax's callbacks, which Brax calls on process 0 alone: the others would wait in the next
+        # epoch's all-reduce for a process that left (DAgger's loop is ours: its processes agree on the stop)
+        raise TrainError(f"{'--minutes' if args.minutes is not None else '--until'}: not with --algo ppo over "
+                         "--num-processes (Brax's trainer calls back on process 0 alone, so only a whole "
+                         "--timesteps ends every process together); give --timesteps")
     processes.initialize()  # before anything asks JAX for its devices
     task = get_task(args.task)
     if args.algo == "ppo" and args.goal != "fixed":
@@ -86,7 +89,7 @@ def cmd_train(args) -> int:
     devices = training_devices(args.devices, name)
     if args.algo == "ppo":
         check_divides(devices, envs=args.envs, batch=args.batch or 256)  # Brax gives each device its share of both
-        return _cmd_ppo(args, name, why, devices)
+        return _cmd_ppo(args, name, why, devices, processes)
     cfg = DaggerConfig(obs_type=args.obs, envs=args.envs, iterations=args.iterations, hidden=tuple(args.hidden),
                        learning_rate=args.lr or 1e-3, batch=args.batch or 4096, fit_steps=args.fit_steps,
                        beta_decay=args.beta_decay, max_samples=args.max_samples, eval_envs=args.eval_envs,
@@ -104,7 +107,11 @@ def cmd_train(args) -> int:
 
         processes.agree({**config_dict(cfg), "backend": name, "devices": len(devices), "out": str(args.out.resolve())})
         if not processes.leader:  # its files go to a folder of its own, removed after: process 0 writes the run's
-            return _follow(cfg, name, devices, processes, args)
+            from mjx_pusht.train.run import train_dagger
+
+            return _follow(lambda out: train_dagger(cfg, name, out, minutes=args.minutes, progress=False, rerun=False,
+                                                    keep=args.keep, devices=devices, until=args.until),
+                           devices, processes, args)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
@@ -121,23 +128,23 @@ def cmd_train(args) -> int:
     return _finish(args, name, out, summary, banner)
 
 
-def _follow(cfg, backend: str, devices: list, processes, args) -> int:
-    """A process other than 0 of a run over several: the same loop on its own devices, its gradients averaged with
-    every other's, its files (the same as process 0's) into a temporary folder, removed after."""
+def _follow(train, devices: list, processes, args) -> int:
+    """A process other than 0 of a run over several: `train(out)`, the same training on its own devices, its
+    gradients averaged with every other's, its files (process 0 writes the run's) into a temporary folder, removed
+    after. `train` returns a digest of the weights it ended with (PPO) or None."""
     import shutil
     import tempfile
 
-    from mjx_pusht.train.run import train_dagger
+    from mjx_pusht.train.devices import local_count
 
     out = Path(tempfile.mkdtemp(prefix=f"mjx-pusht-train-process-{processes.process_id}-"))
     try:
-        train_dagger(cfg, backend, out, minutes=args.minutes, progress=False, rerun=False, keep=args.keep,
-                     devices=devices, until=args.until)
+        digest = train(out)
     finally:
         shutil.rmtree(out, ignore_errors=True)
-    mine = sum(d.process_index == processes.process_id for d in devices)
-    print(f"process {processes.process_id}: trained on {mine} of the run's {len(devices)} devices; process 0 writes "
-          f"the run to {args.out}")
+    print(f"process {processes.process_id}: trained on {local_count(devices)} of the run's {len(devices)} devices"
+          + (f" (its final weights' digest {digest}, as process 0's)" if digest else "")
+          + f"; process 0 writes the run to {args.out}")
     return 0
 
 
@@ -161,7 +168,7 @@ def _check_rerun(args) -> None:
                              "pip install rerun-sdk, or pass --no-rerun") from None
 
 
-def _cmd_ppo(args, name: str, why: str, devices: list) -> int:
+def _cmd_ppo(args, name: str, why: str, devices: list, processes) -> int:
     """`train --algo ppo`: Brax's PPO (train/ppo.py), then the same judgement and files as DAgger's."""
     from mjx_pusht.io.banner import Banner
     from mjx_pusht.io.outputs import claim_out_dir
@@ -176,14 +183,22 @@ def _cmd_ppo(args, name: str, why: str, devices: list) -> int:
                     max_grad_norm=args.max_grad_norm, lr_schedule=args.lr_schedule, max_steps=args.max_steps,
                     success_threshold=args.success_threshold, randomize=args.randomize,
                     task=None if args.task == "chapter" else args.task)
+    from mjx_pusht.train.devices import local_count
+
+    run = dict(resume=args.resume, minutes=args.minutes, keep=args.keep, devices=local_count(devices), until=args.until)
+    if processes.many:  # one run: every process must have been given the same one (Brax maps it over them all)
+        from mjx_pusht.train.resume import config_dict
+
+        processes.agree({**config_dict(cfg), "backend": name, "devices": len(devices), "out": str(args.out.resolve())})
+        if not processes.leader:  # Brax's loop on its devices; process 0 alone judges and writes (Brax calls back there)
+            return _follow(lambda out: train_ppo(cfg, name, out, progress=False, **run)[1], devices, processes, args)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)
     _restart(out, args)
     _check_rerun(args)
     banner = Banner("train")
     print(f"backend: {name} ({why}); Brax PPO from {cfg.obs_type} on the {cfg.the_task.name} task: {cfg.envs} envs, "
           f"{cfg.timesteps:,} env steps, held-out judgement {cfg.evals} times on seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")
-    curve = train_ppo(cfg, name, out, resume=args.resume, progress=args.progress, minutes=args.minutes, keep=args.keep,
-                      devices=len(devices), until=args.until)
+    curve, _ = train_ppo(cfg, name, out, progress=args.progress, **run)
     summary = write_summary(cfg, name, out, curve, args.rerun, method="ppo", kept=kept_row(curve, args.keep),
                             keep=args.keep, devices=len(devices))
     return _finish(args, name, out, summary, banner)

@@ -136,3 +136,15 @@ class Processes:
         from jax._src import distributed
 
         distributed.global_state.client.wait_at_barrier(f"mjx_pusht:{name}", BARRIER_TIMEOUT_MS)
+
+
+def every_process(name: str, value: str) -> list[str]:
+    """`value` from every process joined through jax.distributed, in process order (each process gives its own under
+    `name`, once), through the coordinator's key-value store."""
+    import jax
+    from jax._src import distributed
+
+    client = distributed.global_state.client
+    client.key_value_set(f"mjx_pusht:{name}:{jax.process_index()}", value)
+    return [client.blocking_key_value_get(f"mjx_pusht:{name}:{i}", BARRIER_TIMEOUT_MS)
+            for i in range(jax.process_count())]

@@ -42,6 +42,13 @@ def training_devices(count: int | None, backend: str) -> list:
     return [d for p in range(jax.process_count()) for d in [d for d in jax.devices() if d.process_index == p][:n]]
 
 
+def local_count(devices: list) -> int:
+    """How many of `devices` (a run's, over every process) are this process's."""
+    import jax
+
+    return sum(d.process_index == jax.process_index() for d in devices)
+
+
 def check_divides(devices: list, **sizes: int) -> None:
     """A one-line TrainError unless every size (a flag's name: its value) splits evenly over the devices."""
     for name, n in sizes.items():

@@ -266,8 +266,9 @@ def graph_mode(backend: str, devices: int | None) -> str | None:
 
 def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, progress: bool = True,
               minutes: float | None = None, keep: str = "last", devices: int | None = None,
-              until: float | None = None) -> list[dict]:
-    """Brax PPO on the adapter, judged on the held-out seeds at every evaluation; returns the curve.
+              until: float | None = None) -> tuple[list[dict], str | None]:
+    """Brax PPO on the adapter, judged on the held-out seeds at every evaluation; returns the curve and a digest of
+    the weights Brax ended with (`weights_digest`; on several processes, checked the same on every one).
 
     Each curve row has the held-out success of the action the policy is saved with (`cfg.act`) and of both
     actions (success_mean, success_sample), the saved action's success on the validation seeds, and Brax's own
@@ -280,8 +281,12 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     `keep`: "best": policy.msgpack is the judged policy with the highest validation success (never chosen by
     the held-out seeds); "last": the last judged. `devices`: this host's devices Brax maps its training over
     (its max_devices_per_host; None: every one), each its share of the envs and of every minibatch. A non-finite network, observation statistic or judged episode
-    stops the run with a TrainError naming the judgement; the files of the last good one stay."""
+    stops the run with a TrainError naming the judgement; the files of the last good one stay.
+    Over several processes (jax.distributed; Brax maps its epochs over every process's devices) process 0 alone
+    judges and writes: Brax calls back there alone, past its first call (the untrained policy), which the others skip."""
     import functools
+
+    import jax
 
     needs("train_ppo", "train")  # one line naming the extra, before any work
     from brax.training.agents.ppo import networks as ppo_networks
@@ -320,7 +325,11 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
         good = f"judgement {len(curve) - 1}'s policy stays in {out / 'policy.msgpack'}" if curve else "nothing was saved"
         return TrainError(f"PPO: {what} at judgement {len(curve)} ({step:,} env steps); {good}")
 
+    lead = jax.process_index() == 0
+
     def on_params(step, make_policy, params):
+        if not lead:  # Brax's first call, on every process: process 0 judges
+            return
         if last["skip"]:  # a resumed run's first call: the restored policy, judged already
             last["skip"] = False
             return
@@ -372,8 +381,9 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
         if minutes is not None and curve and curve[-1]["wall_seconds"] > 60 * minutes:
             raise _Stop(f"the {minutes:g}-minute budget is spent")
 
+    final = None
     try:
-        brax_ppo.train(
+        _, final, _ = brax_ppo.train(
             environment=env, num_timesteps=cfg.timesteps - done, num_envs=cfg.envs, episode_length=cfg.max_steps,
             wrap_env_fn=wrap_for_training, learning_rate=cfg.learning_rate, entropy_cost=cfg.entropy_cost,
             discounting=cfg.discounting, unroll_length=cfg.unroll_length, batch_size=cfg.batch_size,
@@ -385,13 +395,33 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
             network_factory=functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=cfg.hidden))
     except _Stop as why:
         bar.write(f"stopping after judgement {len(curve) - 1}: {why}")
+        final = last["params"]
     bar.close()
+    digest = weights_digest(final, cfg.obs_type) if final is not None else None
+    if jax.process_count() > 1:  # one run: the all-reduced gradients left every process the same weights
+        from mjx_pusht.study.distributed import every_process
+
+        digests = every_process("ppo-final-weights", digest)
+        if len(set(digests)) > 1:
+            raise RuntimeError(f"PPO over {len(digests)} processes ended with different weights (digests "
+                               f"{', '.join(digests)}): their gradients were not averaged across processes")
     kept = kept_row(curve, keep)
     if kept is not None and kept["iteration"] != curve[-1]["iteration"]:
         shutil.copyfile(ckpt / f"policy_{kept['iteration']:03d}.msgpack", out / "policy.msgpack")
         print(f"keeping judgement {kept['iteration']}'s policy: {kept['validation_success']:.1%} on the "
               f"{len(cfg.validation_seeds())} validation seeds (held-out {kept['success']:.1%})")
-    return curve
+    return curve, digest
+
+
+def weights_digest(params, obs_type: str) -> str:
+    """16 hex digits of SHA-256 over the policy's layers as float32 (the checkpoint's `Dense_i` kernels and biases,
+    in the order jax.tree.leaves gives a loaded checkpoint's): equal digests, equal weights."""
+    import hashlib
+
+    import jax
+
+    dense, _ = to_checkpoint(params, obs_type)
+    return hashlib.sha256(b"".join(np.asarray(a, np.float32).tobytes() for a in jax.tree.leaves(dense))).hexdigest()[:16]
 
 
 def _save_resume(path: Path, cfg: PPOConfig, params, curve: list[dict]) -> None:
