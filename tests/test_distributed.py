@@ -92,3 +92,28 @@ def test_a_missing_process_is_a_timeout_in_one_line(tmp_path):
     _, err = p.communicate(timeout=120)
     assert p.returncode == 1 and err.strip().splitlines()[-1].startswith("mjx-pusht: error: not all 2 processes")
     assert "Check failure" not in err and time.time() - t0 < 60
+
+
+def test_sigterm_stops_a_process_joined_by_jax_distributed(tmp_path):
+    """JAX's preemption service, on by default with jax.distributed, caught SIGTERM and let the process run on (a
+    two-process sweep 30 s past it; a training on 2 H200s to its end): `kill`, `timeout`, Slurm's scancel and `docker
+    stop` stop a run with SIGTERM. Each joined process now ends on it at once."""
+    import signal
+    import time
+
+    port = _free_port()
+    long = ("--seeds", "4000", "--steps", "2000")  # minutes of work: still running when signalled
+    procs = [_start(1, tmp_path / "out", port, *long), _start(0, tmp_path / "out", port, *long)]
+    try:
+        t = time.monotonic()
+        while not (tmp_path / "out" / ".parts").exists() and time.monotonic() - t < 120:
+            assert all(p.poll() is None for p in procs), [p.communicate() for p in procs]
+            time.sleep(0.2)
+        assert (tmp_path / "out" / ".parts").exists()  # both joined (process 0 made the folder after agreeing)
+        for p in procs:
+            p.send_signal(signal.SIGTERM)
+            assert p.wait(timeout=20) == -signal.SIGTERM
+    finally:
+        for p in procs:
+            p.kill()
+            p.communicate()

@@ -72,6 +72,11 @@ class Processes:
         # collectives across processes on CPU devices (a training run's gradients, tested with 2 CPU processes) go
         # through gloo; without it JAX's CPU client has none. GPUs' collectives are NCCL's whatever this says.
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
+        # JAX's preemption service (on by default with jax.distributed) catches SIGTERM, logs "SIGTERM caught" and
+        # carries on, for programs that poll `reached_preemption_sync_point` to checkpoint; nothing here polls, so a
+        # `kill`, `timeout`, `docker stop` or Slurm's scancel left a sweep or training running (a 2-process sweep
+        # ran on 30 s after it; a training on 2 H200s finished its run, notebook lead20): SIGTERM stops it again
+        jax.config.update("jax_enable_preemption_service", False)
         joined = threading.Event()
         threading.Thread(target=self._watchdog, args=(joined,), daemon=True, name="join-watchdog").start()
         try:
