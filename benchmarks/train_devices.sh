@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Issue 56's runs in one hold of 4 GPUs (see ../shared/gpu/README.md for the wheels; jax 0.10.2 in $HOME/jsite):
-#   bash benchmarks/train_devices.sh start    # the whole plan in the background, in its own process session
+#   bash benchmarks/train_devices.sh start [PLAN]  # a plan (default: plan, below) in the background, its own session
 #   bash benchmarks/train_devices.sh watch    # back to back: copies what is finished into $OUT every 15 s
 # A hold ends when its device time does, so the plan runs its most needed figures first and every run is copied
 # back as it finishes (a watch cut at its limit still returns what is under $OUT). Session 15's hold (notebook
@@ -25,7 +25,7 @@ case "${1:-}" in
     (cd "$runs" && setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' "$runs/devices.pid" \
       bash "$root/benchmarks/train_devices.sh" "${2:-plan}" > "$runs/devices.log" 2>&1 < /dev/null &)
     sleep "${WAIT:-20}"; cp "$runs/devices.log" "${OUT:-/tmp}/" ;;
-  plan|ppo-wide|ppo-apart)
+  plan|ppo-wide|ppo-apart|ppo-procs)
     export PYTHONPATH=$HOME/jsite:$HOME/site:$root PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
     export MJX_PUSHT_JAX_CACHE=$HOME/jax_cache NCCL_NVLS_ENABLE=0 TORCH_SYMM_MEM_DISABLE_MULTICAST=1 NVSHMEM_DISABLE_NVLS=1
     cd "$runs" || exit 1
@@ -57,6 +57,25 @@ case "${1:-}" in
       scale "" 0.95 wide 4 $ppo_per MJX_PUSHT_ENV_GRAPH_MODE=WARP --backend mjx-warp $w $common > wide-4.log 2>&1
       }
       echo "$(date +%T) plan done"; exit 0
+    fi
+    if [ "$1" = ppo-procs ]; then
+      # PPO on MJX-Warp as a process a GPU (`--num-processes`, Brax's pmap over every process's one GPU) against one
+      # GPU, weak scaling, a fixed budget each (PPO over processes refuses --minutes and --until): ppo-apart's four
+      # lone processes kept 3.75x one GPU's steps where one process over four made 2.8x. GPUS: the host's (2 or 4).
+      # T: env steps a GPU (60 M: ~70 s of epochs at one H200's ~850k a second, lead19)
+      n=${GPUS:-$(nvidia-smi -L | wc -l)} t=${T:-60000000}
+      w() { echo --algo ppo --backend mjx-warp --envs $((8192 * $1)) --batch $((512 * $1)) --timesteps $((t * $1)) \
+              --iterations 8 $common; }  # the run on N GPUs: N x one GPU's envs, minibatch and steps
+      # shellcheck disable=SC2046  # the recipe: a list of flags
+      scale 0 0.95 procs 1 "" "" $(w 1) > procs-1.log 2>&1
+      for ((k = n - 1; k >= 0; k--)); do  # process 0 last: it listens at the coordinator, the others wait for it
+        # shellcheck disable=SC2046  # the recipe: a list of flags
+        run env CUDA_VISIBLE_DEVICES=$k python3 -m mjx_pusht train $(w "$n") --num-processes "$n" --process-id $k \
+          --coordinator 127.0.0.1:${PORT:-29517} --out "procs/devices-$n" > "procs-$n-p$k.log" 2>&1 &
+      done
+      wait
+      run python3 -m benchmarks.train_scaling --collect --devices "1,$n" --goal 0.95 --out procs > procs-collect.log 2>&1
+      tail -n 6 procs-collect.log; echo "$(date +%T) plan done"; exit 0
     fi
     if [ "$1" = ppo-apart ]; then
       # four one-GPU PPO runs at once, a process a GPU (seeds 0-3, MINUTES long, no --until): if each keeps one GPU's
@@ -112,7 +131,7 @@ case "${1:-}" in
     out=${OUT:?watch copies into \$OUT}; t=0
     while :; do
       (cd "$runs" && tar czf "$out/devices.tgz" --exclude='*.msgpack' --exclude='*.f32' --exclude='*.parquet' \
-        --exclude='*.rrd' --exclude='checkpoint*' ./*.log $(ls -d probe-* px-* ppo-* wide apart-? 2>/dev/null | grep -v '\.log$') 2>/dev/null)
+        --exclude='*.rrd' --exclude='checkpoint*' ./*.log $(ls -d probe-* px-* ppo-* wide apart-? procs 2>/dev/null | grep -v '\.log$') 2>/dev/null)
       for p in "$runs"/*/devices-*/policy.msgpack; do
         [ -f "$p" ] && [ -f "$(dirname "$p")/summary.json" ] && grep -q '"eval"' "$(dirname "$p")/summary.json" && \
           cp "$p" "$out/$(basename "$(dirname "$(dirname "$p")")")-$(basename "$(dirname "$p")").msgpack"
@@ -123,5 +142,5 @@ case "${1:-}" in
     done
     nvidia-smi --query-gpu=index,utilization.gpu,memory.used --format=csv > "$out/nvidia-smi.csv" 2>&1
     tail -n 4 "$runs/devices.log"; true ;;
-  *) echo "usage: train_devices.sh start [plan|ppo-wide|ppo-apart]|watch (issue 56's plans on a 4-GPU machine)" >&2; exit 2 ;;
+  *) echo "usage: train_devices.sh start [plan|ppo-wide|ppo-apart|ppo-procs]|watch (issue 56's plans on a 4-GPU machine)" >&2; exit 2 ;;
 esac
