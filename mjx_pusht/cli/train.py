@@ -109,9 +109,11 @@ def cmd_train(args) -> int:
         if not processes.leader:  # its files go to a folder of its own, removed after: process 0 writes the run's
             from mjx_pusht.train.run import train_dagger
 
-            return _follow(lambda out: train_dagger(cfg, name, out, minutes=args.minutes, progress=False, rerun=False,
-                                                    keep=args.keep, devices=devices, until=args.until),
-                           devices, processes, args)
+            def follow(out: Path) -> None:  # DAgger's processes agree on their weights by construction (one mesh)
+                train_dagger(cfg, name, out, minutes=args.minutes, progress=False, rerun=False, keep=args.keep,
+                             devices=devices, until=args.until)
+
+            return _follow(follow, devices, processes, args)
     out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)  # the run's settings: checked on --resume
     _restart(out, args)
     _check_rerun(args)
