@@ -73,6 +73,9 @@ def test_bad_devices_are_one_line_before_anything_is_written(tmp_path, capsys):
                          (["--backend", "cpu", "--devices", "1"], "the cpu backend steps MuJoCo C"),
                          (["--backend", "mjx-warp", "--algo", "ppo", "--devices", "2"],
                           "--devices 2: this process has 1"),
+                         # before joining: nobody listens at port 1, so a join would wait out --peer-timeout
+                         (["--num-processes", "2", "--coordinator", "127.0.0.1:1", "--backend", "cpu"],
+                          "--num-processes spreads training over the devices of the mjx-jax or mjx-warp backends"),
                          (["--num-processes", "2", "--coordinator", "127.0.0.1:1", "--resume"],
                           "--resume: not with --num-processes yet"),
                          # PPO's stop is raised from Brax's callbacks, which run on process 0 alone

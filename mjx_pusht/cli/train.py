@@ -62,6 +62,9 @@ def cmd_train(args) -> int:
         raise TrainError(f"{'--minutes' if args.minutes is not None else '--until'}: not with --algo ppo over "
                          "--num-processes (Brax's trainer calls back on process 0 alone, so only a whole "
                          "--timesteps ends every process together); give --timesteps")
+    if processes.many and args.backend in ("cpu", "gym-pusht"):  # said now, not after every process has joined
+        raise TrainError(f"--num-processes spreads training over the devices of the mjx-jax or mjx-warp backends, not "
+                         f"{args.backend}")
     processes.initialize()  # before anything asks JAX for its devices
     task = get_task(args.task)
     if args.algo == "ppo" and args.goal != "fixed":
