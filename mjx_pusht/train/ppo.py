@@ -295,6 +295,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
 
     from mjx_pusht.envs.brax import BraxPushT, wrap_for_training
     from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.study.distributed import every_process
     from mjx_pusht.study.stats import wilson
     from mjx_pusht.train.policy import save
     from mjx_pusht.train.curve import kept as kept_row
@@ -317,7 +318,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     judge = _judge(judge_env, cfg)
     ckpt.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter() - (curve[-1]["wall_seconds"] if curve else 0.0)
-    last = {"t": time.perf_counter(), "skip": resume, "params": None,
+    last = {"t": time.perf_counter(), "skip": resume, "params": None, "first": True,
             "in_std": None if restored is None else np.asarray(restored[0].std)}  # a resumed run's normaliser
     bar = tqdm(total=cfg.evals + 1, initial=len(curve), desc="ppo", unit="eval", disable=not progress)
 
@@ -325,11 +326,20 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
         good = f"judgement {len(curve) - 1}'s policy stays in {out / 'policy.msgpack'}" if curve else "nothing was saved"
         return TrainError(f"PPO: {what} at judgement {len(curve)} ({step:,} env steps); {good}")
 
-    lead = jax.process_index() == 0
+    lead, many = jax.process_index() == 0, jax.process_count() > 1
 
     def on_params(step, make_policy, params):
-        if not lead:  # Brax's first call, on every process: process 0 judges
-            return
+        if lead:
+            judged(step, params)
+        if many and last["first"]:
+            # Brax's first call is on every process, the others on process 0 alone. Every process leaves the first
+            # together: the others would otherwise wait in the first epoch's all-reduce while process 0 compiles and
+            # runs its judgement, and on CPU devices gloo gives up connecting after a fixed time (a two-process test
+            # failed so under a loaded CI machine: "Gloo context initialization failed ... Connect timeout")
+            every_process("ppo-first-judgement", "")
+        last["first"] = False
+
+    def judged(step, params):
         if last["skip"]:  # a resumed run's first call: the restored policy, judged already
             last["skip"] = False
             return
@@ -398,9 +408,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
         final = last["params"]
     bar.close()
     digest = weights_digest(final, cfg.obs_type) if final is not None else None
-    if jax.process_count() > 1:  # one run: the all-reduced gradients left every process the same weights
-        from mjx_pusht.study.distributed import every_process
-
+    if many:  # one run: the all-reduced gradients left every process the same weights
         digests = every_process("ppo-final-weights", digest)
         if len(set(digests)) > 1:
             raise RuntimeError(f"PPO over {len(digests)} processes ended with different weights (digests "
