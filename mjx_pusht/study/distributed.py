@@ -114,15 +114,10 @@ class Processes:
         (seeds, scene, steps, parameters, --out): their rows would be mixed into one table."""
         if not self.many:
             return
-        from jax._src import distributed
-
-        client = distributed.global_state.client
         mine = json.dumps(settings, sort_keys=True, default=str)
         settings = json.loads(mine)  # compared as every process sees it: through JSON
-        client.key_value_set(f"mjx_pusht:settings:{self.process_id}", mine)
-        timeout = int(self.peer_timeout * 1000)
-        for i in range(self.num_processes):
-            theirs = json.loads(client.blocking_key_value_get(f"mjx_pusht:settings:{i}", timeout))
+        for i, given in enumerate(every_process("settings", mine, int(self.peer_timeout * 1000))):
+            theirs = json.loads(given)
             if theirs != settings:
                 diff = "; ".join(f"{k} {settings.get(k)} here, {theirs.get(k)} there"
                                  for k in sorted({*theirs, *settings}) if theirs.get(k) != settings.get(k))
@@ -143,13 +138,13 @@ class Processes:
         distributed.global_state.client.wait_at_barrier(f"mjx_pusht:{name}", BARRIER_TIMEOUT_MS)
 
 
-def every_process(name: str, value: str) -> list[str]:
+def every_process(name: str, value: str, timeout_ms: int = BARRIER_TIMEOUT_MS) -> list[str]:
     """`value` from every process joined through jax.distributed, in process order (each process gives its own under
-    `name`, once), through the coordinator's key-value store."""
+    `name`, once), through the coordinator's key-value store; waits for each at most `timeout_ms`."""
     import jax
     from jax._src import distributed
 
     client = distributed.global_state.client
     client.key_value_set(f"mjx_pusht:{name}:{jax.process_index()}", value)
-    return [client.blocking_key_value_get(f"mjx_pusht:{name}:{i}", BARRIER_TIMEOUT_MS)
+    return [client.blocking_key_value_get(f"mjx_pusht:{name}:{i}", timeout_ms)
             for i in range(jax.process_count())]
