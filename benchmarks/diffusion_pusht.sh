@@ -17,7 +17,9 @@
 #   rate         the SIZES' training side by side for RATE_STEPS updates, no evals: the update rate, and so STEPS,
 #                EVAL_FREQ and SAVE_FREQ for MINUTES of training ($OUT/results/diffusion-rate.json). ~2 min, with demos.
 #   train-N      starts (or, when $RUNS/train-N has a checkpoint, resumes with LeRobot's --resume) lerobot-train on
-#                demos-N, detached; returns at once. Run every size in one call, then `wait`.
+#                demos-N, detached; returns at once. Run every size in one call, then `wait`. STOP_AT=K: the run
+#                ends once its step-K checkpoint is saved, its schedule still STEPS long (a schedule cut short, as
+#                an earlier run was, to compare with it at equal updates).
 #   eval-final-N detached: lerobot-eval of train-N's last checkpoint, 500 episodes on --env.type=mjx_pusht (one batch
 #                of 500) then on --env.type=pusht (gym-pusht, LeRobot's SyncVectorEnv), one after the other on the same
 #                machine; each a row (wall-clock, Wilson 95% interval) in $OUT/results/diffusion-eval-N.json.
@@ -69,6 +71,7 @@ CARRIED=${CARRIED:-$HOME/carried}  # where the carried parts of a packed run are
 # it with LeRobot's --policy.path, a new optimizer and schedule (STEPS, LR). For a run whose whole resume state did
 # not survive the hold it came from (the optimizer's 2 x 114 MB): --resume is the way when it did
 FROM=${FROM:-}
+STOP_AT=${STOP_AT:-}             # train-N ends after saving this step's checkpoint (unset: at STEPS)
 [ -z "$FROM" ] || [ -f "$FROM/config.json" ] || { echo "FROM must be a pretrained_model folder (with config.json), got '$FROM'" >&2; exit 2; }
 # found here in one line, not in a detached training's log minutes later
 case "$SCHED" in DDPM|DDIM) ;; *) echo "SCHED must be DDPM or DDIM (LeRobot's samplers), got '$SCHED'" >&2; exit 2 ;; esac
@@ -77,6 +80,7 @@ whole() {  # NAME VALUE: a one-line error unless VALUE is a whole number above 0
     echo "$1 must be a whole number above 0, got '$2'" >&2; exit 2; }
 }
 whole INFER_STEPS "$INFER_STEPS" optional
+whole STOP_AT "$STOP_AT" optional
 for v in BATCH SAVE_FREQ EVAL_FREQ EVAL_EPISODES RATE_STEPS WAIT_MIN; do whole "$v" "${!v}"; done
 [ "$STEPS" = rated ] || whole STEPS "$STEPS"
 [[ "$EVAL_GPUS" =~ ^([0-9]+( [0-9]+)?)?$ ]] || { echo "EVAL_GPUS must be one or two GPU numbers (e.g. \"2 3\"), got '$EVAL_GPUS'" >&2; exit 2; }
@@ -103,6 +107,15 @@ policy_args() {  # FROM set: LeRobot's own fine-tuning (--policy.path) from that
 env_args() {
   echo --env.type=mjx_pusht --env.observation_height=96 --env.observation_width=96 --env_eval_freq="$EVAL_FREQ" \
     --eval.n_episodes="$EVAL_EPISODES" --eval.batch_size="$EVAL_EPISODES" --eval.use_async_envs=false
+}
+
+trainer() {  # lerobot-train's module, or (STOP_AT) LeRobot's own run ended after that step's checkpoint
+  if [ -z "$STOP_AT" ]; then echo lerobot.scripts.lerobot_train; else echo benchmarks.lerobot_train_until "$STOP_AT"; fi
+}
+stop_at() {  # STEPS SAVE_FREQ: STOP_AT must name a checkpoint the run writes before its end (or it would never stop)
+  if [ -n "$STOP_AT" ] && { [ "$STOP_AT" -ge "$1" ] || [ $((STOP_AT % $2)) != 0 ]; }; then
+    echo "STOP_AT must be a checkpoint's step before the run's end (a multiple of SAVE_FREQ $2 below STEPS $1), got $STOP_AT" >&2
+    exit 2; fi
 }
 
 detach() {  # NAME CMD...: CMD in a session of its own, its output in $RUNS/logs/NAME-<time>.log. The pid file is
@@ -171,13 +184,17 @@ PYEOF
       last="$RUNS/train-$n/checkpoints/last/pretrained_model/train_config.json"
       if [ -f "$last" ]; then  # LeRobot's own resume: its config, optimizer, scheduler, RNG and data order
         [ -z "$FROM" ] || echo "train-$n: resuming its own checkpoint in $RUNS/train-$n; FROM is not used" >&2
-        detach "train-$n" "$PY -m lerobot.scripts.lerobot_train --config_path=$last --resume=true"
+        read -r steps save_freq < <($PY -c "import json, sys; c = json.load(open(sys.argv[1]))
+print(c['steps'], c['save_freq'])" "$last") || exit 1
+        stop_at "$steps" "$save_freq"
+        detach "train-$n" "$PY -m $(trainer) --config_path=$last --resume=true"
       else
         if [ "$STEPS" = rated ]; then  # this size's row of the rate stage's JSON
           read -r steps eval_freq save_freq < <($PY -c "import json, sys; r = json.load(open(sys.argv[1]))[sys.argv[2]]
 print(r['STEPS'], r['EVAL_FREQ'], r['SAVE_FREQ'])" "$RUNS/results/diffusion-rate.json" "$n") || exit 1
         else steps=$STEPS eval_freq=$EVAL_FREQ save_freq=$SAVE_FREQ; fi
-        detach "train-$n" "$PY -m lerobot.scripts.lerobot_train --dataset.repo_id=local/mjx_pusht_demos_$n \
+        stop_at "$steps" "$save_freq"
+        detach "train-$n" "$PY -m $(trainer) --dataset.repo_id=local/mjx_pusht_demos_$n \
           --dataset.root=$RUNS/demos-$n $(policy_args) $(EVAL_FREQ=$eval_freq env_args) --steps=$steps --save_freq=$save_freq \
           --output_dir=$RUNS/train-$n"
       fi ;;

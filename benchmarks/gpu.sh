@@ -261,13 +261,17 @@ EOS
           # not the loader, was then the wait). FROM=~/diffusion/NAME/pretrained_model (bundled in .gpu-demos/NAME):
           # the run starts from that policy's weights with a new optimizer and schedule (diffusion_pusht.sh FROM).
           # The sizes at equal updates: the loader split evenly, WORKERS_BIG=WORKERS_SMALL= half the cores less one
-          # (30 on a 4-GPU host, 15 on nvidia-h100-x2's 32 cores)
+          # (30 on a 4-GPU host, 15 on nvidia-h100-x2's 32 cores). SIZE0=200 SMALL=0: the 200 episodes alone on GPU 0
+          # (the sizes at equal updates in holds of their own: STEPS=12000 STOP_AT=8000 is hold 1's schedule, cut where
+          # hold 1's 2,000-episode run was, so the two compare at 8,000 updates)
           dp() { env OUT="$OUT" BATCH="${BATCH:-256}" LR="${LR:-2e-4}" STEPS="${STEPS:-10000}" SAVE_FREQ="${SAVE_FREQ:-1000}" \
                    EVAL_FREQ="${EVAL_FREQ:-3000}" SCHED=DDIM INFER_STEPS=10 "$@"; }
-          [ -n "${FROM:-}" ] && [ "${SMALL:-1}" = 1 ] && {  # dp passes FROM to both sizes' runs
-            echo "issue54-hold: FROM starts the 2,000-episode run from a policy; give SMALL=0 with it" >&2; exit 2; }
+          [ -n "${FROM:-}${STOP_AT:-}" ] && [ "${SMALL:-1}" = 1 ] && {  # dp passes them to both sizes' runs
+            echo "issue54-hold: FROM and STOP_AT are for the run on GPU 0 alone; give SMALL=0 with them" >&2; exit 2; }
+          [ "${SIZE0:-2000}" != 200 ] || [ "${SMALL:-1}" = 0 ] || {
+            echo "issue54-hold: SIZE0=200 trains the 200 episodes on GPU 0; give SMALL=0 with it" >&2; exit 2; }
           # a setting diffusion_pusht.sh refuses (its one line, exit 2) ends the stage there, before any GPU work
-          CUDA_VISIBLE_DEVICES=0 dp SIZES=2000 WORKERS="${WORKERS_BIG:-46}" bash benchmarks/diffusion_pusht.sh train-2000 || exit
+          CUDA_VISIBLE_DEVICES=0 dp SIZES="${SIZE0:-2000}" WORKERS="${WORKERS_BIG:-46}" bash benchmarks/diffusion_pusht.sh "train-${SIZE0:-2000}" || exit
           if [ "${SMALL:-1}" = 1 ]; then
             CUDA_VISIBLE_DEVICES=1 dp SIZES=200 WORKERS="${WORKERS_SMALL:-14}" bash benchmarks/diffusion_pusht.sh train-200 || exit; fi
           # the last GPU (3 on a 4-GPU host, 1 on a 2-GPU one, where it shares with the 200 episodes' run)

@@ -124,12 +124,15 @@ def test_the_recipe_carries_a_run_across_holds_and_lerobot_resumes_it_from_the_c
         return p.stdout if ok else p.stderr
 
     runs = tmp_path / "runs"  # the same path on every machine ($HOME/diffusion): the checkpoint names it
+    env["STOP_AT"] = "2"  # the hold ends between the two checkpoints: the schedule is 4 updates long, the run 2
     stages(runs, "demos-2", "train-2", "wait")
+    del env["STOP_AT"]
     ckpts = runs / "train-2" / "checkpoints"
-    assert sorted(c.name for c in ckpts.iterdir()) == ["000002", "000004", "last"]
-    shutil.rmtree(ckpts / "000004")  # the hold ended between the two checkpoints
-    (ckpts / "last").unlink()
-    (ckpts / "last").symlink_to("000002")
+    assert sorted(c.name for c in ckpts.iterdir()) == ["000002", "last"]
+    assert (ckpts / "last").readlink() == Path("000002")
+    first_log = next((runs / "logs").glob("train-2-*.log")).read_text()
+    assert "STOP_AT: the step-2 checkpoint is saved; stopping the run" in first_log
+    assert json.loads((ckpts / "000002/pretrained_model/train_config.json").read_text())["steps"] == 4
     assert stages(runs, "pack-3", ok=False).strip() == f"pack-3: {runs}/train-3 has no checkpoint to pack"
     stages(runs, "pack-2")
     parts = sorted((runs / "pack").glob("train-2.tar.part.*"))
@@ -228,7 +231,8 @@ def _packed(runs, n):
     ("STEPS", "rate", "STEPS must be a whole number above 0, got 'rate'"),
     ("LR", "1e-4x", "LR must be a number (e.g. 1e-4), got '1e-4x'"),
     ("EVAL_GPUS", "2,3", 'EVAL_GPUS must be one or two GPU numbers (e.g. "2 3"), got \'2,3\''),
-    ("FROM", "nowhere", "FROM must be a pretrained_model folder (with config.json), got 'nowhere'")])
+    ("FROM", "nowhere", "FROM must be a pretrained_model folder (with config.json), got 'nowhere'"),
+    ("STOP_AT", "0", "STOP_AT must be a whole number above 0, got '0'")])
 def test_a_bad_setting_is_one_line_before_anything_starts(tmp_path, var, value, line):
     """A value LeRobot cannot take would otherwise surface minutes later in a detached training's log."""
     p = subprocess.run(["bash", "benchmarks/diffusion_pusht.sh", "train-2"], cwd=ROOT, capture_output=True, text=True,
@@ -238,8 +242,21 @@ def test_a_bad_setting_is_one_line_before_anything_starts(tmp_path, var, value, 
     assert not (tmp_path / "runs").exists()
 
 
+@pytest.mark.parametrize("stop_at", ["3", "4"])
+def test_a_stop_at_no_checkpoint_before_the_end_is_one_line_before_the_run_starts(tmp_path, stop_at):
+    """STOP_AT names a checkpoint the run writes before its schedule's end: any other step would never stop it."""
+    env = {**os.environ, "STOP_AT": stop_at, "STEPS": "4", "SAVE_FREQ": "2", "RUNS": str(tmp_path / "runs"),
+           "OUT": str(tmp_path / "out")}
+    p = subprocess.run(["bash", "benchmarks/diffusion_pusht.sh", "train-2"], cwd=ROOT, capture_output=True, text=True,
+                       timeout=60, env=env)
+    line = f"STOP_AT must be a checkpoint's step before the run's end (a multiple of SAVE_FREQ 2 below STEPS 4), got {stop_at}"
+    assert (p.returncode, p.stderr.strip().splitlines(), p.stdout) == (2, [line], "")
+    assert not (tmp_path / "runs/train-2").exists() and not list((tmp_path / "runs/pids").iterdir())
+
+
 @pytest.mark.parametrize("settings, line", [
-    ({"FROM": "x"}, "issue54-hold: FROM starts the 2,000-episode run from a policy; give SMALL=0 with it"),
+    ({"FROM": "x"}, "issue54-hold: FROM and STOP_AT are for the run on GPU 0 alone; give SMALL=0 with them"),
+    ({"SIZE0": "200"}, "issue54-hold: SIZE0=200 trains the 200 episodes on GPU 0; give SMALL=0 with it"),
     ({"SMALL": "0", "BATCH": "abc"}, "BATCH must be a whole number above 0, got 'abc'")])
 def test_the_one_hold_stage_refuses_a_bad_setting_before_any_run_starts(tmp_path, settings, line):
     """gpu.sh issue54-hold on the lent host: a refused setting is its one line and exit 2, no run folder made."""
