@@ -313,9 +313,11 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     env = BraxPushT(backend=backend, obs_type=cfg.obs_type, reset_kind=cfg.reset, episode=episode,
                     max_worlds=max(cfg.envs, 128), table=TABLE, reward_fn=cfg.reward(), randomize=cfg.randomize,
                     task=task.name, graph_mode=graph_mode(backend, devices))
-    judge_env = PushTEnv(backend=backend, reset_kind=cfg.reset, action_type=task.action_type, episode=episode,
-                         scene=task.scene(), keep_states=False, randomize=cfg.randomize)
-    judge = _judge(judge_env, cfg)
+    lead, many = jax.process_index() == 0, jax.process_count() > 1
+    judge = None
+    if lead:  # Brax calls back on process 0 alone after its first call: only process 0 judges, the others skip it
+        judge = _judge(PushTEnv(backend=backend, reset_kind=cfg.reset, action_type=task.action_type, episode=episode,
+                                scene=task.scene(), keep_states=False, randomize=cfg.randomize), cfg)
     ckpt.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter() - (curve[-1]["wall_seconds"] if curve else 0.0)
     last = {"t": time.perf_counter(), "skip": resume, "params": None, "first": True,
@@ -325,8 +327,6 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     def bad(step: int, what: str) -> TrainError:
         good = f"judgement {len(curve) - 1}'s policy stays in {out / 'policy.msgpack'}" if curve else "nothing was saved"
         return TrainError(f"PPO: {what} at judgement {len(curve)} ({step:,} env steps); {good}")
-
-    lead, many = jax.process_index() == 0, jax.process_count() > 1
 
     def on_params(step, make_policy, params):
         if lead:
