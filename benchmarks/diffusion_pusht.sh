@@ -112,10 +112,13 @@ env_args() {
 trainer() {  # lerobot-train's module, or (STOP_AT) LeRobot's own run ended after that step's checkpoint
   if [ -z "$STOP_AT" ]; then echo lerobot.scripts.lerobot_train; else echo benchmarks.lerobot_train_until "$STOP_AT"; fi
 }
-stop_at() {  # STEPS SAVE_FREQ: STOP_AT must name a checkpoint the run writes before its end (or it would never stop)
+stop_at() {  # STEPS SAVE_FREQ [FROM_STEP]: STOP_AT must name a checkpoint the run has yet to write before its end
+  # (or it would never stop): after FROM_STEP, where a resumed run starts
   if [ -n "$STOP_AT" ] && { [ "$STOP_AT" -ge "$1" ] || [ $((STOP_AT % $2)) != 0 ]; }; then
     echo "STOP_AT must be a checkpoint's step before the run's end (a multiple of SAVE_FREQ $2 below STEPS $1), got $STOP_AT" >&2
     exit 2; fi
+  if [ -n "$STOP_AT" ] && [ "$STOP_AT" -le "${3:-0}" ]; then
+    echo "STOP_AT $STOP_AT is not ahead of the checkpoint train-$n resumes from (step $3)" >&2; exit 2; fi
 }
 
 detach() {  # NAME CMD...: CMD in a session of its own, its output in $RUNS/logs/NAME-<time>.log. The pid file is
@@ -186,7 +189,7 @@ PYEOF
         [ -z "$FROM" ] || echo "train-$n: resuming its own checkpoint in $RUNS/train-$n; FROM is not used" >&2
         read -r steps save_freq < <($PY -c "import json, sys; c = json.load(open(sys.argv[1]))
 print(c['steps'], c['save_freq'])" "$last") || exit 1
-        stop_at "$steps" "$save_freq"
+        stop_at "$steps" "$save_freq" "$((10#$(readlink "$RUNS/train-$n/checkpoints/last")))"
         detach "train-$n" "$PY -m $(trainer) --config_path=$last --resume=true"
       else
         if [ "$STEPS" = rated ]; then  # this size's row of the rate stage's JSON

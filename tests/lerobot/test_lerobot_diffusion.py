@@ -154,7 +154,12 @@ def test_the_recipe_carries_a_run_across_holds_and_lerobot_resumes_it_from_the_c
         f"unpack-2: parts missing or damaged in {carried} (sha256sum -c train-2.sha256 there names them)"]
     assert not (runs / "train-2").exists()
     (tmp_path / "held-back").rename(last)
-    stages(runs, "demos-2", "unpack-2", "train-2", "wait")
+    stages(runs, "demos-2", "unpack-2")
+    env["STOP_AT"] = "2"  # a resumed run starts after step 2: it would never write that checkpoint again
+    assert stages(runs, "train-2", ok=False).strip().splitlines() == [
+        "STOP_AT 2 is not ahead of the checkpoint train-2 resumes from (step 2)"]
+    del env["STOP_AT"]
+    stages(runs, "train-2", "wait")
     model = "checkpoints/000002/pretrained_model/model.safetensors"
     assert (runs / "train-2" / model).read_bytes() == (first / "train-2" / model).read_bytes()
     state = runs / "train-2/checkpoints/000004/training_state/training_step.json"
