@@ -16,6 +16,9 @@ from lerobot.scripts import lerobot_train
 
 
 def main() -> None:
+    if len(sys.argv) < 2 or not sys.argv[1].isdigit() or int(sys.argv[1]) < 1:
+        sys.exit("usage: python -m benchmarks.lerobot_train_until STEP [lerobot-train's arguments], STEP a whole "
+                 f"number above 0 (got {sys.argv[1:2] or 'nothing'})")
     stop_at = int(sys.argv.pop(1))  # the rest is lerobot-train's own command line, parsed by LeRobot
     update_last_checkpoint = lerobot_train.update_last_checkpoint
 

@@ -269,3 +269,11 @@ def test_the_one_hold_stage_refuses_a_bad_setting_before_any_run_starts(tmp_path
                        timeout=60, env={**os.environ, **settings, "HOME": str(tmp_path), "OUT": str(tmp_path / "out")})
     assert (p.returncode, p.stderr.strip().splitlines()) == (2, [line])
     assert not (tmp_path / "diffusion").exists()
+
+
+@pytest.mark.parametrize("step", ["abc", "0"])
+def test_the_stopping_trainer_refuses_a_step_that_is_not_one_in_one_line(step):
+    p = subprocess.run([sys.executable, "-m", "benchmarks.lerobot_train_until", step], cwd=ROOT, capture_output=True,
+                       text=True, timeout=120)
+    assert p.returncode != 0 and p.stdout == "" and len(p.stderr.strip().splitlines()) == 1
+    assert "STEP a whole number above 0" in p.stderr and "Traceback" not in p.stderr
