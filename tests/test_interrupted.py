@@ -39,6 +39,24 @@ def _signal_state(pid: int) -> str:
         return "(gone)"
 
 
+def _start(*args: str) -> subprocess.Popen:
+    """`python -m mjx_pusht ARGS` as a terminal's shell starts it."""
+    return subprocess.Popen([sys.executable, "-m", "mjx_pusht", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=ENV, preexec_fn=_as_a_shell_starts_it)
+
+
+def _interrupt(p: subprocess.Popen, within: float) -> tuple[str, float]:
+    """Ctrl-C to `p`: its stderr and the seconds it took to end (a failure, with its signal masks, past `within`)."""
+    state = _signal_state(p.pid)
+    p.send_signal(signal.SIGINT)
+    t0 = time.monotonic()
+    try:
+        _, err = p.communicate(timeout=within)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"still running {within:g} s after SIGINT; its signal masks: {state}")
+    return err, time.monotonic() - t0
+
+
 def one_line(capsys, *words) -> str:
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "Traceback" not in err[0], err
@@ -71,23 +89,14 @@ def test_an_out_name_longer_than_the_file_system_allows_is_one_line(tmp_path, ca
 @pytest.mark.slow
 def test_ctrl_c_during_demos_is_one_line_and_exit_130_within_seconds(tmp_path):
     out = tmp_path / "ds"
-    p = subprocess.Popen([sys.executable, "-m", "mjx_pusht", "demos", "--backend", "cpu", "--seeds", "2000",
-                          "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
-                         preexec_fn=_as_a_shell_starts_it)
+    p = _start("demos", "--backend", "cpu", "--seeds", "2000", "--out", str(out))
     try:
         deadline = time.monotonic() + 60
         while not (out / ".demos-partial").exists() and time.monotonic() < deadline:  # rolling out
             time.sleep(0.1)
         time.sleep(0.5)
         assert p.poll() is None
-        state = _signal_state(p.pid)
-        p.send_signal(signal.SIGINT)
-        t0 = time.monotonic()
-        try:
-            _, err = p.communicate(timeout=30)
-        except subprocess.TimeoutExpired:
-            pytest.fail(f"still running 30 s after SIGINT; its signal masks: {state}")
-        waited = time.monotonic() - t0
+        err, waited = _interrupt(p, 30)
     finally:
         p.kill()
     assert p.returncode == 130, err[-2000:]
@@ -99,23 +108,13 @@ def test_ctrl_c_during_demos_is_one_line_and_exit_130_within_seconds(tmp_path):
 @pytest.mark.slow
 def test_ctrl_c_during_train_is_one_line_and_exit_130(tmp_path):
     out = tmp_path / "run"
-    p = subprocess.Popen([sys.executable, "-m", "mjx_pusht", "train", "--backend", "cpu", "--envs", "64",
-                          "--iterations", "50", "--no-rerun", "--out", str(out)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
-                         preexec_fn=_as_a_shell_starts_it)
+    p = _start("train", "--backend", "cpu", "--envs", "64", "--iterations", "50", "--no-rerun", "--out", str(out))
     try:
         deadline = time.monotonic() + 120
         while not (out / "checkpoints").exists() and time.monotonic() < deadline:  # training
             time.sleep(0.2)
         time.sleep(1)
-        state = _signal_state(p.pid)
-        p.send_signal(signal.SIGINT)
-        t0 = time.monotonic()
-        try:
-            _, err = p.communicate(timeout=60)
-        except subprocess.TimeoutExpired:
-            pytest.fail(f"still running 60 s after SIGINT; its signal masks: {state}")
-        waited = time.monotonic() - t0
+        err, waited = _interrupt(p, 60)
     finally:
         p.kill()
     assert p.returncode == 130 and "Traceback" not in err, err[-2000:]
