@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+import threading
 from pathlib import Path
 
 from mjx_pusht.errors import MjxPushtError
@@ -49,6 +50,40 @@ def atomic_write_bytes(path: Path, *data) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+class BackgroundWrite(threading.Thread):
+    """A write on a thread of its own (a checkpoint while training goes on). Its failure (a full disk) is raised
+    where it is joined, not only printed; an interrupted command waits for it (`finish_background_writes`)."""
+
+    running: set[BackgroundWrite] = set()
+
+    def __init__(self, write, name: str):
+        super().__init__(name=name)
+        self.write, self.error = write, None
+
+    def start(self) -> None:
+        BackgroundWrite.running.add(self)
+        super().start()
+
+    def run(self) -> None:
+        try:
+            self.write()
+        except BaseException as e:  # noqa: BLE001 - handed to the joining thread as it is
+            self.error = e
+        finally:
+            BackgroundWrite.running.discard(self)
+
+    def join(self, timeout=None) -> None:
+        super().join(timeout)
+        if self.error is not None:
+            raise self.error
+
+
+def finish_background_writes() -> None:
+    """Wait for every `BackgroundWrite` still running (their failures are theirs to report, not raised here)."""
+    for w in list(BackgroundWrite.running):
+        threading.Thread.join(w)
 
 
 def _umask() -> int:

@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import threading
 from pathlib import Path
 
 import numpy as np
 
 from mjx_pusht.errors import MjxPushtError
-from mjx_pusht.io.outputs import atomic_write_bytes
+from mjx_pusht.io.outputs import BackgroundWrite, atomic_write_bytes
 
 # The resume checkpoint holds the whole dataset (8 M samples: ~0.5 GB, ~4 s to write, measured on the H100
 # run of notebook change 14), so it is written at most this often, and at the last iteration; a run killed
@@ -74,7 +73,7 @@ def checkpoint(path, cfg, learner, iteration, env_steps, curve, writer=None):
             if old != ring:
                 old.unlink(missing_ok=True)
 
-    writer = _Writer(write)
+    writer = BackgroundWrite(write, "resume-checkpoint")
     writer.start()
     return writer
 
@@ -101,25 +100,6 @@ def _ring(path: Path, tree: dict) -> tuple[np.ndarray, np.ndarray]:
         raise TrainError(f"--resume: the dataset ring {file} holds {raw.size} numbers, its checkpoint names "
                          f"{sum(sizes)}; start again without --resume")
     return raw[:sizes[0]].reshape(shapes[0]), raw[sizes[0]:].reshape(shapes[1])
-
-
-class _Writer(threading.Thread):
-    """A thread whose failure (a full disk) is raised in the training loop when joined, not only printed."""
-
-    def __init__(self, write):
-        super().__init__(name="resume-checkpoint")
-        self.write, self.error = write, None
-
-    def run(self) -> None:
-        try:
-            self.write()
-        except BaseException as e:  # noqa: BLE001 - handed to the joining thread as it is
-            self.error = e
-
-    def join(self, timeout=None) -> None:
-        super().join(timeout)
-        if self.error is not None:
-            raise self.error
 
 
 def resume_tree(path: Path, cfg, may_change: tuple[str, ...]) -> dict:

@@ -98,7 +98,8 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
         meta = _meta(cfg, i, env_steps, learner.norm)
         save(ckpt / f"policy_{i:03d}.msgpack", learner.params, meta)
         save(out / "policy.msgpack", learner.params, meta)
-        if last or i == cfg.iterations - 1 or time.perf_counter() - saved > every:
+        # the first judgement's too: a run stopped in its first minute can be resumed, as its Ctrl-C line says
+        if last or i == cfg.iterations - 1 or writer[0] is None or time.perf_counter() - saved > every:
             writer[0] = checkpoint(resume_path, cfg, learner, i, env_steps, curve, writer[0])
             saved = time.perf_counter()
         bar.set_postfix(success=f"{k / n:.1%}", loss=f"{loss:.4f}", steps=env_steps,
