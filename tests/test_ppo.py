@@ -179,7 +179,8 @@ def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
                              ("ppo", ("--first-fits", "4"), "--first-fits: DAgger's setting, not PPO's"),
                              ("ppo", ("--fit-steps", "5", "--teacher", "expert"), "--fit-steps, --teacher: DAgger's"),
                              ("dagger", ("--lr-schedule", "adaptive-kl", "--timesteps", "9"), "--timesteps, --lr-schedule"),
-                             ("dagger", ("--ppo-act", "mean"), "--ppo-act: PPO's")):
+                             ("dagger", ("--ppo-act", "mean"), "--ppo-act: PPO's"),
+                             ("dagger", ("--minibatches", "4"), "--minibatches: PPO's")):
         r = cli("train", "--algo", algo, "--backend", "mjx-jax", *extra, "--out", str(tmp_path / "q"), "--no-rerun")
         assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and why in r.stderr, r.stderr
         assert not (tmp_path / "q").exists()
@@ -194,17 +195,19 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval_and
     pytest.importorskip("brax")
     pytest.importorskip("gym_pusht")
     out = tmp_path / "ppo"
-    # 50-step episodes: each judgement and the eval cost a sixth of the task's 300 (this test's time is MJX on a CPU)
+    # 50-step episodes: each judgement and the eval cost a sixth of the task's 300; 4 minibatches, not 32: Brax's
+    # round of updates takes 640 env steps (this test's time is MJX on a CPU: 10,240 steps a run took 45 s of 110)
     args = ["train", "--algo", "ppo", "--task", "gym-pusht", "--backend", "mjx-jax", "--envs", "8", "--batch", "8",
-            "--timesteps", "10240", "--iterations", "1", "--eval-envs", "8", "--hidden", "32,32", "--no-rerun",
-            "--record", "0", "--no-progress", "--out", str(out), "--keep", "best", "--max-steps", "50"]
+            "--timesteps", "1280", "--iterations", "1", "--eval-envs", "8", "--hidden", "32,32", "--no-rerun",
+            "--record", "0", "--no-progress", "--out", str(out), "--keep", "best", "--max-steps", "50",
+            "--minibatches", "4"]
     r = cli(*args)
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["config"]["task"] == summary["held_out"]["task"] == "gym-pusht"
     assert summary["held_out"]["reset"] == "gym-pusht" and summary["held_out"]["success_coverage"] == 0.95
     _runs_alike_in_gym_pusht_itself(out, summary, tmp_path / "peer")
-    assert summary["method"] == "ppo" and [c["env_steps"] for c in summary["curve"]] == [0, 10240]
+    assert summary["method"] == "ppo" and [c["env_steps"] for c in summary["curve"]] == [0, 1280]
     assert summary["config"]["max_grad_norm"] == 1.0  # clipped by default: unclipped, PPO's curves collapsed (issue 40)
     # --max-steps reaches the trainer, its judge and the eval after it: every held-out episode ran 50 steps
     assert summary["config"]["max_steps"] == summary["held_out"]["max_steps"] == 50
@@ -227,28 +230,28 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval_and
     assert (out / "policy.msgpack").read_bytes() == kept.read_bytes()
     for name in ("policy.msgpack", "checkpoints/policy_000.msgpack", "checkpoints/policy_001.msgpack", "curve.png"):
         assert (out / name).is_file(), name
-    assert _moved(out) > 1e-3  # 256 Adam steps at 3e-4, clipped at 1.0 by Brax's own optimiser, move the layers
+    assert _moved(out) > 1e-3  # 32 Adam steps at 3e-4, clipped at 1.0 by Brax's own optimiser, move the layers
     # the trainer's judge (its own jitted scan) and `eval --controller policy:...` (the backend's episode
     # machinery) on the same held-out seeds: MJX-JAX on the CPU is deterministic, so they agree
     rows = pq.read_table(out / "eval" / "per_episode.parquet").to_pydict()
     assert summary["eval"]["success_rate"] == best["success"] == summary["held_out_success"]
     assert best["coverage"] == pytest.approx(np.mean(rows["final_coverage"]), abs=1e-5)
     # --resume goes on from the last judged policy: the finished judgements stay, more are added; --minutes
-    # (spent at once here) stops it at the first judgement past the budget, 20,480 of the 30,720 steps asked
-    args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "30720", "3"
+    # (spent at once here) stops it at the first judgement past the budget, 2,560 of the 3,840 steps asked
+    args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "3840", "3"
     r = cli(*args, "--resume", "--max-grad-norm", "off")  # unclipped is another trainer: not resumed into
     assert r.returncode == 1 and "max_grad_norm" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     r = cli(*args, "--resume", "--minutes", "0.0001")
     assert r.returncode == 0, r.stderr
     assert "the 0.0001-minute budget is spent" in r.stdout + r.stderr
     after = json.loads((out / "summary.json").read_text())["curve"]
-    assert after[:2] == summary["curve"] and [c["env_steps"] for c in after] == [0, 10240, 20480]
+    assert after[:2] == summary["curve"] and [c["env_steps"] for c in after] == [0, 1280, 2560]
     assert (out / "checkpoints" / "policy_002.msgpack").is_file()
     stds = [np.asarray(load_checkpoint(out / "checkpoints" / f"policy_00{i}.msgpack")[1]["in_std"]) for i in (1, 2)]
     assert after[2]["norm_std_change"] == pytest.approx(np.abs(stds[1] / stds[0] - 1).max(), rel=1e-6)  # vs restored
-    args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "20480", "2"
+    args[args.index("--timesteps") + 1], args[args.index("--iterations") + 1] = "2560", "2"
     r = cli(*args, "--resume")  # nothing left to do is one line, not a crash inside Brax
-    assert r.returncode == 1 and "already reached 20,480 env steps" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert r.returncode == 1 and "already reached 2,560 env steps" in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
 def _runs_alike_in_gym_pusht_itself(out, summary, peer_out) -> None:

@@ -298,6 +298,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--lr-schedule", choices=("adaptive-kl",), default=None,
                    help="PPO: adaptive-kl, Brax's ADAPTIVE_KL (the rate follows the epochs' KL toward 0.01); "
                         "default a constant rate")
+    t.add_argument("--minibatches", type=_positive, default=None,
+                   help="PPO: Brax's num_minibatches, each of --batch unrolls (default 32): a round of updates takes "
+                        "--batch x this x 20 env steps")
     t.add_argument("--hidden", type=_widths, default=(256, 256, 256), help="hidden widths (default 256,256,256)")
     t.add_argument("--lr", type=_positive_float, default=None, help="Adam's learning rate (default 1e-3; PPO 3e-4)")
     t.add_argument("--beta-decay", type=_fraction, default=None,

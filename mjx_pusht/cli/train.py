@@ -16,7 +16,7 @@ from mjx_pusht.train.summary import write_summary
 DAGGER_ONLY = {"fit_steps": 2000, "beta_decay": 0.7, "max_samples": 8_000_000, "teacher": "paced",
                "image_batch": None, "image_steps": None, "late_fits": None, "first_fits": None,
                "action_eps": None}
-PPO_ONLY = {"timesteps": 50_000_000, "ppo_act": "sample", "lr_schedule": None}
+PPO_ONLY = {"timesteps": 50_000_000, "ppo_act": "sample", "lr_schedule": None, "minibatches": 32}
 BOTH = {"max_grad_norm": 1.0, "envs": 4096, "eval_envs": 4096}  # both methods' settings, and defaults ('off' is None)
 # DAgger on MuJoCo C (2 cores: a 4,096-episode iteration took 3.8 minutes, its held-out judgement 80 s): sized so
 # `--minutes 1` learns something and ends in time (docs/training.md, "On a CPU"; notebook firsthour)
@@ -184,6 +184,7 @@ def _cmd_ppo(args, name: str, why: str, devices: list, processes) -> int:
     from mjx_pusht.train.ppo import PPOConfig, train_ppo
     cfg = PPOConfig(obs_type=args.obs, envs=args.envs, timesteps=args.timesteps, evals=args.iterations,
                     hidden=tuple(args.hidden), learning_rate=args.lr or 3e-4, batch_size=args.batch or 256,
+                    num_minibatches=args.minibatches,
                     eval_envs=args.eval_envs, seed=args.seed, reset=args.reset, act=args.ppo_act,
                     max_grad_norm=args.max_grad_norm, lr_schedule=args.lr_schedule, max_steps=args.max_steps,
                     success_threshold=args.success_threshold, randomize=args.randomize,

@@ -109,7 +109,8 @@ class PPOConfig:
         self.episode()  # a success threshold outside (0, 1] is a one-line error now
         if self.validation_envs < 0:
             raise ConfigError(f"PPO: validation_envs must be at least 0, got {self.validation_envs}")
-        for name in ("envs", "timesteps", "evals", "eval_envs", "max_steps", "unroll_length", "batch_size"):
+        for name in ("envs", "timesteps", "evals", "eval_envs", "max_steps", "unroll_length", "batch_size",
+                     "num_minibatches"):
             if int(getattr(self, name)) < 1:
                 raise ConfigError(f"--{name.replace('_', '-')} must be at least 1, got {getattr(self, name)}")
         per_epoch = self.batch_size * self.num_minibatches * self.unroll_length  # Brax's env steps per update round
