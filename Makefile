@@ -44,8 +44,8 @@ scene: $(RUN_STAMP)
 	$(BIN)/mjx-pusht scene
 
 # The LeRobot venv (2.3 min to install on this 2-core machine, mostly downloads) is made while the suite runs; its
-# tests run after the suite, two workers on the cores the suite's three leave. Beside the suite they took both
-# longer (339 s against 221 s) and the suite too: a fresh clone's `make test` took 1,824 s so, against the
+# tests run after the suite, on two workers. Run beside the suite's three workers, they took longer (339 s against
+# 221 s) and so did the suite: a fresh clone's `make test` took 1,824 s so, against the
 # suite's 1,128 s alone (notebook lead22). A failure in any part fails `make test`, each part's output shown.
 test: $(STAMP) $(VENV)/.docs-installed
 	@( $(MAKE) --no-print-directory $(LEROBOT_STAMP) > $(VENV)/lerobot-install.log 2>&1 || exit 3 ) & lerobot=$$!; \
