@@ -122,15 +122,19 @@ def test_two_processes_joined_by_jax_distributed_train_the_policy_two_devices_of
     """Two processes on localhost (one CPU device each, their gradients averaged across processes through gloo)
     against one process with 2 forced CPU devices: the same run, so the same weights; process 0 wrote the run."""
     port = _free_port()
-    # a compilation cache of their own: in one full-suite run (a cold cache shared with the other tests' processes)
-    # the one-process run failed in jax with "safe_zip() argument 1 has length 2 but argument 0 has length 4",
-    # which it never did alone, cold or warm (notebook lead13); the run takes as long either way
-    env = {**ENV, "JAX_PLATFORMS": "cpu", "MJX_PUSHT_JAX_CACHE": str(tmp_path / "cache-two")}
+    # a compilation cache of its own for each process: in one full-suite run (a cold cache shared with the other
+    # tests' processes) the one-process run failed in jax with "safe_zip() argument 1 has length 2 but argument 0
+    # has length 4", which it never did alone, cold or warm (notebook lead13); the run takes as long either way
+    env = {**ENV, "JAX_PLATFORMS": "cpu"}
     # --minutes: every process stops where process 0's clock says (never here: ten minutes)
     flags = ["--out", str(tmp_path / "two"), "--minutes", "10", "--num-processes", "2", "--coordinator",
              f"127.0.0.1:{port}"]
+    # each process dumps the HLO it compiles: a program the two run together must be the same text in both, or XLA's
+    # GPU compiler, which shares autotuning between them by the text's fingerprint, waits forever (notebook lead23)
     procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *TINY, *flags, "--process-id", str(i)],
-                              env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for i in (1, 0)]
+                              env={**env, "XLA_FLAGS": f"--xla_dump_to={tmp_path / f'hlo-{i}'} --xla_dump_hlo_as_text",
+                                   "MJX_PUSHT_JAX_CACHE": str(tmp_path / f"cache-{i}")},  # a cache hit dumps nothing
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for i in (1, 0)]
     one = subprocess.Popen([sys.executable, "-m", "mjx_pusht", *TINY, "--out", str(tmp_path / "one")],
                            env={**TWO, "MJX_PUSHT_JAX_CACHE": str(tmp_path / "cache-one")},
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -144,28 +148,40 @@ def test_two_processes_joined_by_jax_distributed_train_the_policy_two_devices_of
     for a, b in zip(jax_leaves(two), jax_leaves(one), strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
     assert runs[0]["eval"]["n_episodes"] == 2  # process 0 judged it with eval, as one process does
+    together = [_programs_over_processes(tmp_path / f"hlo-{i}") for i in (0, 1)]
+    assert together[0] and together[0] == together[1]  # the fit's programs, the same text in both processes
+
+
+def _programs_over_processes(dump: Path) -> list[str]:
+    """The texts of the programs, as JAX handed them to XLA, that span both processes' devices, in compile order."""
+    texts = [f.read_text() for f in sorted(dump.glob("module_*.before_optimizations.txt"))]
+    return [t for t in texts if re.search(r"(replica_count|num_partitions)=2\b", t.partition("\n")[0])]
 
 
 @pytest.mark.slow
 @pytest.mark.skipif(os.environ.get("MJX_PUSHT_HEAVY_TESTS") != "1",
                     reason="3.6 CPU-minutes, more than CI's 30 minutes hold (MJX_PUSHT_HEAVY_TESTS=1 runs it)")
-def test_ppo_over_two_processes_joined_by_jax_distributed_is_one_run_process_0_writes(tmp_path):
+@pytest.mark.parametrize("backend", ["mjx-jax", "mjx-warp"])
+def test_ppo_over_two_processes_joined_by_jax_distributed_is_one_run_process_0_writes(tmp_path, backend):
     """Brax's own PPO over two processes on localhost (one CPU device each, ~2.2 minutes here, 3.6 CPU-minutes: each
     process compiles Brax's epoch; in CI's suite, beside its other worker and LeRobot's tests, it pushed the fresh-clone
     rehearsal to 2,072 s and starved two timed tests, so it runs by hand, notebook lead20): Brax maps its epochs
     over both (its gradients all-reduced through gloo), so both end with the same weights, which process 0 judged,
     wrote and evaluated; process 1 says the digest of the weights it ended with. Two processes that trained apart
-    (different envs, keys fold_in(process)) would end with different ones."""
+    (different envs, keys fold_in(process)) would end with different ones. Brax's epoch is the same HLO text in both
+    processes (on MJX-Warp too, whose FFI calls are numbered in the order a process registers them)."""
     pytest.importorskip("brax")
     port = _free_port()
     out = tmp_path / "two"
-    args = ["train", "--algo", "ppo", "--task", "gym-pusht", "--backend", "mjx-jax", "--envs", "8", "--batch", "8",
+    args = ["train", "--algo", "ppo", "--task", "gym-pusht", "--backend", backend, "--envs", "8", "--batch", "8",
             "--timesteps", "10240", "--iterations", "1", "--eval-envs", "8", "--hidden", "32,32", "--max-steps", "50",
             "--keep", "last", "--no-rerun", "--record", "0", "--no-progress", "--out", str(out), "--num-processes", "2",
             "--coordinator", f"127.0.0.1:{port}"]
     (tmp_path / "tmp").mkdir()  # where process 1 keeps its files while it trains (TMPDIR)
-    env = {**ENV, "JAX_PLATFORMS": "cpu", "MJX_PUSHT_JAX_CACHE": str(tmp_path / "cache"), "TMPDIR": str(tmp_path / "tmp")}
-    procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *args, "--process-id", str(i)], env=env,
+    env = {**ENV, "JAX_PLATFORMS": "cpu", "TMPDIR": str(tmp_path / "tmp")}
+    procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *args, "--process-id", str(i)],
+                              env={**env, "XLA_FLAGS": f"--xla_dump_to={tmp_path / f'hlo-{i}'} --xla_dump_hlo_as_text",
+                                   "MJX_PUSHT_JAX_CACHE": str(tmp_path / f"cache-{i}")},  # a cache hit dumps nothing
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for i in (1, 0)]
     logs = [p.communicate(timeout=600)[0] for p in procs]
     assert [p.returncode for p in procs] == [0, 0], logs
@@ -183,6 +199,8 @@ def test_ppo_over_two_processes_joined_by_jax_distributed_is_one_run_process_0_w
     assert said.group(1) == mine  # process 1 ended on the weights process 0 wrote: one run's
     untrained = load_checkpoint(out / "checkpoints" / "policy_000.msgpack")[0]
     assert max(np.max(np.abs(np.subtract(a, b))) for a, b in zip(jax_leaves(final), jax_leaves(untrained))) > 1e-4
+    together = [_programs_over_processes(tmp_path / f"hlo-{i}") for i in (0, 1)]
+    assert together[0] and together[0] == together[1]  # Brax's epoch, the same text in both processes
 
 
 def _free_port() -> int:

@@ -77,6 +77,7 @@ class Processes:
         # `kill`, `timeout`, `docker stop` or Slurm's scancel left a sweep or training running (a 2-process sweep
         # ran on 30 s after it; a training on 2 H200s finished its run, notebook lead20): SIGTERM stops it again
         jax.config.update("jax_enable_preemption_service", False)
+        same_program_text()
         joined = threading.Event()
         threading.Thread(target=self._watchdog, args=(joined,), daemon=True, name="join-watchdog").start()
         try:
@@ -136,6 +137,23 @@ class Processes:
         from jax._src import distributed
 
         distributed.global_state.client.wait_at_barrier(f"mjx_pusht:{name}", BARRIER_TIMEOUT_MS)
+
+
+def same_program_text() -> None:
+    """Make a program the processes run together lower to the same HLO text in each of them, whatever Python line
+    called it and wherever the package is installed.
+
+    By default JAX writes every op's whole Python call stack, with absolute paths, into the HLO, and XLA's fingerprint
+    of a module covers it; process 0 calls training from another line than the others (`_follow`). XLA's GPU compiler
+    shares its autotuning between the processes that compile one program, keyed by that fingerprint (openxla/xla
+    #13108; a hang of this kind: marin-community/marin#9042). Brax's PPO over 2 processes, a GPU each, was still
+    compiling its first epoch at 170 s, over 4 it never left that epoch (H200s, notebook lead23); with the texts the
+    same (this, and the judge every PPO process runs, train/ppo.py) 2 processes trained to the end in 127 s. One frame
+    an op (its own line, the same in every process) and file names without their folders make the texts agree."""
+    import jax
+
+    jax.config.update("jax_include_full_tracebacks_in_locations", False)
+    jax.config.update("jax_hlo_source_file_canonicalization_regex", r".*/")
 
 
 def every_process(name: str, value: str, timeout_ms: int = BARRIER_TIMEOUT_MS) -> list[str]:

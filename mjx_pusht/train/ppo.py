@@ -315,10 +315,13 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
                     max_worlds=max(cfg.envs, 128), table=TABLE, reward_fn=cfg.reward(), randomize=cfg.randomize,
                     task=task.name, graph_mode=graph_mode(backend, devices))
     lead, many = jax.process_index() == 0, jax.process_count() > 1
-    judge = None
-    if lead:  # Brax calls back on process 0 alone after its first call: only process 0 judges, the others skip it
-        judge = _judge(PushTEnv(backend=backend, reset_kind=cfg.reset, action_type=task.action_type, episode=episode,
-                                scene=task.scene(), keep_states=False, randomize=cfg.randomize), cfg)
+    # Every process builds the judge and runs the first judgement, though Brax calls back on process 0 alone after
+    # its first call: MJX-Warp names each FFI call a process registers by a counter of its own, so a process that
+    # compiled the judge before Brax's epoch lowered that epoch to another HLO text than one that did not
+    # (`..._func_wrapper_3` against `_1`), and the processes hung in its compile (study/distributed.py's
+    # same_program_text has why, notebook lead23). The others' judgement is thrown away.
+    judge = _judge(PushTEnv(backend=backend, reset_kind=cfg.reset, action_type=task.action_type, episode=episode,
+                            scene=task.scene(), keep_states=False, randomize=cfg.randomize), cfg)
     ckpt.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter() - (curve[-1]["wall_seconds"] if curve else 0.0)
     last = {"t": time.perf_counter(), "skip": resume, "params": None, "first": True,
@@ -332,6 +335,8 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     def on_params(step, make_policy, params):
         if lead:
             judged(step, params)
+        elif last["first"]:  # the same programs compiled in the same order as process 0's (above)
+            judge(*to_checkpoint(params, cfg.obs_type, cfg.act))
         if many and last["first"]:
             # Brax's first call is on every process, the others on process 0 alone. Every process leaves the first
             # together: the others would otherwise wait in the first epoch's all-reduce while process 0 compiles and
