@@ -29,7 +29,10 @@ case "$stage" in
           if [ -d .gpu-demos ]; then mkdir -p "$HOME/diffusion" && cp -r .gpu-demos/* "$HOME/diffusion/"; fi
           jsite=""; [ -d "$HOME/jsite" ] && jsite=$HOME/jsite:
           PYTHONPATH=$jsite$PYTHONPATH python3 -c "import jax, mujoco, warp; from mujoco import mjx
-print(jax.__version__, mujoco.__version__, warp.__version__, jax.devices())"; ls "$HOME/diffusion" 2>/dev/null; true ;;
+print(jax.__version__, mujoco.__version__, warp.__version__, jax.devices())
+if jax.__version__ != '0.10.2':  # the machine's own jax, not the pinned one (the 6 .gpu-all parts hold none)
+    print(f'unbundle: WARNING jax {jax.__version__} here, not the pinned 0.10.2: carry .gpu-jax too (notebook lead23)')"
+          ls "$HOME/diffusion" 2>/dev/null; true ;;
   warp)   python3 -m benchmarks.harness --tier "$tier-warp" --backends cpu,mjx-warp --cpu-batches 4096,65536 \
             --batches 1024,4096,16384,65536 --repeats 2 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
   warp-tight) python3 -m benchmarks.harness --tier "$tier-warp-tight" --backends cpu,mjx-warp --cpu-batches 65536 \
