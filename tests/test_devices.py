@@ -160,16 +160,18 @@ def _programs_over_processes(dump: Path) -> list[str]:
 
 @pytest.mark.slow
 @pytest.mark.skipif(os.environ.get("MJX_PUSHT_HEAVY_TESTS") != "1",
-                    reason="3.6 CPU-minutes, more than CI's 30 minutes hold (MJX_PUSHT_HEAVY_TESTS=1 runs it)")
+                    reason="3.6 CPU-minutes (MJX-Warp's twice that), more than CI's 30 minutes hold "
+                           "(MJX_PUSHT_HEAVY_TESTS=1 runs it)")
 @pytest.mark.parametrize("backend", ["mjx-jax", "mjx-warp"])
 def test_ppo_over_two_processes_joined_by_jax_distributed_is_one_run_process_0_writes(tmp_path, backend):
-    """Brax's own PPO over two processes on localhost (one CPU device each, ~2.2 minutes here, 3.6 CPU-minutes: each
-    process compiles Brax's epoch; in CI's suite, beside its other worker and LeRobot's tests, it pushed the fresh-clone
-    rehearsal to 2,072 s and starved two timed tests, so it runs by hand, notebook lead20): Brax maps its epochs
-    over both (its gradients all-reduced through gloo), so both end with the same weights, which process 0 judged,
-    wrote and evaluated; process 1 says the digest of the weights it ended with. Two processes that trained apart
-    (different envs, keys fold_in(process)) would end with different ones. Brax's epoch is the same HLO text in both
-    processes (on MJX-Warp too, whose FFI calls are numbered in the order a process registers them)."""
+    """Brax's own PPO over two processes on localhost (one CPU device each, ~2.5 minutes here on MJX-JAX, ~5 on
+    MJX-Warp: each process compiles Brax's epoch; in CI's suite, beside its other worker and LeRobot's tests, it
+    pushed the fresh-clone rehearsal to 2,072 s and starved two timed tests, so it runs by hand, notebook lead20):
+    Brax maps its epochs over both (its gradients all-reduced through gloo), so both end with the same weights, which
+    process 0 judged, wrote and evaluated; process 1 says the digest of the weights it ended with. Two processes that
+    trained apart (different envs, keys fold_in(process)) would end with different ones. Brax's epoch is the same
+    HLO text in both processes (on MJX-Warp too, whose FFI calls are numbered in the order a process registers
+    them)."""
     pytest.importorskip("brax")
     port = _free_port()
     out = tmp_path / "two"
