@@ -146,10 +146,11 @@ def same_program_text() -> None:
     By default JAX writes every op's whole Python call stack, with absolute paths, into the HLO, and XLA's fingerprint
     of a module covers it; process 0 calls training from another line than the others (`_follow`). XLA's GPU compiler
     shares its autotuning between the processes that compile one program, keyed by that fingerprint (openxla/xla
-    #13108; a hang of this kind: marin-community/marin#9042). Brax's PPO over 2 processes, a GPU each, was still
-    compiling its first epoch at 170 s, over 4 it never left that epoch (H200s, notebook lead23); with the texts the
-    same (this, and the judge every PPO process runs, train/ppo.py) 2 processes trained to the end in 127 s. One frame
-    an op (its own line, the same in every process) and file names without their folders make the texts agree."""
+    #13108; a hang of this kind: marin-community/marin#9042; inferred here, not observed). Brax's PPO over 2
+    processes, a GPU each, was still compiling its first epoch at 170 s, over 4 it never left that epoch (H200s,
+    notebook lead23); with the texts the same (this, and the judge every PPO process runs, train/ppo.py) 2 processes
+    trained to the end in 127 s. One frame an op (its own line, the same in every process) and file names without
+    their folders make the texts agree."""
     import jax
 
     jax.config.update("jax_include_full_tracebacks_in_locations", False)

@@ -335,7 +335,8 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     def on_params(step, make_policy, params):
         if lead:
             judged(step, params)
-        elif last["first"]:  # the same programs compiled in the same order as process 0's (above)
+        elif last["first"]:  # the same programs compiled in the same order as process 0's (above); a resumed
+            # run's process 0 skips this judgement, so --resume over processes (refused today) would have to skip it too
             judge(*to_checkpoint(params, cfg.obs_type, cfg.act))
         if many and last["first"]:
             # Brax's first call is on every process, the others on process 0 alone. Every process leaves the first
