@@ -129,11 +129,10 @@ def test_two_processes_joined_by_jax_distributed_train_the_policy_two_devices_of
     # --minutes: every process stops where process 0's clock says (never here: ten minutes)
     flags = ["--out", str(tmp_path / "two"), "--minutes", "10", "--num-processes", "2", "--coordinator",
              f"127.0.0.1:{port}"]
-    # each process dumps the HLO it compiles: a program the two run together must be the same text in both, or XLA's
-    # GPU compiler, which shares autotuning between them by the text's fingerprint, waits forever (notebook lead23)
+    # each process dumps the HLO it compiles: a program the two run together must be the same text in both (texts
+    # that differed hung Brax's PPO over processes in its GPU compile, notebook lead23)
     procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *TINY, *flags, "--process-id", str(i)],
-                              env={**env, "XLA_FLAGS": f"--xla_dump_to={tmp_path / f'hlo-{i}'} --xla_dump_hlo_as_text",
-                                   "MJX_PUSHT_JAX_CACHE": str(tmp_path / f"cache-{i}")},  # a cache hit dumps nothing
+                              env=_dumping_hlo(env, tmp_path, i),
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for i in (1, 0)]
     one = subprocess.Popen([sys.executable, "-m", "mjx_pusht", *TINY, "--out", str(tmp_path / "one")],
                            env={**TWO, "MJX_PUSHT_JAX_CACHE": str(tmp_path / "cache-one")},
@@ -150,6 +149,13 @@ def test_two_processes_joined_by_jax_distributed_train_the_policy_two_devices_of
     assert runs[0]["eval"]["n_episodes"] == 2  # process 0 judged it with eval, as one process does
     together = [_programs_over_processes(tmp_path / f"hlo-{i}") for i in (0, 1)]
     assert together[0] and together[0] == together[1]  # the fit's programs, the same text in both processes
+
+
+def _dumping_hlo(env: dict, tmp_path: Path, i: int) -> dict:
+    """Process i's environment, dumping the HLO it compiles into tmp_path/hlo-i, with a compilation cache of its own
+    (a cache hit compiles, and so dumps, nothing)."""
+    return {**env, "XLA_FLAGS": f"--xla_dump_to={tmp_path / f'hlo-{i}'} --xla_dump_hlo_as_text",
+            "MJX_PUSHT_JAX_CACHE": str(tmp_path / f"cache-{i}")}
 
 
 def _programs_over_processes(dump: Path) -> list[str]:
@@ -182,8 +188,7 @@ def test_ppo_over_two_processes_joined_by_jax_distributed_is_one_run_process_0_w
     (tmp_path / "tmp").mkdir()  # where process 1 keeps its files while it trains (TMPDIR)
     env = {**ENV, "JAX_PLATFORMS": "cpu", "TMPDIR": str(tmp_path / "tmp")}
     procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *args, "--process-id", str(i)],
-                              env={**env, "XLA_FLAGS": f"--xla_dump_to={tmp_path / f'hlo-{i}'} --xla_dump_hlo_as_text",
-                                   "MJX_PUSHT_JAX_CACHE": str(tmp_path / f"cache-{i}")},  # a cache hit dumps nothing
+                              env=_dumping_hlo(env, tmp_path, i),
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for i in (1, 0)]
     logs = [p.communicate(timeout=600)[0] for p in procs]
     assert [p.returncode for p in procs] == [0, 0], logs
