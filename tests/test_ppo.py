@@ -186,6 +186,18 @@ def test_ppo_refuses_what_it_cannot_do_in_one_line(tmp_path):
         assert not (tmp_path / "q").exists()
 
 
+def test_a_ppo_config_below_one_names_its_field_and_the_flag_that_sets_it():
+    """A Python caller and a CLI user each read their own word: the field, then the flag `train` spells it with."""
+    from mjx_pusht.errors import ConfigError
+    from mjx_pusht.train.ppo import PPOConfig
+
+    for field, flag in (("num_minibatches", "--minibatches"), ("batch_size", "--batch"), ("evals", "--iterations"),
+                        ("eval_envs", "--eval-envs"), ("unroll_length", None)):
+        with pytest.raises(ConfigError) as e:
+            PPOConfig(**{field: 0})
+        assert str(e.value) == f"PPO: {field}{f' ({flag})' if flag else ''} must be at least 1, got 0"
+
+
 @pytest.mark.slow
 def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval_and_runs_in_gym_pusht_itself(tmp_path):
     """One tiny `train --algo ppo --task gym-pusht` on the CPU (Brax's trainer compiled once: 2-6 minutes here):

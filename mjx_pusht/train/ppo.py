@@ -54,6 +54,10 @@ SUCCESS_BONUS = 10.0
 SHAPING = 10.0
 TABLE = 65536  # the training starts: task seeds 0 .. TABLE - 1 (BraxPushT's table)
 RESUME = "resume.msgpack"  # in checkpoints/: Brax's params and the curve after the last judgement
+# the flags `train --algo ppo` sets these fields from: an error names the field (a Python caller's word) and the
+# flag (the CLI user's); unroll_length and validation_envs have none
+_FLAGS = {"envs": "--envs", "timesteps": "--timesteps", "evals": "--iterations", "eval_envs": "--eval-envs",
+          "max_steps": "--max-steps", "batch_size": "--batch", "num_minibatches": "--minibatches"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,7 +116,8 @@ class PPOConfig:
         for name in ("envs", "timesteps", "evals", "eval_envs", "max_steps", "unroll_length", "batch_size",
                      "num_minibatches"):
             if int(getattr(self, name)) < 1:
-                raise ConfigError(f"--{name.replace('_', '-')} must be at least 1, got {getattr(self, name)}")
+                flag = f" ({_FLAGS[name]})" if name in _FLAGS else ""
+                raise ConfigError(f"PPO: {name}{flag} must be at least 1, got {getattr(self, name)}")
         per_epoch = self.batch_size * self.num_minibatches * self.unroll_length  # Brax's env steps per update round
         if (self.batch_size * self.num_minibatches) % self.envs:
             raise ConfigError(f"PPO: --batch x minibatches ({self.batch_size} x {self.num_minibatches}) must be a "
