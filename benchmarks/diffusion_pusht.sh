@@ -29,6 +29,10 @@
 #   pack-N       (stopping a train-N still running) train-N's last checkpoint (model, optimizer, scheduler, RNG: LeRobot's whole resume state) and its
 #                logs as 15 MiB parts in $RUNS/pack; then `send` returns 4 of them a call (60 MiB
 #                of the 64 that come back). PACK=model: the policy's pretrained_model folder alone (8 parts).
+#                PACK=live: the training goes on; the checkpoint `last` names now is packed (LeRobot points `last`
+#                at a step only once its folder is written), so its parts can leave the machine during the wait
+#                calls: a hold lost mid-run (it goes back after 30 s without a call) then loses only the updates
+#                since that checkpoint, and the hold's end needs no stop-pack-send of its own.
 #   unpack-N     puts back a run carried in .gpu-diffusion/ (see below) as $RUNS/train-N with its logs.
 # Carrying a packed run into a new hold: here, copy each call's parts (files_at/parts/*) into .gpu-diffusion/K/
 # folders of at most 3 parts (45 MiB: a call carries 64 with the tree, ~3 MiB with outputs/ moved aside), and run
@@ -75,6 +79,7 @@ STOP_AT=${STOP_AT:-}             # train-N ends after saving this step's checkpo
 [ -z "$FROM" ] || [ -f "$FROM/config.json" ] || { echo "FROM must be a pretrained_model folder (with config.json), got '$FROM'" >&2; exit 2; }
 # found here in one line, not in a detached training's log minutes later
 case "$SCHED" in DDPM|DDIM) ;; *) echo "SCHED must be DDPM or DDIM (LeRobot's samplers), got '$SCHED'" >&2; exit 2 ;; esac
+case "${PACK:-resume}" in resume|model|live) ;; *) echo "PACK must be resume, model or live, got '$PACK'" >&2; exit 2 ;; esac
 whole() {  # NAME VALUE: a one-line error unless VALUE is a whole number above 0 (or empty, where $3 is "optional")
   [[ ( -z "$2" && "${3:-}" = optional ) || "$2" =~ ^[1-9][0-9]*$ ]] || {
     echo "$1 must be a whole number above 0, got '$2'" >&2; exit 2; }
@@ -228,7 +233,7 @@ print(r['STEPS'], r['EVAL_FREQ'], r['SAVE_FREQ'])" "$RUNS/results/diffusion-rate
     pack-*)
       # a training still running would write a checkpoint under tar's feet: stop it first (its last checkpoint is
       # what a resume restarts from, so call pack-N just after one: SAVE_FREQ's line in the log)
-      if [ -f "$RUNS/pids/train-$n" ] && kill -0 "$(cat "$RUNS/pids/train-$n")" 2>/dev/null; then
+      if [ "${PACK:-resume}" != live ] && [ -f "$RUNS/pids/train-$n" ] && kill -0 "$(cat "$RUNS/pids/train-$n")" 2>/dev/null; then
         kill -TERM -- "-$(cat "$RUNS/pids/train-$n")"
         for _ in $(seq 60); do kill -0 "$(cat "$RUNS/pids/train-$n")" 2>/dev/null || break; sleep 0.5; done
         echo "pack-$n: stopped the running train-$n"
@@ -236,10 +241,13 @@ print(r['STEPS'], r['EVAL_FREQ'], r['SAVE_FREQ'])" "$RUNS/results/diffusion-rate
       step=$(readlink "$RUNS/train-$n/checkpoints/last") || {
         echo "pack-$n: $RUNS/train-$n has no checkpoint to pack" >&2; exit 1; }
       mkdir -p "$RUNS/pack" && rm -f "$RUNS/pack/train-$n".* "$RUNS/pack/sent"
-      what=("train-$n/checkpoints/$step" "train-$n/checkpoints/last" logs)
+      # `last` as read above, not as the running training may have moved it since: a link of our own to $step
+      rm -rf "$RUNS/pack/link" && mkdir -p "$RUNS/pack/link/train-$n/checkpoints" && ln -s "$step" "$RUNS/pack/link/train-$n/checkpoints/last"
+      what=("train-$n/checkpoints/$step" logs -C "$RUNS/pack/link" "train-$n/checkpoints/last")
       # PACK=model: the policy alone (114 MB, 2 send calls), to score it elsewhere or start a run FROM it
       [ "${PACK:-resume}" = model ] && what=("train-$n/checkpoints/$step/pretrained_model")
-      tar cf - -C "$RUNS" "${what[@]}" \
+      # (live: the log being written as tar reads it is no error, its copy ends where tar read it)
+      tar cf - --warning=no-file-changed -C "$RUNS" "${what[@]}" \
         | split -b 15m -d -a 3 - "$RUNS/pack/train-$n.tar.part."
       (cd "$RUNS/pack" && sha256sum train-"$n".tar.part.* > "train-$n.sha256")
       ls -l "$RUNS/pack"; echo "then: send, once per 4 parts" ;;

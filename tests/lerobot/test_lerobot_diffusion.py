@@ -10,6 +10,7 @@ import json
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -193,10 +194,13 @@ def test_the_recipe_carries_a_run_across_holds_and_lerobot_resumes_it_from_the_c
     assert max(float((after[k].float() - before[k].float()).abs().max()) for k in before) < 1e-8
 
 
-def test_pack_stops_a_training_still_running_before_it_cuts_the_checkpoint(tmp_path):
+@pytest.mark.parametrize("pack", ["resume", "live"])
+def test_pack_stops_a_training_still_running_before_it_cuts_the_checkpoint_unless_live(tmp_path, pack):
     """A hold ends while lerobot-train still runs (it is detached): `pack-N` stops it first, so no checkpoint is
-    written under tar's feet, then packs the last one. The training here is a stand-in process group, as `detach`
-    starts it (its own session, the pid file written from inside), since what is tested is the script, not LeRobot."""
+    written under tar's feet, then packs the last one. PACK=live leaves it running and packs the checkpoint `last`
+    named (a finished one: LeRobot moves `last` after writing), so the parts can leave during the hold. The training
+    here is a stand-in process group, as `detach` starts it (its own session, the pid file written from inside),
+    since what is tested is the script, not LeRobot."""
     runs = tmp_path / "runs"
     ckpt = runs / "train-5" / "checkpoints"
     (ckpt / "000002" / "pretrained_model").mkdir(parents=True)
@@ -214,12 +218,21 @@ def test_pack_stops_a_training_still_running_before_it_cuts_the_checkpoint(tmp_p
         time.sleep(0.1)
     pid = int(pidfile.read_text())
     p = subprocess.run(["bash", "benchmarks/diffusion_pusht.sh", "pack-5"], cwd=ROOT, capture_output=True, text=True,
-                       timeout=60, env={**os.environ, "RUNS": str(runs), "OUT": str(tmp_path / "out")})
+                       timeout=60, env={**os.environ, "RUNS": str(runs), "OUT": str(tmp_path / "out"), "PACK": pack})
     assert p.returncode == 0, p.stderr
-    assert "pack-5: stopped the running train-5" in p.stdout
-    with pytest.raises(ProcessLookupError):
-        os.kill(pid, 0)
-    assert "train-5/checkpoints/000002/pretrained_model/model.safetensors" in _packed(runs, 5)[1]
+    if pack == "live":
+        assert "stopped" not in p.stdout
+        os.kill(pid, 0)  # still training
+        os.killpg(pid, signal.SIGTERM)
+    else:
+        assert "pack-5: stopped the running train-5" in p.stdout
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    packed, listing = _packed(runs, 5)
+    assert "train-5/checkpoints/000002/pretrained_model/model.safetensors" in listing
+    # unpacked, `last` names the packed step, as LeRobot's --resume reads it
+    subprocess.run(["tar", "xf", "-", "-C", str(tmp_path / "out")], input=packed, check=True)
+    assert os.readlink(tmp_path / "out" / "train-5" / "checkpoints" / "last") == "000002"
 
 
 def _packed(runs, n):
@@ -237,7 +250,8 @@ def _packed(runs, n):
     ("LR", "1e-4x", "LR must be a number (e.g. 1e-4), got '1e-4x'"),
     ("EVAL_GPUS", "2,3", 'EVAL_GPUS must be one or two GPU numbers (e.g. "2 3"), got \'2,3\''),
     ("FROM", "nowhere", "FROM must be a pretrained_model folder (with config.json), got 'nowhere'"),
-    ("STOP_AT", "0", "STOP_AT must be a whole number above 0, got '0'")])
+    ("STOP_AT", "0", "STOP_AT must be a whole number above 0, got '0'"),
+    ("PACK", "alive", "PACK must be resume, model or live, got 'alive'")])
 def test_a_bad_setting_is_one_line_before_anything_starts(tmp_path, var, value, line):
     """A value LeRobot cannot take would otherwise surface minutes later in a detached training's log."""
     p = subprocess.run(["bash", "benchmarks/diffusion_pusht.sh", "train-2"], cwd=ROOT, capture_output=True, text=True,
