@@ -233,21 +233,28 @@ def test_call_render_gives_one_frame_per_env_as_sync_vector_env_does():
     assert quiet.call("render") == quiet_copies.call("render") == (None, None)  # no render_mode: None per env
 
 
+@pytest.fixture(scope="module")
+def warp_vector_pair():
+    """Two 4-env MJX-Warp vector envs, built (and their step compiled) once for the three non-finite values below:
+    each case starts both from reset(seed=7), so it sees the fresh batch it would see in envs of its own."""
+    from mjx_pusht.backends.warp import warp_available
+
+    if not warp_available():
+        pytest.skip("warp-lang is not installed")
+    return (gym.make_vec(ENV, num_envs=4, backend="mjx-warp", array_type="jax"),
+            gym.make_vec(ENV, num_envs=4, backend="mjx-warp", array_type="jax"))
+
+
 @pytest.mark.slow
 @pytest.mark.warp
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
-def test_a_device_batchs_non_finite_action_is_named_at_the_next_read_and_its_row_held_still(bad):
+def test_a_device_batchs_non_finite_action_is_named_at_the_next_read_and_its_row_held_still(bad, warp_vector_pair):
     """On MJX the vector env reads the batch on the host every few steps, not each step: a non-finite action is
     checked on the device, its row gets action 0 (the pusher holds still: compared with a zero action), and the
     next read raises one line naming the row and the step."""
     import jax.numpy as jnp
 
-    from mjx_pusht.backends.warp import warp_available
-
-    if not warp_available():
-        pytest.skip("warp-lang is not installed")
-    envs = gym.make_vec(ENV, num_envs=4, backend="mjx-warp", array_type="jax")
-    ref = gym.make_vec(ENV, num_envs=4, backend="mjx-warp", array_type="jax")
+    envs, ref = warp_vector_pair
     envs.reset(seed=7)
     ref.reset(seed=7)
     a = jnp.full((4, 2), 0.3)
