@@ -3,9 +3,10 @@
 Every figure on gym-pusht's task can be checked on the original: `eval --task gym-pusht --backend gym-pusht`
 runs the same controller (a built-in, a trained policy, a user's function) from the same seeds, and a seed
 gives gym-pusht's own `reset(seed=seed)` start, as it does on the drop-in. Nothing of this project's physics
-runs: the controller sees gym-pusht's state (converted to the world frame by model/gym_pusht.py's exact maps)
-or its own rendered image, and its targets go to gym-pusht's `step` in pixels; success is gym-pusht's
-`is_success`, coverage its `coverage`.
+runs: the controller sees what gym-pusht's `reset`/`step` return (its state observation, the angle wrapped to
+[0, 2 pi), or its rendered image and `agent_pos`) through task/gym_pusht_obs.py, the door `GymPushtPolicy` puts
+a user's plain gym-pusht loop through, and its targets go to gym-pusht's `step` as that door makes them; success
+is gym-pusht's `is_success`, coverage its `coverage`.
 
 The episodes spread over a process per core (spawn), each stepping its share of the seeds in lockstep, so a
 controller acts once a control step for all of them (a trained policy's batch, not one call an env).
@@ -98,7 +99,8 @@ class GymPushtBackend(Backend):
 
 
 def world_state(env) -> np.ndarray:
-    """gym-pusht's agent and block as observe's state row: pusher x, y, tee x, y, yaw (world frame, metres)."""
+    """gym-pusht's agent and block as a state row: pusher x, y, tee x, y, yaw (world frame, metres), read from
+    pymunk's bodies for the rows and traces, never for a controller."""
     agent = frame.to_world(np.array([tuple(env.agent.position)], np.float64))
     tee = frame.pose_to_world(np.array([tuple(env.block.position)], np.float64), np.array([env.block.angle]))
     return np.concatenate([agent, tee], axis=-1)[0]
@@ -112,7 +114,8 @@ def episodes(scenario, seeds: np.ndarray, trace: bool = False, poses=None):
 
     from mjx_pusht.task.controllers import seed_key
     from mjx_pusht.task.goals import draw
-    from mjx_pusht.task.rules import episode_init, observe, wrap_angle
+    from mjx_pusht.task.gym_pusht_obs import controller_obs, gym_pusht_action
+    from mjx_pusht.task.rules import episode_init, wrap_angle
 
     controller, episode = scenario.driver()
     n, image = len(seeds), controller.pixels
@@ -123,10 +126,7 @@ def episodes(scenario, seeds: np.ndarray, trace: bool = False, poses=None):
         # gym-pusht fixes its success_threshold at 0.95 in __init__ (no kwarg: gym-pusht#24) and reads the attribute
         # each step (reward clip(coverage / threshold), is_success coverage > threshold): set, it judges at ours
         env.success_threshold = episode.success
-    pixels = [None] * n
-    for i, (env, seed) in enumerate(zip(envs, seeds)):
-        o, _ = env.reset(seed=int(seed))
-        pixels[i] = o["pixels"] if image else None
+    seen = [env.reset(seed=int(seed))[0] for env, seed in zip(envs, seeds)]  # what gym-pusht returns, per env
     state = np.stack([world_state(e) for e in envs])
     if poses is not None:  # the same seed must start in the same place here as on every other backend
         ours = np.asarray(poses, np.float64)[:, [3, 4, 0, 1, 2]]
@@ -152,21 +152,20 @@ def episodes(scenario, seeds: np.ndarray, trace: bool = False, poses=None):
     finite, contained = np.isfinite(state).all(-1), _inside(envs)
     states = [state.copy()] if trace else None
     for k in range(episode.max_steps):
-        obs = observe(state[:, 0:2], state[:, 2:5]) | ({} if goal is None else {"goal": goal})
-        if image:
-            obs["pixels"] = np.stack(pixels)
+        # the controller sees what gym-pusht's reset/step returned, through the door a user's loop goes through
+        # (task/gym_pusht_obs.py, as GymPushtPolicy): never pymunk's bodies, which are read for the rows alone
+        batch = {f: np.stack([o[f] for o in seen]) for f in ("pixels", "agent_pos")} if image else np.stack(seen)
+        obs = controller_obs(batch, obs_type) | ({} if goal is None else {"goal": goal})
         action, carry = controller.act(carry, obs, k, key)
-        target = frame.to_px(np.asarray(action, np.float64))
-        bad = live & ~np.isfinite(target).all(-1)
+        bad = live & ~np.isfinite(np.asarray(action, np.float64)).all(-1)
         if bad.any():  # the controller's bug, said as the other backends say it: never a pusher quietly held still
             from mjx_pusht.task.controllers import ControllerError
 
             raise ControllerError(f"controller {controller.name} gave a non-finite action at step {k} for seeds "
                                   f"{seeds[bad][:8].tolist()}")
+        target = gym_pusht_action(action)
         for i in np.flatnonzero(live):
-            a = np.clip(target[i], 0.0, 512.0)
-            o, _, terminated, _, info = envs[i].step(a)
-            pixels[i] = o["pixels"] if image else None
+            seen[i], _, terminated, _, info = envs[i].step(target[i])
             state[i] = world_state(envs[i])
             cov = float(info["coverage"])
             ep["length"][i] = k + 1

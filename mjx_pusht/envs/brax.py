@@ -123,6 +123,8 @@ class BraxPushT(Env):
             metrics["bad_action"] = (pipeline_info["bad_action"]["step"] >= 0).astype(jnp.float32)
         done = (s.terminated | s.truncated).astype(jnp.float32)
         obs = s.obs[self.obs_type]
+        # the yaw in the task's window (Task.observed), as a PPO policy is handed it when it acts (train/policy.py)
+        obs = self.task.observed(obs) if self.obs_type == "state" else obs
         obs = obs if "goal" not in s.obs else with_goal(obs, s.obs["goal"], self.obs_type)  # random goals: beside the T
         return State(pipeline_state=s, obs=obs, reward=reward, done=done, metrics=metrics, info=pipeline_info)
 

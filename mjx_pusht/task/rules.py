@@ -80,6 +80,14 @@ def wrap_angle(a):
     return xp.where(w == -math.pi, math.pi, w)
 
 
+def yaw_in_window(yaw, centre: float):
+    """A yaw given in any convention (a hinge's unwrapped turns, gym-pusht's [0, 2 pi), (-pi, pi]) as the one angle
+    in (centre - pi, centre + pi] that points the same way: a task's observations are given in the window centred on
+    its starts' yaws (task/tasks.py `Task.yaw_centre`), so a policy that reads the raw yaw sees what it trained on
+    whichever convention its input arrived in."""
+    return centre + wrap_angle(yaw - centre)
+
+
 def rotate(pose, local):
     """Points given in a T's frame placed at `pose` (..., 3): (..., K, 2) world points from (K, 2) local ones."""
     xp = array_namespace(pose)

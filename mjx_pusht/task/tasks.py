@@ -28,7 +28,7 @@ from mjx_pusht.task.controller_base import Wrapper
 from mjx_pusht.task.controllers import Controller
 from mjx_pusht.task.expert_gym_pusht import CONTACTS
 from mjx_pusht.task.memory import CHAPTER, CarryFormat
-from mjx_pusht.task.rules import SUCCESS_COVERAGE, array_namespace
+from mjx_pusht.task.rules import SUCCESS_COVERAGE, array_namespace, yaw_in_window
 
 # s: a PD-tracked pusher (gym-pusht's law, kp 100, kv 20) moving at velocity v settles this far behind its target,
 # so a velocity command v becomes the target pusher + LEAD v
@@ -61,6 +61,12 @@ class Task:
     about: str = ""
     memory: CarryFormat = CHAPTER  # how its expert's carry reads as a DAgger student's memory
     action_eps: float | None = None  # DAgger's --action-eps on this task by default (train/dagger.py DaggerConfig)
+    # The yaw convention of its observations (the one place it is stated): a controller is handed the T's yaw in
+    # (yaw_centre - pi, yaw_centre + pi], the window its starts fill, whatever the source gives (`observed`). The
+    # chapter's starts turn the T anywhere in (-pi, pi]; gym-pusht draws its block angle in (-pi, pi) and a yaw is
+    # pi/4 minus that angle, so its starts fill (pi/4 - pi, pi/4 + pi), while its observation wraps the angle to
+    # [0, 2 pi): the same T at yaws 2 pi apart, one of them never seen in training.
+    yaw_centre: float = 0.0
 
     @property
     def reset(self) -> str:
@@ -91,6 +97,11 @@ class Task:
                        success=self.success if success_threshold is None else success_threshold,
                        end_covered_start=self.end_covered_start,
                        goal=region(self.variant) if check(goal) == "random" else None)
+
+    def observed(self, state):
+        """An observation state (..., 5: pusher x, y, tee x, y, yaw) with its yaw in this task's window."""
+        xp = array_namespace(state)
+        return xp.concat([state[..., :4], yaw_in_window(state[..., 4:5], self.yaw_centre)], axis=-1)
 
     def from_velocity(self, action, obs):
         """A velocity command as this task's scene takes it: itself, or (targets) the target that reaches it."""
@@ -124,7 +135,7 @@ TASKS = {
                       memory=CarryFormat(moves=len(CONTACTS) + 1, latches=(), offset=1),
                       # its expert nudges the T home at 0.005-0.02 m/s: learned with the plain loss, 3 H100 students
                       # stood still short of it (91.2%, 94.6% held-out); with 0.01, 98.4-99.0% (notebook lead10)
-                      action_eps=0.01),
+                      action_eps=0.01, yaw_centre=frame.GOAL_PX[2]),
 }
 TASKS["gym-pusht-easy"] = dataclasses.replace(
     TASKS["gym-pusht"], name="gym-pusht-easy", resets=("easy",),

@@ -380,9 +380,21 @@ class PolicyController(Controller):
         a 0 there would read as pursuing contact 0, a memory the student never had at a start)."""
         return super().init(key) - CarryFormat.of(self.meta).offset
 
+    @property
+    def task(self):
+        """The task it was trained on (task/tasks.py; a checkpoint that names none: the chapter's)."""
+        from mjx_pusht.task.tasks import TASKS
+
+        return TASKS.get((self.meta.get("config") or {}).get("task") or "chapter", TASKS["chapter"])
+
     def act(self, carry, obs, t, key):
         if self.meta.get("method") == "ppo":
-            return apply_ppo(self.params, self.meta, obs[self.meta["obs_type"]], key, t), carry
+            x = obs[self.meta["obs_type"]]
+            # a PPO network reads the raw yaw: handed in its task's window, a yaw 2 pi off (gym-pusht's own [0, 2 pi)
+            # observation) reads as the one it trained on. The other inputs (keypoints; DAgger's cos and sin) are
+            # the same whichever way round the yaw is counted.
+            x = self.task.observed(x) if self.meta["obs_type"] == "state" else x
+            return apply_ppo(self.params, self.meta, x, key, t), carry
         x = features(obs, self.meta["obs_type"], carry, CarryFormat.of(self.meta), self.reads_goal)
         action, memory = apply(self.params, self.meta, x, obs.get("pixels"))
         return action, memory
