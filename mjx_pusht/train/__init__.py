@@ -5,7 +5,8 @@
 - `controller.py`: `policy:PATH` registered with the task's controllers;
 - `dagger.py`: DAgger from the scripted expert (config, rollouts, the learner);
 - `run.py`: `train_dagger`, a DAgger run: the loop, its checkpoints, the judged curve;
-- `ppo.py`: PPO with Brax's own trainer;
+- `ppo.py`: PPO with Brax's own trainer (its glue: the callbacks, stop, resume); `ppo_config.py`: its settings and
+  the training reward; `ppo_judge.py`: Brax's params as a checkpoint, and the episodes that judge it;
 - `resume.py`, `curve.py`, `summary.py`: what a run of either method leaves behind (the resume
   checkpoint, curve.csv/png and train.rrd, summary.json).
 
