@@ -148,7 +148,7 @@ def test_train_seeds_reports_every_committed_seed_run_and_their_spread(tmp_path)
 
 def test_train_seeds_names_a_collapse_the_curve_recovered_from():
     """`low_after` is the lowest held-out judgement later than the first at or above 80%: the committed unclipped PPO
-    runs (issue 40's collapses) fell below 10% after it; the clipped ones (the default since) never left 99%."""
+    runs (their collapses) fell below 10% after it; the clipped ones (the default since) never left 99%."""
     from benchmarks import train_seeds
 
     root = Path(__file__).resolve().parents[1] / "outputs" / "reports" / "train"

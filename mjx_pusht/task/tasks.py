@@ -60,7 +60,7 @@ class Task:
     frame_skip: int = 10
     about: str = ""
     memory: CarryFormat = CHAPTER  # how its expert's carry reads as a DAgger student's memory
-    action_eps: float | None = None  # DAgger's --action-eps on this task by default (train/dagger.py DaggerConfig)
+    action_eps: float | None = None  # DAgger's --action-eps on this task by default (train/dagger_config.py DaggerConfig)
 
     @property
     def reset(self) -> str:

@@ -1,4 +1,4 @@
-"""LeRobot's own Diffusion Policy as benchmarks/diffusion_pusht.sh trains and scores it (issue 54), shrunk to a CPU:
+"""LeRobot's own Diffusion Policy as benchmarks/diffusion_pusht.sh trains and scores it, shrunk to a CPU:
 `lerobot-train --policy.type=diffusion` on `mjx-pusht demos`, evaluating on `--env.type=mjx_pusht` as it trains (the
 curve's points, read back by benchmarks/diffusion_curve.py), then `lerobot-eval` of its checkpoint on gym-pusht
 itself and on the plugin's env."""
