@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Measurements on a lent GPU machine (see ../shared/gpu/README.md for carrying the wheels).
+# Measurements on a lent GPU machine (carrying the wheels to one that reaches no registry: docs/offline-gpu.md).
 # Usage there: bash benchmarks/gpu.sh STAGE TIER   (logs and results go under $OUT)
 set -uo pipefail
 stage=$1; tier=${2:-h100}
@@ -11,28 +11,6 @@ mkdir -p "$OUT/results"
 dagger_fit="--hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 --beta-decay 0.7"
 state_data="--envs ${ENVS:-16384} --max-samples ${MAX_SAMPLES:-32000000} --first-fits ${FIRST_FITS:-4}"
 case "$stage" in
-  unbundle) # the folders benchmarks/bundle.sh packed here (7 calls for MuJoCo, Warp, Brax and jax 0.10.2, not 11),
-          # every call but the last having run `mkdir -p ~/b && cp .gpu-all/K/* ~/b/`: each wheel set present installed
-          # (MuJoCo, Warp, Brax into ~/site; jax 0.10.2 into ~/jsite, first on the path; LeRobot into ~/site), demos
-          # into ~/diffusion (diffusion_pusht.sh's RUNS)
-          mkdir -p "$HOME/b" && cp .gpu-all/*/* "$HOME/b/" 2>/dev/null; cd "$HOME/b" && cat bundle.part.* | tar x || exit 1
-          if [ -d .gpu ]; then mkdir -p "$HOME/stash" && cp .gpu/*/* "$HOME/stash/" && (cd "$HOME/stash" && \
-            cat warp.part* > "$(cat warp.name)" && python3 -m pip install -q --no-index --no-deps --no-compile \
-            --no-cache-dir --target "$HOME/site" ./*.whl) || exit 1; fi
-          if [ -d .gpu-jax ]; then mkdir -p "$HOME/jstash" && cp .gpu-jax/*/* "$HOME/jstash/" && (cd "$HOME/jstash" && \
-            cat jaxlib.part0* > jaxlib-0.10.2-cp312-cp312-manylinux_2_27_x86_64.whl && \
-            cat pjrt.part0* > jax_cuda13_pjrt-0.10.2-py3-none-manylinux_2_27_x86_64.whl && rm -f ./*.part0* && \
-            python3 -m pip install -q --no-index --no-deps --no-compile --target "$HOME/jsite" ./*.whl) || exit 1; fi
-          if [ -d .gpu-lerobot ]; then mkdir -p "$HOME/lr" && cp .gpu-lerobot/*/* "$HOME/lr/" && (cd "$HOME/lr" && \
-            cat part.* | tar x && python3 -m pip install -q --no-index --no-deps --no-compile --target "$HOME/site" \
-            "$HOME"/lr/*.whl) || exit 1; fi
-          if [ -d .gpu-demos ]; then mkdir -p "$HOME/diffusion" && cp -r .gpu-demos/* "$HOME/diffusion/"; fi
-          jsite=""; [ -d "$HOME/jsite" ] && jsite=$HOME/jsite:
-          PYTHONPATH=$jsite$PYTHONPATH python3 -c "import jax, mujoco, warp; from mujoco import mjx
-print(jax.__version__, mujoco.__version__, warp.__version__, jax.devices())
-if jax.__version__ != '0.10.2':  # the machine's own jax, not the pinned one (the 6 .gpu-all parts hold none)
-    print(f'unbundle: WARNING jax {jax.__version__} here, not the pinned 0.10.2: carry .gpu-jax too (notebook lead23)')"
-          ls "$HOME/diffusion" 2>/dev/null; true ;;
   warp)   python3 -m benchmarks.harness --tier "$tier-warp" --backends cpu,mjx-warp --cpu-batches 4096,65536 \
             --batches 1024,4096,16384,65536 --repeats 2 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
   warp-tight) python3 -m benchmarks.harness --tier "$tier-warp-tight" --backends cpu,mjx-warp --cpu-batches 65536 \
@@ -203,7 +181,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
             # PPO over several GPUs on mjx-warp fails in its CUDA-graph FFI call, Warp or XLA capturing it (pinned jax,
             # notebooks lead13, lead15): mjx-jax, or BACKEND=mjx-warp with MJX_PUSHT_ENV_GRAPH_MODE=WARP or NONE (not
             # measured; the staged default shares one graph between devices).
-            # Issue 56's whole 4-GPU plan, weak scaling, is benchmarks/train_devices.sh
+            # The whole 4-GPU plan of training on several GPUs, weak scaling, is tools/offline-gpu/train_devices.sh
             ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes ${MINUTES:-3}"
                  backend=${BACKEND:-mjx-jax} ;;
             dagger-state) args="$dagger_fit --iterations ${ITERATIONS:-60} --minutes ${MINUTES:-5} $state_data"
@@ -322,10 +300,6 @@ EOS
             --minutes "${MINUTES:-5}" $dagger_fit $state_data --seed "${SEED:-0}" --keep "${KEEP:-best}" --no-progress --no-rerun --record 0 --out "state-${SEED:-0}") > "$OUT/$stage.log" 2>&1
           for f in curve.csv curve.png summary.json policy.msgpack; do [ -f "$run/$f" ] && cp "$run/$f" "$OUT/"; done
           mkdir -p "$OUT/eval"; cp "$run"/eval/*.parquet "$run"/eval/summary.json "$OUT/eval/" 2>/dev/null; true ;;
-  first-fit) # DAgger's first fit alone, from the same demonstrations, for each of SEEDS (default 0-7) unclipped and
-          # clipped (benchmarks/first_fit.py; ENVS default 16384): the loss and the held-out success it lands at
-          python3 -m benchmarks.first_fit --backend mjx-warp --envs "${ENVS:-16384}" --seeds "${SEEDS:-0-7}" \
-            --clips "${CLIPS:-off,1.0}" --json "$OUT/results/$tier-first-fit.json" > "$OUT/$stage.log" 2>&1 ;;
   transfer) # a trained policy (POLICY=path) on the 4,096 held-out task seeds, on MJX-Warp and on MuJoCo C, paired
           # seed by seed; a pixel policy renders on the CPU too, so EGL must be there (.gl, see the device README)
           MUJOCO_GL=egl python3 -m mjx_pusht compare --controller "policy:${POLICY:?POLICY=path of a policy.msgpack}" \
