@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # LeRobot 0.6.1's own Diffusion Policy (`lerobot-train --policy.type=diffusion`, unchanged) trained on `mjx-pusht
 # demos` of the gym-pusht expert on one lent H100, evaluated on the plugin's batch as it trains, then scored by
-# `lerobot-eval` on gym-pusht itself and on the batch (issue 54; docs/lerobot-diffusion.md has the plan).
+# `lerobot-eval` on gym-pusht itself and on the batch (docs/lerobot-diffusion.md has the plan).
 # Usage there, from the repository root, with lerobot 0.6.1 (and diffusers), gym-pusht, this project and its plugin
 # installed (docs/offline-gpu.md: tools/offline-gpu/ carries the wheels to $HOME/site):
 #   bash benchmarks/diffusion_pusht.sh STAGE [STAGE ...]        # stages run in the order given

@@ -53,7 +53,7 @@ case "$stage" in
   render) python3 -m benchmarks.render --backend mjx-warp --tier "$tier" --batches "${BATCHES:-1024,4096,16384,65536}" \
             --save-pixels "$OUT/pixels-$tier.npz" --out "$OUT/results" > "$OUT/$stage.log" 2>&1
           python3 -m benchmarks.render --backend mjx-warp --tier "$tier" --vector-env --out "$OUT/results" >> "$OUT/$stage.log" 2>&1 ;;
-  raster) # the pure-JAX renderer (render/raster.py, issue 56) against MJX-Warp's ray tracer on the same states:
+  raster) # the pure-JAX renderer (render/raster.py, which runs under shard_map) against MJX-Warp's ray tracer on the same states:
           # images/s at the learner's 512 images a minibatch and up, and the pixels they differ in (no GL here: no cpu)
           python3 -m benchmarks.raster --renderers raster,warp --batches "${BATCHES:-512,4096,65536}" \
             --json "$OUT/results/$tier-raster.json" > "$OUT/$stage.log" 2>&1 ;;
@@ -118,7 +118,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           cp "$run.log" "$OUT/"; for f in curve.csv curve.png summary.json policy.msgpack; do
             [ -f "$run/$f" ] && cp "$run/$f" "$OUT/"; done
           [ -f "$run/eval/summary.json" ] && mkdir -p "$OUT/eval" && cp "$run/eval/summary.json" "$OUT/eval/"; true ;;
-  train-ppo) # Brax PPO from state at change 18's settings (issue 40's) for MINUTES (default 10) of training, with
+  train-ppo) # Brax PPO from state at change 18's settings for MINUTES (default 10) of training, with
           # --keep best (validation seeds) and the sampled action (ACT=mean for Brax's deterministic one), started
           # in its own session like train-pixels (about 11.5 minutes with compiling and eval); then
           # `watch` with the same RUN (default ppo-SEED) copies it back. The curve has both actions' held-out
@@ -133,7 +133,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # session like train-pixels, then `watch-seeds`. A machine is held at most 30 minutes, so give each hold
           # what fits: ppo 2 seeds (~11.5 min each), dagger-state 4 (~5.7), dagger-pixels 1 (~22); aggregate the
           # holds' copied-back runs here with `python -m benchmarks.train_seeds --collect DIR... --out DIR`.
-          # EXTRA: more train flags as they are (issue 55: "--goal random", "--randomize kp=0.5:2,kv=0.5:2").
+          # EXTRA: more train flags as they are (e.g. "--goal random", "--randomize kp=0.5:2,kv=0.5:2").
           # ACTION_EPS (DAgger): --action-eps, the actions' loss relative to each label's size above it (m/s).
           # LATE_FITS (DAgger): --late-fits, fits an iteration once the expert's share is at most 1%.
           # FIRST_FITS (DAgger): --first-fits, initialisations of the first fit, the lowest loss kept (notebook lead5;
@@ -169,7 +169,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
             --goal "${GOAL:-0.9}" -- --backend mjx-warp $task $args --keep best --no-progress --no-rerun \
             --record 0 > "$run.log" 2>&1 < /dev/null &)
           sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
-  train-scaling) # one run each on DEVICES (default 1,2,4) GPUs of this host, the same run otherwise (issue 56;
+  train-scaling) # one run each on DEVICES (default 1,2,4) GPUs of this host, the same run otherwise (
           # benchmarks/train_scaling.py: control steps/s during training, x one GPU, and minutes to GOAL held-out, in
           # scaling.json/.md): RECIPE ppo (Brax PPO from state, 3 minutes) or dagger-state (DAgger from state, 5
           # minutes). PPO on 2 and 4 H200s segfaulted in XLA's compile of Brax's pmap (jax 0.11.2, notebook lead12):
@@ -193,10 +193,10 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
             --devices "${DEVICES:-1,2,4}" --goal "${GOAL:-0.95}" --out "$(basename "$run")" -- --backend "$backend" \
             --reset task $args --seed "${SEED:-0}" --keep best --no-progress --no-rerun --record 0 > "$run.log" 2>&1 < /dev/null &)
           sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
-  issue55) # issue 55 in one hold, one after another in the background (watch with watch-seeds NAMES="goals rand"):
+  goals-and-gains) # random goals and drawn gains in one hold, one after another in the background (watch with watch-seeds NAMES="goals rand"):
           # DAgger from state on gym-pusht's task with a goal per episode, then with kp and kv drawn per episode (10
           # minutes each, seed 0), then the env loop's steps/s with goals and drawn physics beside the fixed ones
-          cat > "$HOME/issue55.sh" <<EOS
+          cat > "$HOME/goals-and-gains.sh" <<EOS
 cd "$PWD"
 TASK=gym-pusht MINUTES=10 RECIPE=dagger-state SEEDS=0 NAME=goals EXTRA="--goal random" WAIT=1 bash benchmarks/gpu.sh train-seeds $tier
 while kill -0 \$(cat $HOME/runs/seeds-goals.pid) 2>/dev/null; do sleep 5; done
@@ -204,16 +204,16 @@ TASK=gym-pusht MINUTES=10 RECIPE=dagger-state SEEDS=0 NAME=rand EXTRA="--randomi
 while kill -0 \$(cat $HOME/runs/seeds-rand.pid) 2>/dev/null; do sleep 5; done
 python3 -m benchmarks.env_loop --envs 16384,65536 --cases scan_autoreset,scan_autoreset_randomized,scan_autoreset_goals,scan_autoreset_goals_randomized --json $HOME/runs/$tier-env-loop-goals-randomized.json > $HOME/runs/env-loop.log 2>&1
 EOS
-          setsid nohup bash "$HOME/issue55.sh" > "$HOME/issue55.log" 2>&1 < /dev/null &
-          sleep 30; cp "$HOME/issue55.log" "$OUT/" ;;
-  issue55-pixels) # issue 55's throughput with pixels: the env loop's steps/s with goals (the target drawn at each)
+          setsid nohup bash "$HOME/goals-and-gains.sh" > "$HOME/goals-and-gains.log" 2>&1 < /dev/null &
+          sleep 30; cp "$HOME/goals-and-gains.log" "$OUT/" ;;
+  goals-randomized-pixels) # the throughput with pixels, goals and drawn physics: the env loop's steps/s with goals (the target drawn at each)
           # and drawn physics beside the fixed ones, 96 x 96 images rendered in every step (one call, foreground)
           python3 -m benchmarks.env_loop --envs 16384,65536 --obs pixels --cases scan_autoreset,scan_autoreset_randomized,scan_autoreset_goals,scan_autoreset_goals_randomized \
             --json "$OUT/results/$tier-env-loop-goals-randomized-pixels.json" > "$OUT/$stage.log" 2>&1 ;;
-  issue53) # issue 53's runs in one hold of 4 GPUs, a GPU each, in the background (watch-seeds, back to back:
+  gym-pusht-x4) # gym-pusht's task's pixel and PPO runs in one hold of 4 GPUs, a GPU each, in the background (watch-seeds, back to back:
           # NAMES="ppo-gym-0 ppo-gym-1 bench" first, then NAMES="px-gym-0 px-gym-1"): GPUs 0 and 1 DAgger from pixels on
           # gym-pusht's task, seeds 0 and 1, MINUTES (default 16) each; GPUs 2 and 3 PPO from state on it, seeds 0 and 1
-          # (10 minutes); then on GPU 2 issue 55's pixel env loop (goals, drawn physics) and on GPU 3 the raster
+          # (10 minutes); then on GPU 2 the pixel env loop (goals, drawn physics) and on GPU 3 the raster
           # renderer against MJX-Warp's, as run "bench" (its results under seeds-bench/results)
           for s in 0 1; do
             TASK=gym-pusht RECIPE=dagger-pixels SEEDS=$s NAME=px-gym-$s GPU=$s MINUTES=${MINUTES:-16} WAIT=0 bash benchmarks/gpu.sh train-seeds $tier
@@ -222,14 +222,14 @@ EOS
           mkdir -p "$HOME/runs/seeds-bench"; cat > "$HOME/bench.sh" <<EOS
 cd "$PWD"; sleep 5
 for s in 0 1; do while kill -0 \$(cat $HOME/runs/seeds-ppo-gym-\$s.pid) 2>/dev/null; do sleep 5; done; done
-OUT=$HOME/runs/seeds-bench CUDA_VISIBLE_DEVICES=2 bash benchmarks/gpu.sh issue55-pixels $tier &
+OUT=$HOME/runs/seeds-bench CUDA_VISIBLE_DEVICES=2 bash benchmarks/gpu.sh goals-randomized-pixels $tier &
 OUT=$HOME/runs/seeds-bench CUDA_VISIBLE_DEVICES=3 bash benchmarks/gpu.sh raster $tier
 wait
 EOS
           (cd "$HOME/runs" && setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' "$HOME/runs/seeds-bench.pid" \
             bash "$HOME/bench.sh" > "$HOME/runs/seeds-bench.log" 2>&1 < /dev/null &)
           sleep "${WAIT:-60}"; cp "$HOME"/runs/seeds-*.log "$OUT/"; nvidia-smi > "$OUT/nvidia-smi.txt" 2>&1; true ;;
-  issue54-hold) # issue 54 whole in one hold of a 4-GPU host (nvidia-h100-x4: 64 cores), since nothing off git outlives a
+  diffusion-hold) # LeRobot's Diffusion Policy whole in one hold of a 4-GPU host (nvidia-h100-x4: 64 cores), since nothing off git outlives a
           # session (session 16's checkpoint did not): LeRobot's training is bound by its loader, ~93 samples a second a
           # worker (notebook lead16), so the 2,000 episodes train on GPU 0 with WORKERS_BIG (46) workers at a batch of
           # 256 (the update's 0.055 s on the GPU then meets the loader); the 200 episodes on GPU 1 at the same settings
@@ -248,9 +248,9 @@ EOS
           dp() { env OUT="$OUT" BATCH="${BATCH:-256}" LR="${LR:-2e-4}" STEPS="${STEPS:-10000}" SAVE_FREQ="${SAVE_FREQ:-1000}" \
                    EVAL_FREQ="${EVAL_FREQ:-3000}" SCHED=DDIM INFER_STEPS=10 "$@"; }
           [ -n "${FROM:-}${STOP_AT:-}" ] && [ "${SMALL:-1}" = 1 ] && {  # dp passes them to both sizes' runs
-            echo "issue54-hold: FROM and STOP_AT are for the run on GPU 0 alone; give SMALL=0 with them" >&2; exit 2; }
+            echo "diffusion-hold: FROM and STOP_AT are for the run on GPU 0 alone; give SMALL=0 with them" >&2; exit 2; }
           [ "${SIZE0:-2000}" != 200 ] || [ "${SMALL:-1}" = 0 ] || {
-            echo "issue54-hold: SIZE0=200 trains the 200 episodes on GPU 0; give SMALL=0 with it" >&2; exit 2; }
+            echo "diffusion-hold: SIZE0=200 trains the 200 episodes on GPU 0; give SMALL=0 with it" >&2; exit 2; }
           # a setting diffusion_pusht.sh refuses (its one line, exit 2) ends the stage there, before any GPU work
           CUDA_VISIBLE_DEVICES=0 dp SIZES="${SIZE0:-2000}" WORKERS="${WORKERS_BIG:-46}" bash benchmarks/diffusion_pusht.sh "train-${SIZE0:-2000}" || exit
           if [ "${SMALL:-1}" = 1 ]; then
@@ -261,7 +261,7 @@ EOS
           sleep "${WAIT:-30}"; nproc; nvidia-smi > "$OUT/nvidia-smi.txt" 2>&1
           for l in "$HOME"/diffusion/logs/train-*.log; do echo "== $l"; grep -a "updt_s" "$l" | tail -n 3 | cut -c1-240; done
           true ;;
-  issue53-54) # one H100 hold for two issues at once, each run in the background: LeRobot's Diffusion Policy
+  diffusion-and-pixels) # one H100 hold for two studies at once, each run in the background: LeRobot's Diffusion Policy
           # (benchmarks/diffusion_pusht.sh: the expert's 200 and 2,000 demos, the update rate, then both sizes' training
           # side by side for DP_MINUTES, default 12, of updates) and DAgger from pixels on gym-pusht's task, seeds 0 and 1
           # side by side, FIRST_FITS 4, MINUTES (default 18) each. They share the one GPU: LeRobot's training is bound by

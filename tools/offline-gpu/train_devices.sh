@@ -143,5 +143,5 @@ case "${1:-}" in
     done
     nvidia-smi --query-gpu=index,utilization.gpu,memory.used --format=csv > "$out/nvidia-smi.csv" 2>&1
     tail -n 4 "$runs/devices.log"; true ;;
-  *) echo "usage: train_devices.sh start [plan|ppo-wide|ppo-apart|ppo-procs]|watch (issue 56's plans on a 4-GPU machine)" >&2; exit 2 ;;
+  *) echo "usage: train_devices.sh start [plan|ppo-wide|ppo-apart|ppo-procs]|watch (plans of training on a 4-GPU machine)" >&2; exit 2 ;;
 esac
