@@ -53,7 +53,7 @@ for stage in "$@"; do
     unpack-*)
       (cd "$CARRIED" && sha256sum -c --quiet "train-$n.sha256") > /dev/null 2>&1 || {
         echo "unpack-$n: parts missing or damaged in $CARRIED (sha256sum -c train-$n.sha256 there names them)" >&2; exit 1; }
-      cat "$CARRIED"/train-"$n".tar.part.* | tar xf - -C "$RUNS" && ls "$RUNS/train-$n/checkpoints" ;;
+      mkdir -p "$RUNS" && cat "$CARRIED"/train-"$n".tar.part.* | tar xf - -C "$RUNS" && ls "$RUNS/train-$n/checkpoints" ;;
     *) echo "unknown stage $stage (pack-N send unpack-N)" >&2; exit 2 ;;
   esac
 done
