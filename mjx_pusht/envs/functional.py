@@ -61,7 +61,10 @@ class _Stateless(Controller):
 
 @dataclasses.dataclass
 class PushTEnv(Resets, Observes):
-    """A batch of PushT episodes on one backend (cpu, mjx-jax, mjx-warp)."""
+    """A batch of PushT episodes on one backend (cpu, mjx-jax, mjx-warp).
+
+    Its resets (`reset`, `reset_to`, `fresh_one`, `reset_where`) are inherited from `resets.Resets`, its
+    observations (`with_pixels`, `images`, `renderer`, `close`) from `observation.Observes`: documented there."""
 
     backend: str = "cpu"
     reset_kind: str = "task"
