@@ -1,6 +1,6 @@
 """Rerun determinism: the same seeds twice on one backend and device; are the rows byte-identical?
 
-    python -m benchmarks.determinism --backend mjx-warp --seeds 4096 --out benchmarks/results/determinism-h100.json
+    python -m benchmarks.determinism --backend mjx-warp --seeds 4096 --out benchmarks/results/h100-determinism.json
 """
 
 from __future__ import annotations

@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # LeRobot 0.6.1's own Diffusion Policy (`lerobot-train --policy.type=diffusion`, unchanged) trained on `mjx-pusht
 # demos` of the gym-pusht expert on one lent H100, evaluated on the plugin's batch as it trains, then scored by
-# `lerobot-eval` on gym-pusht itself and on the batch (issue 54; docs/lerobot-diffusion.md has the plan).
+# `lerobot-eval` on gym-pusht itself and on the batch (docs/lerobot-diffusion.md has the plan).
 # Usage there, from the repository root, with lerobot 0.6.1 (and diffusers), gym-pusht, this project and its plugin
-# installed (../shared/gpu/prepare.sh and benchmarks/lerobot_wheels.sh carry the wheels to $HOME/site):
+# installed (docs/offline-gpu.md: tools/offline-gpu/ carries the wheels to $HOME/site):
 #   bash benchmarks/diffusion_pusht.sh STAGE [STAGE ...]        # stages run in the order given
 # A command lasts at most 10 minutes but a machine is held up to 30: training and the final evals run detached
 # (setsid, so they outlive the call that started them) and `wait` collects them; a bare new machine (a new hold)
@@ -230,42 +230,8 @@ print(r['STEPS'], r['EVAL_FREQ'], r['SAVE_FREQ'])" "$RUNS/results/diffusion-rate
       done
       for log in "$RUNS"/logs/*.log; do echo "== $log"; grep -a "INFO" "$log" | tail -n 2 | cut -c1-300; done
       collect ;;
-    pack-*)
-      # a training still running would write a checkpoint under tar's feet: stop it first (its last checkpoint is
-      # what a resume restarts from, so call pack-N just after one: SAVE_FREQ's line in the log)
-      if [ "${PACK:-resume}" != live ] && [ -f "$RUNS/pids/train-$n" ] && kill -0 "$(cat "$RUNS/pids/train-$n")" 2>/dev/null; then
-        kill -TERM -- "-$(cat "$RUNS/pids/train-$n")"
-        for _ in $(seq 60); do kill -0 "$(cat "$RUNS/pids/train-$n")" 2>/dev/null || break; sleep 0.5; done
-        echo "pack-$n: stopped the running train-$n"
-      fi
-      step=$(readlink "$RUNS/train-$n/checkpoints/last") || {
-        echo "pack-$n: $RUNS/train-$n has no checkpoint to pack" >&2; exit 1; }
-      mkdir -p "$RUNS/pack" && rm -f "$RUNS/pack/train-$n".* "$RUNS/pack/sent"
-      # `last` as read above, not as the running training may have moved it since: a link of our own to $step
-      rm -rf "$RUNS/pack/link" && mkdir -p "$RUNS/pack/link/train-$n/checkpoints" && ln -s "$step" "$RUNS/pack/link/train-$n/checkpoints/last"
-      what=("train-$n/checkpoints/$step" logs -C "$RUNS/pack/link" "train-$n/checkpoints/last")
-      # PACK=model: the policy alone (114 MB, 2 send calls), to score it elsewhere or start a run FROM it
-      [ "${PACK:-resume}" = model ] && what=("train-$n/checkpoints/$step/pretrained_model")
-      # (live: the log being written as tar reads it is no error, its copy ends where tar read it)
-      tar cf - --warning=no-file-changed -C "$RUNS" "${what[@]}" \
-        | split -b 15m -d -a 3 - "$RUNS/pack/train-$n.tar.part."
-      (cd "$RUNS/pack" && sha256sum train-"$n".tar.part.* > "train-$n.sha256")
-      ls -l "$RUNS/pack"; echo "then: send, once per 4 parts" ;;
-    send)  # the next 4 parts not yet sent (and the checksums), under $OUT/parts
-      mkdir -p "$OUT/parts" && touch "$RUNS/pack/sent"
-      cp "$RUNS"/pack/*.sha256 "$OUT/parts/"
-      k=0
-      for p in "$RUNS"/pack/*.part.*; do
-        grep -qx "$p" "$RUNS/pack/sent" && continue
-        [ $k -ge 4 ] && { echo "more parts: send again"; break; }
-        cp "$p" "$OUT/parts/" && echo "$p" >> "$RUNS/pack/sent"; k=$((k + 1))
-      done
-      [ $k = 0 ] && echo "every part was sent already"
-      ls "$OUT/parts" ;;
-    unpack-*)
-      (cd "$CARRIED" && sha256sum -c --quiet "train-$n.sha256") > /dev/null 2>&1 || {
-        echo "unpack-$n: parts missing or damaged in $CARRIED (sha256sum -c train-$n.sha256 there names them)" >&2; exit 1; }
-      cat "$CARRIED"/train-"$n".tar.part.* | tar xf - -C "$RUNS" && ls "$RUNS/train-$n/checkpoints" ;;
+    pack-*|send|unpack-*)  # a run carried out of one hold and into the next (tools/offline-gpu/carry_run.sh)
+      RUNS=$RUNS OUT=$OUT CARRIED=$CARRIED bash tools/offline-gpu/carry_run.sh "$stage" || exit ;;
     bundle)  # what `wait` collected as one file, diffusion.tgz (a call brings back at most 8)
       collect; (cd "$OUT" && tar czf diffusion.tgz --remove-files logs.tgz results diffusion-curve.* 2>/dev/null); ls -l "$OUT" ;;
     *) echo "unknown stage $stage (demos-N rate train-N eval-final-N wait bundle pack-N send unpack-N)"; exit 2 ;;

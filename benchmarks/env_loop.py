@@ -4,7 +4,7 @@
     python -m benchmarks.env_loop --envs 4096,16384 --obs pixels
     python -m benchmarks.env_loop --envs 16384 --obs pixels --cases raw,scan_autoreset --ends 10
     python -m benchmarks.env_loop --envs 16384,65536 --cases scan_autoreset,scan_autoreset_randomized \
-        --randomize tee_mass=0.5:2,tee_damping=0.5:1.5,tee_frictionloss=0.1:2,kv=0.8:1.2   # issue 55
+        --randomize tee_mass=0.5:2,tee_damping=0.5:1.5,tee_frictionloss=0.1:2,kv=0.8:1.2
 
 For each N (one process each, so that one size failing to fit is recorded, not fatal), on MJX-Warp:
 - `raw`: the physics alone: a jitted scan of `steps` control steps, each 10 `mjx.step`s of all N
@@ -16,10 +16,10 @@ For each N (one process each, so that one size failing to fit is recorded, not f
   the device pool) stepped in a jitted scan by a JAX policy (a fixed random linear layer + tanh on
   the observation), with pixels rendered in the step for `--obs pixels`, its episodes `--ends` control
   steps long so that every row ends and resets in the timed steps (5 times in 50): the rate with resets
-  in it (with the task's 300-step episodes, as before issue 57, 30 timed steps reset nothing);
+  in it (with the task's 300-step episodes, 30 timed steps would reset nothing);
 - `scan_autoreset_randomized`: the same loop with physics drawn per episode (`PushTEnv(randomize=...)`, the
   `--randomize` ranges, each reset drawing its episode's from the pool), reported with `fraction_of_fixed`, its
-  rate over `scan_autoreset`'s in the same process (issue 55 asks for at least 0.9); `scan_autoreset_goals` a
+  rate over `scan_autoreset`'s in the same process (the goal: at least 0.9); `scan_autoreset_goals` a
   goal drawn per episode (`goal="random"`: its pose observed, reward and success against it; with pixels, the
   target drawn at it), `scan_autoreset_goals_randomized` both;
 - `gym_torch`: `gym.make_vec("mjx_pusht/PushT-v0", num_envs=N, array_type="torch",

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Measurements on a lent GPU machine (see ../shared/gpu/README.md for carrying the wheels).
+# Measurements on a lent GPU machine (carrying the wheels to one that reaches no registry: docs/offline-gpu.md).
 # Usage there: bash benchmarks/gpu.sh STAGE TIER   (logs and results go under $OUT)
 set -uo pipefail
 stage=$1; tier=${2:-h100}
@@ -11,28 +11,6 @@ mkdir -p "$OUT/results"
 dagger_fit="--hidden 1024,1024,1024 --fit-steps 10000 --batch 4096 --beta-decay 0.7"
 state_data="--envs ${ENVS:-16384} --max-samples ${MAX_SAMPLES:-32000000} --first-fits ${FIRST_FITS:-4}"
 case "$stage" in
-  unbundle) # the folders benchmarks/bundle.sh packed here (7 calls for MuJoCo, Warp, Brax and jax 0.10.2, not 11),
-          # every call but the last having run `mkdir -p ~/b && cp .gpu-all/K/* ~/b/`: each wheel set present installed
-          # (MuJoCo, Warp, Brax into ~/site; jax 0.10.2 into ~/jsite, first on the path; LeRobot into ~/site), demos
-          # into ~/diffusion (diffusion_pusht.sh's RUNS)
-          mkdir -p "$HOME/b" && cp .gpu-all/*/* "$HOME/b/" 2>/dev/null; cd "$HOME/b" && cat bundle.part.* | tar x || exit 1
-          if [ -d .gpu ]; then mkdir -p "$HOME/stash" && cp .gpu/*/* "$HOME/stash/" && (cd "$HOME/stash" && \
-            cat warp.part* > "$(cat warp.name)" && python3 -m pip install -q --no-index --no-deps --no-compile \
-            --no-cache-dir --target "$HOME/site" ./*.whl) || exit 1; fi
-          if [ -d .gpu-jax ]; then mkdir -p "$HOME/jstash" && cp .gpu-jax/*/* "$HOME/jstash/" && (cd "$HOME/jstash" && \
-            cat jaxlib.part0* > jaxlib-0.10.2-cp312-cp312-manylinux_2_27_x86_64.whl && \
-            cat pjrt.part0* > jax_cuda13_pjrt-0.10.2-py3-none-manylinux_2_27_x86_64.whl && rm -f ./*.part0* && \
-            python3 -m pip install -q --no-index --no-deps --no-compile --target "$HOME/jsite" ./*.whl) || exit 1; fi
-          if [ -d .gpu-lerobot ]; then mkdir -p "$HOME/lr" && cp .gpu-lerobot/*/* "$HOME/lr/" && (cd "$HOME/lr" && \
-            cat part.* | tar x && python3 -m pip install -q --no-index --no-deps --no-compile --target "$HOME/site" \
-            "$HOME"/lr/*.whl) || exit 1; fi
-          if [ -d .gpu-demos ]; then mkdir -p "$HOME/diffusion" && cp -r .gpu-demos/* "$HOME/diffusion/"; fi
-          jsite=""; [ -d "$HOME/jsite" ] && jsite=$HOME/jsite:
-          PYTHONPATH=$jsite$PYTHONPATH python3 -c "import jax, mujoco, warp; from mujoco import mjx
-print(jax.__version__, mujoco.__version__, warp.__version__, jax.devices())
-if jax.__version__ != '0.10.2':  # the machine's own jax, not the pinned one (the 6 .gpu-all parts hold none)
-    print(f'unbundle: WARNING jax {jax.__version__} here, not the pinned 0.10.2: carry .gpu-jax too (notebook lead23)')"
-          ls "$HOME/diffusion" 2>/dev/null; true ;;
   warp)   python3 -m benchmarks.harness --tier "$tier-warp" --backends cpu,mjx-warp --cpu-batches 4096,65536 \
             --batches 1024,4096,16384,65536 --repeats 2 --out "$OUT/results" 2>&1 | tee "$OUT/$stage.log" ;;
   warp-tight) python3 -m benchmarks.harness --tier "$tier-warp-tight" --backends cpu,mjx-warp --cpu-batches 65536 \
@@ -75,7 +53,7 @@ if jax.__version__ != '0.10.2':  # the machine's own jax, not the pinned one (th
   render) python3 -m benchmarks.render --backend mjx-warp --tier "$tier" --batches "${BATCHES:-1024,4096,16384,65536}" \
             --save-pixels "$OUT/pixels-$tier.npz" --out "$OUT/results" > "$OUT/$stage.log" 2>&1
           python3 -m benchmarks.render --backend mjx-warp --tier "$tier" --vector-env --out "$OUT/results" >> "$OUT/$stage.log" 2>&1 ;;
-  raster) # the pure-JAX renderer (render/raster.py, issue 56) against MJX-Warp's ray tracer on the same states:
+  raster) # the pure-JAX renderer (render/raster.py, which runs under shard_map) against MJX-Warp's ray tracer on the same states:
           # images/s at the learner's 512 images a minibatch and up, and the pixels they differ in (no GL here: no cpu)
           python3 -m benchmarks.raster --renderers raster,warp --batches "${BATCHES:-512,4096,65536}" \
             --json "$OUT/results/$tier-raster.json" > "$OUT/$stage.log" 2>&1 ;;
@@ -140,7 +118,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           cp "$run.log" "$OUT/"; for f in curve.csv curve.png summary.json policy.msgpack; do
             [ -f "$run/$f" ] && cp "$run/$f" "$OUT/"; done
           [ -f "$run/eval/summary.json" ] && mkdir -p "$OUT/eval" && cp "$run/eval/summary.json" "$OUT/eval/"; true ;;
-  train-ppo) # Brax PPO from state at change 18's settings (issue 40's) for MINUTES (default 10) of training, with
+  train-ppo) # Brax PPO from state at change 18's settings for MINUTES (default 10) of training, with
           # --keep best (validation seeds) and the sampled action (ACT=mean for Brax's deterministic one), started
           # in its own session like train-pixels (about 11.5 minutes with compiling and eval); then
           # `watch` with the same RUN (default ppo-SEED) copies it back. The curve has both actions' held-out
@@ -155,7 +133,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
           # session like train-pixels, then `watch-seeds`. A machine is held at most 30 minutes, so give each hold
           # what fits: ppo 2 seeds (~11.5 min each), dagger-state 4 (~5.7), dagger-pixels 1 (~22); aggregate the
           # holds' copied-back runs here with `python -m benchmarks.train_seeds --collect DIR... --out DIR`.
-          # EXTRA: more train flags as they are (issue 55: "--goal random", "--randomize kp=0.5:2,kv=0.5:2").
+          # EXTRA: more train flags as they are (e.g. "--goal random", "--randomize kp=0.5:2,kv=0.5:2").
           # ACTION_EPS (DAgger): --action-eps, the actions' loss relative to each label's size above it (m/s).
           # LATE_FITS (DAgger): --late-fits, fits an iteration once the expert's share is at most 1%.
           # FIRST_FITS (DAgger): --first-fits, initialisations of the first fit, the lowest loss kept (notebook lead5;
@@ -191,7 +169,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
             --goal "${GOAL:-0.9}" -- --backend mjx-warp $task $args --keep best --no-progress --no-rerun \
             --record 0 > "$run.log" 2>&1 < /dev/null &)
           sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
-  train-scaling) # one run each on DEVICES (default 1,2,4) GPUs of this host, the same run otherwise (issue 56;
+  train-scaling) # one run each on DEVICES (default 1,2,4) GPUs of this host, the same run otherwise (
           # benchmarks/train_scaling.py: control steps/s during training, x one GPU, and minutes to GOAL held-out, in
           # scaling.json/.md): RECIPE ppo (Brax PPO from state, 3 minutes) or dagger-state (DAgger from state, 5
           # minutes). PPO on 2 and 4 H200s segfaulted in XLA's compile of Brax's pmap (jax 0.11.2, notebook lead12):
@@ -203,7 +181,7 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
             # PPO over several GPUs on mjx-warp fails in its CUDA-graph FFI call, Warp or XLA capturing it (pinned jax,
             # notebooks lead13, lead15): mjx-jax, or BACKEND=mjx-warp with MJX_PUSHT_ENV_GRAPH_MODE=WARP or NONE (not
             # measured; the staged default shares one graph between devices).
-            # Issue 56's whole 4-GPU plan, weak scaling, is benchmarks/train_devices.sh
+            # The whole 4-GPU plan of training on several GPUs, weak scaling, is tools/offline-gpu/train_devices.sh
             ppo) args="--algo ppo --envs 8192 --batch 512 --timesteps 400000000 --iterations 80 --minutes ${MINUTES:-3}"
                  backend=${BACKEND:-mjx-jax} ;;
             dagger-state) args="$dagger_fit --iterations ${ITERATIONS:-60} --minutes ${MINUTES:-5} $state_data"
@@ -215,10 +193,10 @@ print('tables identical:', same, 'rows identical:', rows.mean(), 'seeds equal:',
             --devices "${DEVICES:-1,2,4}" --goal "${GOAL:-0.95}" --out "$(basename "$run")" -- --backend "$backend" \
             --reset task $args --seed "${SEED:-0}" --keep best --no-progress --no-rerun --record 0 > "$run.log" 2>&1 < /dev/null &)
           sleep "${WAIT:-60}"; cp "$run.log" "$OUT/" ;;
-  issue55) # issue 55 in one hold, one after another in the background (watch with watch-seeds NAMES="goals rand"):
+  goals-and-gains) # random goals and drawn gains in one hold, one after another in the background (watch with watch-seeds NAMES="goals rand"):
           # DAgger from state on gym-pusht's task with a goal per episode, then with kp and kv drawn per episode (10
           # minutes each, seed 0), then the env loop's steps/s with goals and drawn physics beside the fixed ones
-          cat > "$HOME/issue55.sh" <<EOS
+          cat > "$HOME/goals-and-gains.sh" <<EOS
 cd "$PWD"
 TASK=gym-pusht MINUTES=10 RECIPE=dagger-state SEEDS=0 NAME=goals EXTRA="--goal random" WAIT=1 bash benchmarks/gpu.sh train-seeds $tier
 while kill -0 \$(cat $HOME/runs/seeds-goals.pid) 2>/dev/null; do sleep 5; done
@@ -226,16 +204,16 @@ TASK=gym-pusht MINUTES=10 RECIPE=dagger-state SEEDS=0 NAME=rand EXTRA="--randomi
 while kill -0 \$(cat $HOME/runs/seeds-rand.pid) 2>/dev/null; do sleep 5; done
 python3 -m benchmarks.env_loop --envs 16384,65536 --cases scan_autoreset,scan_autoreset_randomized,scan_autoreset_goals,scan_autoreset_goals_randomized --json $HOME/runs/$tier-env-loop-goals-randomized.json > $HOME/runs/env-loop.log 2>&1
 EOS
-          setsid nohup bash "$HOME/issue55.sh" > "$HOME/issue55.log" 2>&1 < /dev/null &
-          sleep 30; cp "$HOME/issue55.log" "$OUT/" ;;
-  issue55-pixels) # issue 55's throughput with pixels: the env loop's steps/s with goals (the target drawn at each)
+          setsid nohup bash "$HOME/goals-and-gains.sh" > "$HOME/goals-and-gains.log" 2>&1 < /dev/null &
+          sleep 30; cp "$HOME/goals-and-gains.log" "$OUT/" ;;
+  goals-randomized-pixels) # the throughput with pixels, goals and drawn physics: the env loop's steps/s with goals (the target drawn at each)
           # and drawn physics beside the fixed ones, 96 x 96 images rendered in every step (one call, foreground)
           python3 -m benchmarks.env_loop --envs 16384,65536 --obs pixels --cases scan_autoreset,scan_autoreset_randomized,scan_autoreset_goals,scan_autoreset_goals_randomized \
             --json "$OUT/results/$tier-env-loop-goals-randomized-pixels.json" > "$OUT/$stage.log" 2>&1 ;;
-  issue53) # issue 53's runs in one hold of 4 GPUs, a GPU each, in the background (watch-seeds, back to back:
+  gym-pusht-x4) # gym-pusht's task's pixel and PPO runs in one hold of 4 GPUs, a GPU each, in the background (watch-seeds, back to back:
           # NAMES="ppo-gym-0 ppo-gym-1 bench" first, then NAMES="px-gym-0 px-gym-1"): GPUs 0 and 1 DAgger from pixels on
           # gym-pusht's task, seeds 0 and 1, MINUTES (default 16) each; GPUs 2 and 3 PPO from state on it, seeds 0 and 1
-          # (10 minutes); then on GPU 2 issue 55's pixel env loop (goals, drawn physics) and on GPU 3 the raster
+          # (10 minutes); then on GPU 2 the pixel env loop (goals, drawn physics) and on GPU 3 the raster
           # renderer against MJX-Warp's, as run "bench" (its results under seeds-bench/results)
           for s in 0 1; do
             TASK=gym-pusht RECIPE=dagger-pixels SEEDS=$s NAME=px-gym-$s GPU=$s MINUTES=${MINUTES:-16} WAIT=0 bash benchmarks/gpu.sh train-seeds $tier
@@ -244,14 +222,14 @@ EOS
           mkdir -p "$HOME/runs/seeds-bench"; cat > "$HOME/bench.sh" <<EOS
 cd "$PWD"; sleep 5
 for s in 0 1; do while kill -0 \$(cat $HOME/runs/seeds-ppo-gym-\$s.pid) 2>/dev/null; do sleep 5; done; done
-OUT=$HOME/runs/seeds-bench CUDA_VISIBLE_DEVICES=2 bash benchmarks/gpu.sh issue55-pixels $tier &
+OUT=$HOME/runs/seeds-bench CUDA_VISIBLE_DEVICES=2 bash benchmarks/gpu.sh goals-randomized-pixels $tier &
 OUT=$HOME/runs/seeds-bench CUDA_VISIBLE_DEVICES=3 bash benchmarks/gpu.sh raster $tier
 wait
 EOS
           (cd "$HOME/runs" && setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' "$HOME/runs/seeds-bench.pid" \
             bash "$HOME/bench.sh" > "$HOME/runs/seeds-bench.log" 2>&1 < /dev/null &)
           sleep "${WAIT:-60}"; cp "$HOME"/runs/seeds-*.log "$OUT/"; nvidia-smi > "$OUT/nvidia-smi.txt" 2>&1; true ;;
-  issue54-hold) # issue 54 whole in one hold of a 4-GPU host (nvidia-h100-x4: 64 cores), since nothing off git outlives a
+  diffusion-hold) # LeRobot's Diffusion Policy whole in one hold of a 4-GPU host (nvidia-h100-x4: 64 cores), since nothing off git outlives a
           # session (session 16's checkpoint did not): LeRobot's training is bound by its loader, ~93 samples a second a
           # worker (notebook lead16), so the 2,000 episodes train on GPU 0 with WORKERS_BIG (46) workers at a batch of
           # 256 (the update's 0.055 s on the GPU then meets the loader); the 200 episodes on GPU 1 at the same settings
@@ -270,9 +248,9 @@ EOS
           dp() { env OUT="$OUT" BATCH="${BATCH:-256}" LR="${LR:-2e-4}" STEPS="${STEPS:-10000}" SAVE_FREQ="${SAVE_FREQ:-1000}" \
                    EVAL_FREQ="${EVAL_FREQ:-3000}" SCHED=DDIM INFER_STEPS=10 "$@"; }
           [ -n "${FROM:-}${STOP_AT:-}" ] && [ "${SMALL:-1}" = 1 ] && {  # dp passes them to both sizes' runs
-            echo "issue54-hold: FROM and STOP_AT are for the run on GPU 0 alone; give SMALL=0 with them" >&2; exit 2; }
+            echo "diffusion-hold: FROM and STOP_AT are for the run on GPU 0 alone; give SMALL=0 with them" >&2; exit 2; }
           [ "${SIZE0:-2000}" != 200 ] || [ "${SMALL:-1}" = 0 ] || {
-            echo "issue54-hold: SIZE0=200 trains the 200 episodes on GPU 0; give SMALL=0 with it" >&2; exit 2; }
+            echo "diffusion-hold: SIZE0=200 trains the 200 episodes on GPU 0; give SMALL=0 with it" >&2; exit 2; }
           # a setting diffusion_pusht.sh refuses (its one line, exit 2) ends the stage there, before any GPU work
           CUDA_VISIBLE_DEVICES=0 dp SIZES="${SIZE0:-2000}" WORKERS="${WORKERS_BIG:-46}" bash benchmarks/diffusion_pusht.sh "train-${SIZE0:-2000}" || exit
           if [ "${SMALL:-1}" = 1 ]; then
@@ -283,7 +261,7 @@ EOS
           sleep "${WAIT:-30}"; nproc; nvidia-smi > "$OUT/nvidia-smi.txt" 2>&1
           for l in "$HOME"/diffusion/logs/train-*.log; do echo "== $l"; grep -a "updt_s" "$l" | tail -n 3 | cut -c1-240; done
           true ;;
-  issue53-54) # one H100 hold for two issues at once, each run in the background: LeRobot's Diffusion Policy
+  diffusion-and-pixels) # one H100 hold for two studies at once, each run in the background: LeRobot's Diffusion Policy
           # (benchmarks/diffusion_pusht.sh: the expert's 200 and 2,000 demos, the update rate, then both sizes' training
           # side by side for DP_MINUTES, default 12, of updates) and DAgger from pixels on gym-pusht's task, seeds 0 and 1
           # side by side, FIRST_FITS 4, MINUTES (default 18) each. They share the one GPU: LeRobot's training is bound by
@@ -322,10 +300,6 @@ EOS
             --minutes "${MINUTES:-5}" $dagger_fit $state_data --seed "${SEED:-0}" --keep "${KEEP:-best}" --no-progress --no-rerun --record 0 --out "state-${SEED:-0}") > "$OUT/$stage.log" 2>&1
           for f in curve.csv curve.png summary.json policy.msgpack; do [ -f "$run/$f" ] && cp "$run/$f" "$OUT/"; done
           mkdir -p "$OUT/eval"; cp "$run"/eval/*.parquet "$run"/eval/summary.json "$OUT/eval/" 2>/dev/null; true ;;
-  first-fit) # DAgger's first fit alone, from the same demonstrations, for each of SEEDS (default 0-7) unclipped and
-          # clipped (benchmarks/first_fit.py; ENVS default 16384): the loss and the held-out success it lands at
-          python3 -m benchmarks.first_fit --backend mjx-warp --envs "${ENVS:-16384}" --seeds "${SEEDS:-0-7}" \
-            --clips "${CLIPS:-off,1.0}" --json "$OUT/results/$tier-first-fit.json" > "$OUT/$stage.log" 2>&1 ;;
   transfer) # a trained policy (POLICY=path) on the 4,096 held-out task seeds, on MJX-Warp and on MuJoCo C, paired
           # seed by seed; a pixel policy renders on the CPU too, so EGL must be there (.gl, see the device README)
           MUJOCO_GL=egl python3 -m mjx_pusht compare --controller "policy:${POLICY:?POLICY=path of a policy.msgpack}" \

@@ -2,7 +2,7 @@
 # LeRobot on a lent GPU machine (one H100): lerobot-eval of one policy on gym-pusht and on the plugin's batch,
 # and `mjx-pusht demos` writing 1,000 and 10,000 expert episodes. Results and logs go under $OUT.
 # Usage there, from the repository root, with lerobot 0.6.1, gym-pusht, this project and its plugin installed
-# (benchmarks/lerobot_wheels.sh carries the wheels to $HOME/site):  bash benchmarks/lerobot_gpu.sh [STAGE ...]
+# (tools/offline-gpu/lerobot_wheels.sh carries the wheels to $HOME/site):  bash benchmarks/lerobot_gpu.sh [STAGE ...]
 set -uo pipefail
 export PYTHONPATH=$HOME/site:$PWD PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false HF_HUB_OFFLINE=1 WANDB_MODE=disabled
 export MJX_PUSHT_JAX_CACHE=${MJX_PUSHT_JAX_CACHE:-$HOME/jax_cache}

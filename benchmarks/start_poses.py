@@ -1,6 +1,6 @@
 """Start poses for a million seeds on one core: the vectorised generators against one default_rng per seed.
 
-    python -m benchmarks.start_poses          # writes benchmarks/results/start-poses-<tier>.json
+    python -m benchmarks.start_poses          # writes benchmarks/results/<tier>-start-poses.json
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ def main(argv=None) -> int:
         print(f"{reset}: {a.seeds:,} start poses in {statistics.median(times):.3f} s (median of {a.repeats}); "
               f"one default_rng per seed: ~{per_seed * a.seeds:.1f} s", flush=True)
     a.out.mkdir(parents=True, exist_ok=True)
-    path = a.out / f"start-poses-{a.tier}.json"
+    path = a.out / f"{a.tier}-start-poses.json"
     path.write_text(json.dumps(result, indent=2) + "\n")
     print(f"wrote {path}")
     return 0

@@ -1,5 +1,5 @@
 """One training run on 1, 2 and 4 devices of one host (`train --devices N`), the same run otherwise: how much faster
-training goes, and how much sooner it reaches its goal rate (issue 56).
+training goes, and how much sooner it reaches its goal rate.
 
     python -m benchmarks.train_scaling --devices 1,2,4 --goal 0.95 --out runs/scaling -- --backend mjx-warp ...
 

@@ -30,7 +30,8 @@ elif _os.environ.get("MUJOCO_GL") in ("egl", "osmesa") and _sys.platform.startsw
         _os.environ["MJX_PUSHT_GL_MISSING"] = _os.environ.pop("MUJOCO_GL")
 
 # MJX-Warp allocates scratch through Warp, outside XLA's pool: with JAX holding its default 75% of the
-# GPU up front, a 65,536-world environment step failed to allocate 2.3 GB (H100, benchmarks/env_step.py).
+# GPU up front, a 65,536-world environment step failed to allocate 2.3 GB (H100, the gymnasium vector env's
+# step: notebook change 9).
 # JAX then grows its pool as it needs instead; a user's own setting wins.
 _os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
 # One OpenBLAS thread (read when NumPy loads, so only where NumPy is not loaded yet): a policy's NumPy products run

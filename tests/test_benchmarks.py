@@ -148,7 +148,7 @@ def test_train_seeds_reports_every_committed_seed_run_and_their_spread(tmp_path)
 
 def test_train_seeds_names_a_collapse_the_curve_recovered_from():
     """`low_after` is the lowest held-out judgement later than the first at or above 80%: the committed unclipped PPO
-    runs (issue 40's collapses) fell below 10% after it; the clipped ones (the default since) never left 99%."""
+    runs (their collapses) fell below 10% after it; the clipped ones (the default since) never left 99%."""
     from benchmarks import train_seeds
 
     root = Path(__file__).resolve().parents[1] / "outputs" / "reports" / "train"
@@ -160,33 +160,6 @@ def test_train_seeds_names_a_collapse_the_curve_recovered_from():
         for run in sorted((root / folder).glob("seed-*")):
             curve = json.loads((run / "summary.json").read_text())["curve"]
             assert bound(train_seeds.row(run)["low_after"]), (run, [r["success"] for r in curve])
-
-
-@pytest.mark.slow
-def test_first_fit_is_the_first_fit_of_a_training_run(tmp_path):
-    """benchmarks/first_fit.py fits a fresh student to iteration 0's demonstrations as `mjx-pusht train` does: on
-    MuJoCo C, for the same seed and settings, its loss is the run's first curve row's, to the bit, and an unclipped
-    fit is another fit."""
-    from helpers import cli
-
-    from benchmarks import first_fit
-
-    tiny = {"--envs": "16", "--fit-steps": "50", "--batch": "128", "--hidden": "32,32", "--eval-envs": "8",
-            "--max-samples": "20000", "--reset": "chapter"}
-    run = tmp_path / "run"
-    r = cli("train", "--backend", "cpu", "--iterations", "1", "--seed", "1", "--no-rerun", "--record", "0",
-            "--no-progress", "--out", str(run), *[a for kv in tiny.items() for a in kv])
-    assert r.returncode == 0, r.stderr
-    out = tmp_path / "ff.json"
-    assert first_fit.main(["--backend", "cpu", "--seeds", "1", "--clips", "1.0,off", "--json", str(out),
-                           *[a for kv in tiny.items() for a in kv]]) == 0
-    rows = json.loads(out.read_text())["rows"]
-    curve = json.loads((run / "summary.json").read_text())["curve"]
-    assert [(row["seed"], row["clip"]) for row in rows] == [(1, "1.0"), (1, "off")]
-    assert rows[0]["loss"] == curve[0]["loss"] and rows[0]["loss_max"] == curve[0]["loss_max"]
-    assert rows[1]["loss"] != rows[0]["loss"]
-    assert rows[0]["held_out_success"] == curve[0]["success"]
-
 
 
 @pytest.mark.slow  # the fast loop keeps the ring's own tests (test_dagger_ring.py); this times the benchmark

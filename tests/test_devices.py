@@ -1,4 +1,4 @@
-"""Training on several devices (issue 56): `train --devices N` splits each rollout's seeds and each minibatch over N
+"""Training on several devices: `train --devices N` splits each rollout's seeds and each minibatch over N
 devices, and the result is the one device's, to float tolerance: the same minibatch, its mean gradient averaged
 across devices, one set of weights; each seed's episode the same whichever device ran it.
 

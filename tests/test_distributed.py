@@ -61,7 +61,7 @@ def _start(i, out, port, *extra):
 
 
 def test_processes_given_other_settings_stop_before_writing_a_mixed_table(tmp_path):
-    """Issue 23 finding 1: process 1 ran the split-tee at 60 steps, process 0 the welded tee at 120, both
+    """A hostile pass found: process 1 ran the split-tee at 60 steps, process 0 the welded tee at 120, both
     exited 0 and the summary said `break none, steps 120` over the mixed rows. Now both stop in one line."""
     port = _free_port()
     procs = [_start(1, tmp_path, port, "--steps", "60", "--break", "split-tee"), _start(0, tmp_path, port)]

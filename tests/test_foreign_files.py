@@ -1,4 +1,4 @@
-"""A command deletes only what it wrote (issue 57).
+"""A command deletes only what it wrote.
 
 `demos --out proj` deleted a user's proj/data/mine.txt and proj/meta/notes.md; `train --out outputs` replaced
 outputs/eval, another command's finished results, with its own judgement; `sweep --out x` removed a .parts

@@ -1,4 +1,4 @@
-"""A full disk, an over-long path and Ctrl-C are one line, a non-zero exit, and what was kept (issue 57).
+"""A full disk, an over-long path and Ctrl-C are one line, a non-zero exit, and what was kept.
 
 Before: `demos`, `train` and `eval --video` ended a full disk in an `OSError: [Errno 28]` traceback, an --out
 name longer than the file system allows in `OSError: [Errno 36]`, and Ctrl-C during `demos` or `train` in a raw

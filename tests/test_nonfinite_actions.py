@@ -1,6 +1,6 @@
 """A controller's NaN or infinite action stops the run, on every backend, before it drives the physics.
 
-Issue 42: `def act(obs, t): return np.full((n, 2), np.nan)` evaluated as "0 of 8 episodes" with exit 0, a broken
+Before: `def act(obs, t): return np.full((n, 2), np.nan)` evaluated as "0 of 8 episodes" with exit 0, a broken
 controller read as one that does not push. Now the first non-finite action of a live episode stops eval and
 compare in one line naming the controller, the seed, the control step and the value; the chunks finished before
 it stay, and --resume finishes the run. The controllers are in bad_actions.py.

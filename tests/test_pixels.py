@@ -297,7 +297,7 @@ def test_eval_video_draws_each_episode_in_its_tile(tmp_path):
 
 def test_a_tiles_label_shows_whole_even_a_held_out_seeds():
     """Every character of `seed N  coverage C` shows on its tile, at the default 128 px and at 64: the last digit of
-    the coverage changes the tile, and no ink reaches the tile's right edge (issue 57: at 128 px a held-out seed's
+    the coverage changes the tile, and no ink reaches the tile's right edge (once, at 128 px a held-out seed's
     label was cut to `seed 1000000000 cover`)."""
     from mjx_pusht.io.video import _label
 

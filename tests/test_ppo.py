@@ -1,4 +1,4 @@
-"""Training with PPO (issues 22, 40): Brax's own trainer on the adapter, its policy a controller everywhere.
+"""Training with PPO: Brax's own trainer on the adapter, its policy a controller everywhere.
 
 The CLI runs compile Brax's trainer on MJX-JAX on the CPU (minutes each, the suite's slowest tests): they are a file
 of their own so that a second test worker runs them beside DAgger's (tests/test_train.py), not after it.
@@ -224,7 +224,7 @@ def test_train_ppo_runs_braxs_trainer_and_its_policy_is_judged_alike_by_eval_and
     assert summary["held_out"]["reset"] == "gym-pusht" and summary["held_out"]["success_coverage"] == 0.95
     _runs_alike_in_gym_pusht_itself(out, summary, tmp_path / "peer")
     assert summary["method"] == "ppo" and [c["env_steps"] for c in summary["curve"]] == [0, 1280]
-    assert summary["config"]["max_grad_norm"] == 1.0  # clipped by default: unclipped, PPO's curves collapsed (issue 40)
+    assert summary["config"]["max_grad_norm"] == 1.0  # clipped by default: unclipped, PPO's curves collapsed (docs/notebook/lead3.md)
     # --max-steps reaches the trainer, its judge and the eval after it: every held-out episode ran 50 steps
     assert summary["config"]["max_steps"] == summary["held_out"]["max_steps"] == 50
     assert pq.read_table(out / "eval" / "per_episode.parquet").to_pydict()["episode_length"] == [50] * 8

@@ -1,4 +1,4 @@
-"""Training with physics randomised per episode (issue 55): `train --randomize` rolls DAgger's episodes out and judges
+"""Training with physics randomised per episode: `train --randomize` rolls DAgger's episodes out and judges
 its held-out seeds at each seed's drawn physics, and `eval --randomize` judges a trained policy at a range's end."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 23's findings, each made small: bad input is one line and a non-zero exit, nothing written is lost."""
+"""A hostile pass's findings, each made small: bad input is one line and a non-zero exit, nothing written is lost."""
 
 from __future__ import annotations
 
@@ -208,7 +208,7 @@ def _files(folder):
 
 def test_a_folder_with_another_commands_results_is_refused_whatever_the_flags(tmp_path):
     """Finding 3: a sweep into a finished eval folder replaced its summary.json and left per_episode.parquet
-    without one. Issue 42: --replace then deleted the eval's table. Now it is one line naming what is there, with
+    without one. Then --replace deleted the eval's table. Now it is one line naming what is there, with
     or without --replace, and the folder is as it was."""
     out = tmp_path / "ev"
     assert cli("eval", "--backend", "cpu", "--seeds", "2", "--max-steps", "3", "--no-rerun", "--out", str(out)).returncode == 0

@@ -1,4 +1,4 @@
-"""--replace replaces the same command's own results, and nothing else (issue 42).
+"""--replace replaces the same command's own results, and nothing else.
 
 `eval --out RUN --replace --controller policy:RUN/policy.msgpack` into a finished train folder deleted the policy
 it had just evaluated and the train's summary.json; `compare --evals A B --out A --replace` deleted A's table. A

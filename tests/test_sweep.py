@@ -225,8 +225,8 @@ def test_sweep_cli_writes_table_summary_and_recording(tmp_path):
     assert s["n_seeds"] == 6 and s["rigid_fraction"] == 1.0 and s["pusher_shape"] == "cylinder"
     assert (out / "sweep.rrd").stat().st_size > 0 and not (out / ".parts").exists()
     assert "tier:" in r.stdout and "wall-clock" in r.stdout
-    # the task's score says what was scored: the nudge's open-loop 120 steps, not a controller (issue 57: a bare
-    # `task.success_rate 0.0` read as a broken task); the seeds' own table agrees with the rate printed
+    # the task's score says what was scored: the nudge's open-loop 120 steps, not a controller (a bare
+    # `task.success_rate 0.0` once read as a broken task); the seeds' own table agrees with the rate printed
     import pyarrow.parquet as pq
 
     rate = float(np.mean(pq.read_table(out / "per_seed.parquet").column("task_success").to_numpy()))

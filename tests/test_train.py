@@ -1,4 +1,4 @@
-"""Training (issue 22): a policy learned by `mjx-pusht train` is a controller everywhere, and learning happens.
+"""Training: a policy learned by `mjx-pusht train` is a controller everywhere, and learning happens.
 
 One small DAgger run on MuJoCo C (chapter starts, a few seconds) is shared by the tests; the
 learning test trains longer (marked slow).
@@ -365,7 +365,7 @@ def test_a_mujoco_c_rollout_past_its_deadline_stops_stepping_and_keeps_the_sampl
 
 @pytest.mark.slow
 def test_train_minutes_1_on_a_cpu_ends_within_a_minute_and_a_half_of_wall_clock(tmp_path):
-    """`--minutes` is a promise (issue 57: `train --minutes 1` on this 2-core CPU, auto backend, ran 5.2 minutes):
+    """`--minutes` is a promise (once, `train --minutes 1` on this 2-core CPU, auto backend, ran 5.2 minutes):
     no rollout or fit starts that would pass the budget, the CPU's defaults are sized for it, and the judgements'
     expected times are said before they start. The whole command, imports and the final eval included, is timed."""
     import time

@@ -1,4 +1,4 @@
-"""DAgger from pixels (issue 22): the student sees the env's 96 x 96 image and the pusher's position, and its
+"""DAgger from pixels: the student sees the env's 96 x 96 image and the pusher's position, and its
 checkpoint is a controller that every backend shows the same image to.
 
 One tiny run on MuJoCo C (chapter starts, OpenGL images) is shared by the tests; learning from pixels is

@@ -7,7 +7,8 @@ MuJoCo Warp through MJX on the scene as authored, on an NVIDIA GPU or on the CPU
 reduced inside the scan, so there is no per-step host round trip and no trajectory unless a trace is asked for.
 
 Jobs live elsewhere: the parameter grid (`grid.ModelGrid`), MJX-Warp's buffers (`warp.Buffers`), laying a
-program over devices (`launch`), JAX settings (`jax_setup`), the check of the actions (`actions`).
+program over devices (`launch`), JAX settings (`jax_setup`), the check of the actions (`actions`), the model MJX
+simulates and one world's control step (`mjx_step`, whose names are importable from here, as before).
 """
 
 from __future__ import annotations
@@ -16,7 +17,6 @@ import dataclasses
 import functools
 from concurrent.futures import ThreadPoolExecutor
 
-import mujoco
 import numpy as np
 
 from mjx_pusht import validate
@@ -24,107 +24,17 @@ from mjx_pusht.backends import actions, launch as launching
 from mjx_pusht.backends.base import Backend, BackendError, drawn_params
 from mjx_pusht.backends.grid import ModelGrid
 from mjx_pusht.backends.jax_setup import enable_compilation_cache
+from mjx_pusht.backends.mjx_step import IMPLS, MjxConfig, mjx_model, physics_for, simulated_scene
 from mjx_pusht.backends.results import Rollouts, Trace, from_carry
 from mjx_pusht.backends.warp import Buffers, dropped, quiet_warp, warp_available
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model.layout import QposLayout
-from mjx_pusht.model.scene import SceneSpec, build_model
 from mjx_pusht.scenario import Scenario
 from mjx_pusht.task.controllers import seed_key
-from mjx_pusht.task.episode import act, after_physics_step, begin, control_step
+from mjx_pusht.task.episode import act, begin, control_step
 from mjx_pusht.task.reset import start_poses
 
-IMPLS = ("jax", "warp")
-PUSHER_FOR_IMPL = {"jax": "capsule", "warp": "cylinder"}
-
-
-@dataclasses.dataclass(frozen=True)
-class MjxConfig:
-    """How MJX runs: implementation, precision and solver settings (None: the scene's own)."""
-
-    impl: str = "jax"
-    x64: bool = False
-    iterations: int | None = None
-    ls_iterations: int | None = None
-    tolerance: float | None = None
-    # MJX-Warp buffers per world; None: start at the typical need and grow on overflow
-    contacts_per_world: int | None = None
-    constraints_per_world: int | None = None
-    # MJX-Warp only: who captures the CUDA graph, a warp.JaxCallableGraphMode name; None: MJX's default
-    graph_mode: str | None = None
-    # MJX-Warp only: compile the scene's kernels on all cores up front (False: lazily, one by one)
-    precompile: bool = True
-    # MJX-Warp only: collide box with box through MuJoCo Warp's primitive box_box, as MuJoCo C does
-    # (mjc_BoxBox), by setting mjDSBL_NATIVECCD on the model MJX receives; see colliders.py
-    match_c_colliders: bool = True
-    # each action checked for finiteness in the scan (actions.py); off only to time the check (benchmarks)
-    check_actions: bool = True
-
-
-def simulated_scene(scenario: Scenario, impl: str) -> SceneSpec:
-    """The scene an impl runs: jax substitutes a capsule for the chapter's cylinder (gym-pusht's agent: a sphere)."""
-    keep = scenario.scene.variant != "chapter"
-    return scenario.scene if keep else dataclasses.replace(scenario.scene, pusher=PUSHER_FOR_IMPL[impl])
-
-
-def mjx_model(scene: SceneSpec, cfg: MjxConfig) -> mujoco.MjModel:
-    model = build_model(scene)
-    # MJX never resets a diverged world (NaN simply propagates into the finite
-    # flag), and MuJoCo Warp refuses the flag outright, so clear it here.
-    model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
-    if cfg.impl == "warp" and cfg.match_c_colliders:
-        # MuJoCo Warp sends box-box to GJK/EPA unless this bit is set; MuJoCo C always uses its
-        # primitive mjc_BoxBox (its contacts are the same with the bit on or off: colliders.py)
-        model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_NATIVECCD)
-    if cfg.iterations is not None:
-        model.opt.iterations = cfg.iterations
-    if cfg.ls_iterations is not None:
-        model.opt.ls_iterations = cfg.ls_iterations
-    if cfg.tolerance is not None:
-        model.opt.tolerance = cfg.tolerance
-    return model
-
-
-def advance(mx, d, carry, u, k, frame_skip: int, settle_step: int, layout, warp: bool, ovf, qs=None):
-    """One control step of one world: `frame_skip` mjx.steps at ctrl u, each folded into the invariants.
-
-    `ovf` accumulates MJX-Warp's overflow bits; `qs`, when given, records qpos after every
-    physics step (the trace).
-    """
-    import jax
-    import jax.numpy as jnp
-    from mujoco import mjx
-
-    def physics_step(inner, j):
-        d, carry, ovf, qs = inner
-        t = k * frame_skip + j
-        d = mjx.step(mx, d.replace(ctrl=u))
-        carry = after_physics_step(carry, t, settle_step, layout, d.qpos, d.qvel, d.sensordata, jnp)
-        if warp:
-            ovf = ovf | d._impl.overflow
-        if qs is not None:
-            # Written into the carry, not stacked as scan output: under MJX-Warp's CUDA-graph
-            # capture on an H100 the stacked per-step qpos came back stale (frame 1 read as
-            # qpos0) while the carried state was right.
-            qs = qs.at[t].set(d.qpos)
-        return (d, carry, ovf, qs), None
-
-    if frame_skip == 1:  # the chapter's schedule acts every physics step: no inner loop
-        (d, carry, ovf, qs), _ = physics_step((d, carry, ovf, qs), 0)
-    else:
-        (d, carry, ovf, qs), _ = jax.lax.scan(physics_step, (d, carry, ovf, qs), jnp.arange(frame_skip))
-    return d, carry, ovf, qs
-
-
-def physics_for(mx, frame_skip: int, settle_step: int, layout, warp: bool):
-    """The MJX side of `task.episode.control_step`: `physics(sim, u, carry, k)` steps one world."""
-
-    def physics(sim, u, carry, k):
-        d, ovf, qs = sim
-        d, carry, ovf, qs = advance(mx, d, carry, u, k, frame_skip, settle_step, layout, warp, ovf, qs)
-        return d.qpos, carry, (d, ovf, qs)
-
-    return physics
+__all__ = ["MjxBackend", "MjxConfig", "MjxRunner", "Pending", "mjx_model", "simulated_scene"]
 
 
 class MjxRunner:

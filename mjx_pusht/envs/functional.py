@@ -19,53 +19,33 @@ generator (reset.py), the same on every backend.
 `pixels=96` adds obs["pixels"], (N, 96, 96, 3) uint8 from the top camera (pixels.py): rendered
 inside the jitted step on MJX-Warp, by MuJoCo C's renderer on cpu. `reset_where` starts new
 episodes in some rows and leaves the rest running (a vector env's autoreset).
+
+This module builds the env and steps it; its resets are in resets.py, its observations in observation.py,
+its `State` in state.py (importable from here, as before).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
 from mjx_pusht import validate
+from mjx_pusht.envs import physics as per_episode
+from mjx_pusht.envs.observation import Observes
+from mjx_pusht.envs.resets import Resets
+from mjx_pusht.envs.starts import episode_with_goal
+from mjx_pusht.envs.state import State
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model.layout import QposLayout
 from mjx_pusht.model.scene import SceneSpec
-from mjx_pusht.task.controllers import Controller, seed_key
-from mjx_pusht.task.episode import (
-    Episode,
-    begin,
-    control_step,
-)
-from mjx_pusht.envs import physics as per_episode
-from mjx_pusht.envs.starts import START_HI, START_LO, clear_of_tee, episode_with_goal
-from mjx_pusht.task.reset import start_poses
-from mjx_pusht.task.rules import ACTION_TYPES, observe
+from mjx_pusht.task.controllers import Controller
+from mjx_pusht.task.episode import Episode, control_step
+from mjx_pusht.task.rules import ACTION_TYPES
 
-
-class State(NamedTuple):
-    """One batch of episodes. `data` is the backend's physics state; the rest is arrays."""
-
-    data: Any  # mjx.Data (batched) or the CPU's MjData copies
-    carry: dict  # episode.begin's carry: invariants, episode bookkeeping, end poses
-    obs: dict  # {"state": (N, 5), "keypoints": (N, 16)}
-    reward: Any  # (N,) coverage after the last step (0 for an ended episode)
-    terminated: Any  # (N,) bool: coverage reached the success threshold
-    truncated: Any  # (N,) bool: max_steps control steps taken without success
-    step: Any  # (N,) int32 control steps taken
-    key: Any  # (N, 2) uint32 seed words
-    dropped: Any = None  # (N,) int32 MJX-Warp overflow bits since reset (0: nothing dropped); None on cpu/mjx-jax
-    info: Any = None  # wrappers' own arrays (wrappers.AutoReset: the start pool, the ended episodes' outcome)
-    physics: Any = None  # (N, k) each episode's physics factors, drawn from its seed (`randomize`); None: the scene's
-
-    @property
-    def metrics(self) -> dict:
-        """coverage, best_coverage, return, success, steps_to_success, and the invariants."""
-        ep, inv = self.carry["ep"], self.carry["inv"]
-        return {k: ep[k] for k in ("coverage", "best_coverage", "return", "success", "steps_to_success")} | {
-            "gap_max_dev": inv["gap_max_dev"], "finite": inv["finite"], "contained": inv["contained"]}
+__all__ = ["ENV_GRAPH_MODE", "PushTEnv", "State"]
 
 
 # The env steps one control step per call, from buffers XLA hands it anew each call: staged, Warp replays
@@ -80,8 +60,11 @@ class _Stateless(Controller):
 
 
 @dataclasses.dataclass
-class PushTEnv:
-    """A batch of PushT episodes on one backend (cpu, mjx-jax, mjx-warp)."""
+class PushTEnv(Resets, Observes):
+    """A batch of PushT episodes on one backend (cpu, mjx-jax, mjx-warp).
+
+    Its resets (`reset`, `reset_to`, `fresh_one`, `reset_where`) are inherited from `resets.Resets`, its
+    observations (`with_pixels`, `images`, `renderer`, `close`) from `observation.Observes`: documented there."""
 
     backend: str = "cpu"
     reset_kind: str = "task"
@@ -183,122 +166,18 @@ class PushTEnv:
         return cls(backend, t.reset, t.action_type, t.episode(max_steps, success_threshold=success_threshold),
                    t.scene(), **kwargs)
 
-    @property
-    def renderer(self):
-        """cpu: the renderer of obs["pixels"], made on first use (no GL context before then, so an env made in a
-        parent process can be forked) and again after `close`."""
-        if self._cpu_renderer is None:
-            from mjx_pusht.render.pixels import CpuRenderer
-
-            self._cpu_renderer = CpuRenderer(self.model, self.pixels)
-        return self._cpu_renderer
-
-    def close(self) -> None:
-        """Free this env's GL context (cpu pixels); the next image makes a new one."""
-        r, self._cpu_renderer = getattr(self, "_cpu_renderer", None), None
-        if r is not None:
-            r.close()
-
-    # -- reset ------------------------------------------------------------------------------------
-    def reset(self, seeds) -> State:
-        """A fresh episode per seed, from the reset distribution's start pose for that seed."""
-        seeds = validate.seed_array(seeds)
-        return self.reset_to(start_poses(seeds, reset=self.reset_kind), seeds, drawn=True)
-
-    def reset_to(self, starts, seeds=None, drawn: bool = False) -> State:
-        """Episodes from given (N, 5) starts: tee x, y, yaw and pusher x, y (seeds key random controllers).
-        A given start (not `drawn` by a reset distribution) must not put the pusher inside the T."""
-        starts = self._starts(starts) if drawn else self.given_starts(starts)
-        seeds = np.zeros(len(starts), np.int64) if seeds is None else validate.seed_array(seeds)
-        if len(seeds) != len(starts):
-            raise ConfigError(f"seeds: {len(seeds)} seeds for {len(starts)} start states")
-        qpos0, key, f = self.layout.initial_qpos(self.model, starts), seed_key(seeds), per_episode.draw(self, seeds)
-        if self.backend == "cpu":
-            from mjx_pusht.backends.cpu import _Lockstep
-
-            data = _Lockstep(per_episode.cpu_models(self, f), self.model, qpos0, self.episode.frame_skip, self.threads)
-            return self._state(data, begin(self.layout, qpos0, key, self._ctrl, self.episode, np), qpos0, key, 0, f)
-        import jax.numpy as jnp
-
-        n, dt, f = len(qpos0), self.runner.dtype, f if f is None else f.astype(self.runner.dtype)
-        return self._batch_fns(n)[1](self.template(n), jnp.asarray(qpos0, dt), jnp.asarray(key), f)
-
-    def given_starts(self, starts) -> np.ndarray:
-        """A user's starts, checked as `_starts` checks any, and the pusher clear of the T (`clear_of_tee`)."""
-        return clear_of_tee(self._starts(starts), self.scene.variant)
-
-    def _starts(self, starts) -> np.ndarray:
-        """(N, 5) tee x, y, yaw, pusher x, y (or (N, 3) tee only), finite, the positions inside the walls
-        (the validation layer's rule; the gym-pusht variant's walls are its own frame's)."""
-        a = np.atleast_2d(np.asarray(starts, np.float64))
-        if a.ndim != 2 or a.shape[1] not in (3, 5):
-            raise ConfigError(f"starts must be (N, 5) tee x, y, yaw, pusher x, y (or (N, 3) tee only), got {a.shape}")
-        if self.scene.variant != "chapter" or a.shape[1] == 3:  # the tee alone: finite only (its yaw is free)
-            if not np.isfinite(a).all():
-                raise ConfigError("starts must be finite numbers")
-            return a
-        return validate.starts(a, len(a), START_LO, START_HI)
-
-    def template(self, n: int):
-        """The fresh mjx.Data every episode of an `n`-world batch starts from (MJX-Warp sizes its buffers by n)."""
-        if n not in self._templates:  # on this process's device: MJX's own default is jax.devices()[0], another
-            self._templates[n] = self.runner.initial_data(n, self.runner.devices[0])  # process's under jax.distributed
-        return self._templates[n]
-
-    def fresh_one(self, d0, qpos, key, coverage0=None, physics=None) -> State:
-        """One world's new episode from `qpos` (pure; no pixels: `with_pixels` adds them). `coverage0`, the
-        start's coverage if known, spares the polygon clipping (the costly part of a reset). `physics`: its factors."""
-        import jax.numpy as jnp
-
-        carry = begin(self.layout, qpos, key, self._ctrl, self.episode, jnp, coverage0)
-        return self._state(d0.replace(qpos=qpos), carry, qpos, key, jnp.zeros((), jnp.int32), physics, pixels=False)
-
-    def _reset_batch(self, d0, q, k, f) -> State:
-        import jax
-
-        return jax.vmap(lambda qp, kk, ff: self.with_pixels(self.fresh_one(d0, qp, kk, physics=ff)))(q, k, f)
-
-    def _state(self, data, carry, qpos, key, step, physics=None, pixels=True) -> State:
-        xp = self._xp
-        ep = carry["ep"]
-        obs = self._observe(qpos, data, pixels, goal=carry.get("goal"))
-        n = qpos.shape[:-1]
-        # an episode that starts covered is terminated at reset, before any step
-        dropped = xp.zeros(n, dtype=xp.int32) if self.backend == "mjx-warp" else None
-        return State(data, carry, obs, xp.zeros(n, dtype=qpos.dtype), ep["done"] & ep["success"],
-                     xp.zeros(n, dtype=bool), xp.zeros(n, dtype=xp.int32) + step, key, dropped, None, physics)
 
     # -- step -------------------------------------------------------------------------------------
     def step_one(self, state: State, action) -> State:
         """One world's control step (MJX): pure, jit- and vmap-able."""
         return self.with_pixels(self.advance_one(state, action))
 
-    def with_pixels(self, state: State) -> State:
-        """`state` with this world's image in obs["pixels"] (under vmap over the batch; a no-op without pixels).
-        Wrappers render once, after they have replaced the rows that ended."""
-        if not self.pixels:
-            return state
-        return state._replace(obs={**state.obs, "pixels": self._renderer(state.data, state.carry.get("goal"))})
-
-    def images(self, n: int):
-        """A jittable function: (n, 5) observation states (pusher x, y, tee x, y, yaw) -> the (n, size, size, 3)
-        uint8 images `obs["pixels"]` shows of them (a learner renders its minibatches again from the states, rather
-        than keeping their images: train/dagger.py). On MJX by the raster renderer, whichever draws obs["pixels"]
-        (MJX-Warp's bytes on every state tested, and plain JAX ops: a data-parallel fit runs it on every device);
-        on cpu by MuJoCo C's renderer, as obs["pixels"]."""
-        if self.backend != "cpu":
-            from mjx_pusht.render.raster import state_images
-
-            return state_images(self)
-        from mjx_pusht.render.pixels import state_images
-
-        return state_images(self, n)
 
     def advance_one(self, state: State, action) -> State:
         """One world's control step without the image (pure)."""
         import jax.numpy as jnp
 
-        from mjx_pusht.backends.mjx import physics_for
+        from mjx_pusht.backends.mjx_step import physics_for
 
         mx = per_episode.world_model(self, state.physics)
         step = physics_for(mx, self.episode.frame_skip, self._settle, self.layout, self.backend == "mjx-warp")
@@ -326,21 +205,6 @@ class PushTEnv:
         return State(data, carry, obs, reward, terminated, truncated, step, state.key, state.dropped, state.info,
                      state.physics)
 
-    def _observe(self, qpos, data, pixels=True, qvel=None, goal=None):
-        # a random goal's pose beside the T's (a fixed goal is the origin, never observed)
-        obs = observe(self.layout.pusher_xy(qpos), self.layout.tee_pose(qpos), self.keypoints) | (
-            {} if goal is None else {"goal": goal})
-        if self.scene.variant == "gym-pusht":  # gym-pusht reports its agent's velocity (info["vel_agent"])
-            if qvel is None:
-                qvel = data.qvel[-1] if self.backend == "cpu" else data.qvel
-            # the pusher's slide joints: in this scene (no free joint) dof addresses are qpos addresses
-            obs["pusher_vel"] = qvel[..., list(self.layout.pusher)]
-        if self.pixels and pixels:
-            if self.backend == "cpu":  # the target drawn at each episode's goal (None: the scene's)
-                obs["pixels"] = self.renderer(qpos, goal)
-            else:  # under vmap: this world's image, from the renderer made for this batch size
-                obs["pixels"] = self._renderer(data, goal)
-        return obs
 
     def _step_cpu(self, state: State, action) -> State:
         """The batch's control step on MuJoCo C: the same episode.py functions on NumPy arrays."""
@@ -403,11 +267,3 @@ class PushTEnv:
             if dropped(bits).any():
                 self.runner.buffers.check(bits)
         return state
-
-    # -- partial reset ----------------------------------------------------------------------------
-    def reset_where(self, state: State, mask, seeds=None, starts=None) -> State:
-        """`state` with the rows where `mask` holds started afresh (from `seeds`' start poses, or `starts`),
-        every other row untouched: how a vector env resets the episodes that ended."""
-        from mjx_pusht.envs.partial import reset_where
-
-        return reset_where(self, state, mask, seeds, starts)

@@ -2,7 +2,7 @@
 
 MJX-Warp's ray tracer is an XLA FFI call bound to one device's render context, which XLA cannot partition:
 under `jax.shard_map` it cannot run (compiling it there crashed XLA on 2 x H200), so a data-parallel program
-that renders (a pixel student's fit, issue 56) had no renderer. This one is elementwise array arithmetic, so it
+that renders (a pixel student's fit over several GPUs) had no renderer. This one is elementwise array arithmetic, so it
 runs wherever JAX runs, sharded or not, vmapped over any batch without buffers sized for it.
 
 It needs no ray tracing because the view (`view_model`) is flat: an orthographic camera looking straight down,

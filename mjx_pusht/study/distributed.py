@@ -148,7 +148,7 @@ def same_program_text() -> None:
     shares its autotuning between the processes that compile one program, keyed by that fingerprint (openxla/xla
     #13108; a hang of this kind: marin-community/marin#9042; inferred here, not observed). Brax's PPO over 2
     processes, a GPU each, was still compiling its first epoch at 170 s, over 4 it never left that epoch (H200s,
-    notebook lead23); with the texts the same (this, and the judge every PPO process runs, train/ppo.py) 2 processes
+    notebook lead23); with the texts the same (this, and the judge every PPO process runs, train/ppo_judge.py) 2 processes
     trained to the end in 127 s. One frame an op (its own line, the same in every process) and file names without
     their folders make the texts agree."""
     import jax

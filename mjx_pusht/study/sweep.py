@@ -324,7 +324,8 @@ def summarize(rollouts: Rollouts, *, backend, schedule, break_it: str, compile_s
         "gap_max_dev": distribution(rollouts.gap_max_dev[finite]),
         "tee_gap_settled": distribution(rollouts.gap_settled[finite]),
         "tee_final_y": distribution(rollouts.final[finite, 1]),
-        # what was scored: read alone, a success rate near 0 looked like a broken task (issue 57)
+        # what was scored: read alone, a sweep's success rate near 0 (an open-loop nudge, no controller) looked like a
+        # broken task
         "task": {"run": nudge_run(schedule), **_task_summary(rollouts, table)},
         "compile_seconds": round(compile_s, 3),
         "run_seconds": round(run_s, 3),

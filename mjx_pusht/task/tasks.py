@@ -60,7 +60,7 @@ class Task:
     frame_skip: int = 10
     about: str = ""
     memory: CarryFormat = CHAPTER  # how its expert's carry reads as a DAgger student's memory
-    action_eps: float | None = None  # DAgger's --action-eps on this task by default (train/dagger.py DaggerConfig)
+    action_eps: float | None = None  # DAgger's --action-eps on this task by default (train/dagger_config.py DaggerConfig)
     # The yaw convention of its observations (the one place it is stated): a controller is handed the T's yaw in
     # (yaw_centre - pi, yaw_centre + pi], the window its starts fill, whatever the source gives (`observed`). The
     # chapter's starts turn the T anywhere in (-pi, pi]; gym-pusht draws its block angle in (-pi, pi) and a yaw is

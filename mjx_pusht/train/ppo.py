@@ -5,37 +5,11 @@ starts on every reset (`wrap_for_training`). Brax trains on a reward designed fo
 success is never judged by it, only by the task's rule (coverage >= 0.95, or --success-threshold, within the episode's
 control steps) on held-out seeds, by the same code the `policy:PATH` controller runs.
 
-The training reward, per control step (`training_reward`):
-
-    r = (coverage(s') - 1) + SUCCESS_BONUS * success(s') + SHAPING * (phi(s') - phi(s))
-    phi(s) = -(|tee position error| / L + |tee yaw error| / 1 rad + |pusher to the T| / L) / 3
-
-L is 0.1 m on the chapter's scene (`shaping_length`: its arena's width over 7.8) and the same fraction of
-gym-pusht's (0.064 m), so the shaping weighs a start's distance from the goal alike on either task (--task).
-
-The first term is the env's own reward (the coverage, what gym-pusht pays) less 1: a cost for every
-step not yet covered. Success ends the episode, so a reward of plain coverage made *not* succeeding
-the better policy: staying at 0.8 coverage is worth 0.8 / (1 - 0.97) ~ 27 discounted, more than the
-bonus and the end (measured on the H100, notebook change 17: PPO's held-out coverage rose to 0.79 in two
-minutes and stayed there, success under 1.5%). With the cost, every step short of success loses and
-ending it is the best outcome (a test checks this). The bonus marks the end the task asks for; the
-shaping term is potential-based (Ng et al., 1999), so it changes how fast PPO finds the task, not
-which policy is best: it pays for moving the T toward its target pose and the pusher toward the T,
-the two things a random policy almost never does on its own.
-
-The policy Brax learns (an MLP on Brax's running observation normalisation, tanh-squashed
-Gaussian) is saved as a `policy:PATH` checkpoint (policy.py): the normaliser's mean and std, the
-layers, and which action it acts with (ppo_policy.py): by default a draw from the Gaussian keyed
-by seed and step, the policy PPO trains; or its mean, tanh(loc), Brax's own `make_policy(...,
-deterministic=True)` (tests check both against Brax). The mean action is not what PPO optimises:
-it stalls where the trained policy's noise carries it on, and its held-out rate swung 5-93%
-between judgements while PPO learned (docs/notebook/training.md), so every judgement measures
-both, and `--keep best` chooses by validation seeds, never the held-out ones.
+How it is configured and what it is rewarded for: ppo_config.py; how each judgement judges: ppo_judge.py.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import shutil
@@ -44,204 +18,18 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pusht.errors import ConfigError, needs
+from mjx_pusht.errors import needs
 from mjx_pusht.io.outputs import atomic_write_bytes
-from mjx_pusht.train.dagger import held_out_seeds
 from mjx_pusht.train.policy import OBS_SIZE, PPO_ACTS
+from mjx_pusht.train.ppo_config import SHAPING, SUCCESS_BONUS, TABLE, PPOConfig, shaping_length, training_reward
+from mjx_pusht.train.ppo_judge import finite, make_judge, std_change, to_checkpoint, weights_digest
 from mjx_pusht.train.resume import TrainError, config_dict, resume_tree
 
-SUCCESS_BONUS = 10.0
-SHAPING = 10.0
-TABLE = 65536  # the training starts: task seeds 0 .. TABLE - 1 (BraxPushT's table)
+# PPO's names as they were before its config and judging had modules of their own
+__all__ = ["PPOConfig", "SHAPING", "SUCCESS_BONUS", "TABLE", "graph_mode", "shaping_length", "to_checkpoint", "train_ppo",
+           "training_reward", "weights_digest"]
+
 RESUME = "resume.msgpack"  # in checkpoints/: Brax's params and the curve after the last judgement
-# the flags `train --algo ppo` sets these fields from: an error names the field (a Python caller's word) and the
-# flag (the CLI user's); unroll_length and validation_envs have none
-_FLAGS = {"envs": "--envs", "timesteps": "--timesteps", "evals": "--iterations", "eval_envs": "--eval-envs",
-          "max_steps": "--max-steps", "batch_size": "--batch", "num_minibatches": "--minibatches"}
-
-
-@dataclasses.dataclass(frozen=True)
-class PPOConfig:
-    obs_type: str = "state"
-    envs: int = 4096  # parallel training envs
-    timesteps: int = 50_000_000  # env control steps in all
-    evals: int = 20  # held-out judgements (and checkpoints) over the run
-    hidden: tuple[int, ...] = (256, 256, 256)  # the policy's hidden widths (the value net: Brax's default)
-    learning_rate: float = 3e-4
-    entropy_cost: float = 1e-2
-    discounting: float = 0.97
-    unroll_length: int = 20
-    batch_size: int = 256  # Brax's: unrolls per minibatch
-    num_minibatches: int = 32
-    updates_per_batch: int = 4
-    reward_scaling: float = 0.1
-    reset: str = "task"
-    eval_envs: int = 4096
-    max_steps: int = 300
-    seed: int = 0
-    act: str = "sample"  # the saved policy's action (ppo_policy.py): "sample", what PPO trains, or "mean"
-    validation_envs: int = 0  # --keep best judges on this many seeds, neither trained on nor held out (0: eval_envs / 4)
-    # Brax's limits on an update. max_grad_norm: the gradient's global norm clipped to this before Adam (None:
-    # unclipped). Measured on one H100 (docs/notebook/lead3.md): unclipped, two 10-minute runs fell from 99-100% to
-    # 0-6% eight times in 57 judgements, each after an epoch whose KL was 1.1-51 (0.02-0.07 otherwise): a sharp
-    # policy (sigma ~0.005) gives one minibatch a gradient far above those Adam has seen. Clipped at 1.0, three runs
-    # held 99.3-100% from their third judgement on, epoch KL <= 0.14.
-    max_grad_norm: float | None = 1.0
-    lr_schedule: str | None = None  # "adaptive-kl": Brax's ADAPTIVE_KL, the rate /1.5 or x1.5 toward desired_kl 0.01
-    success_threshold: float | None = None  # the coverage an episode succeeds at; None: the task's (0.95)
-    # Physics drawn per episode from its seed in training (the Brax adapter's table) and every judgement, as DAgger's
-    # (DaggerConfig.randomize); None: the scene's own (a resume file from before this setting existed still matches)
-    randomize: tuple | None = None
-    # The task trained and judged on (task/tasks.TASKS), as DaggerConfig.task; None: the chapter's (a resume file
-    # from before this setting existed still matches). The policy acts in velocities on either task (envs/brax.py).
-    task: str | None = None
-
-    def __post_init__(self) -> None:
-        if self.randomize is not None:
-            from mjx_pusht.model.randomize import check
-
-            object.__setattr__(self, "randomize", check(self.randomize, self.the_task.scene(), "--randomize") or None)
-        self.the_task.check_reset(self.reset)
-        if self.act not in PPO_ACTS:
-            raise ConfigError(f"PPO acts with its Gaussian's {' or '.join(PPO_ACTS)}, not {self.act!r}")
-        if self.obs_type not in ("state", "keypoints"):
-            raise ConfigError(f"PPO trains from state or keypoints observations, not {self.obs_type!r}")
-        if self.lr_schedule not in (None, "adaptive-kl"):
-            raise ConfigError(f"PPO: --lr-schedule is adaptive-kl (or not given: constant), not {self.lr_schedule!r}")
-        if self.max_grad_norm is not None and not self.max_grad_norm > 0:
-            raise ConfigError(f"PPO: --max-grad-norm must be above 0, got {self.max_grad_norm}")
-        self.episode()  # a success threshold outside (0, 1] is a one-line error now
-        if self.validation_envs < 0:
-            raise ConfigError(f"PPO: validation_envs must be at least 0, got {self.validation_envs}")
-        for name in ("envs", "timesteps", "evals", "eval_envs", "max_steps", "unroll_length", "batch_size",
-                     "num_minibatches"):
-            if int(getattr(self, name)) < 1:
-                flag = f" ({_FLAGS[name]})" if name in _FLAGS else ""
-                raise ConfigError(f"PPO: {name}{flag} must be at least 1, got {getattr(self, name)}")
-        per_epoch = self.batch_size * self.num_minibatches * self.unroll_length  # Brax's env steps per update round
-        if (self.batch_size * self.num_minibatches) % self.envs:
-            raise ConfigError(f"PPO: --batch x minibatches ({self.batch_size} x {self.num_minibatches}) must be a "
-                              f"multiple of --envs ({self.envs}), as Brax requires")
-        if self.timesteps < per_epoch * self.evals:
-            raise ConfigError(f"PPO: --timesteps {self.timesteps} is fewer than one round of {per_epoch} env steps "
-                              f"(--batch x {self.num_minibatches} minibatches x unroll {self.unroll_length}) per "
-                              f"judgement ({self.evals})")
-
-    @property
-    def the_task(self):
-        from mjx_pusht.task.tasks import get
-
-        return get(self.task or "chapter")
-
-    def episode(self):
-        """The episodes trained and judged on: the task's, at `max_steps` and `success_threshold`."""
-        return self.the_task.episode(max_steps=self.max_steps, success_threshold=self.success_threshold)
-
-    def reward(self):  # `training_reward` at this task's scene's shaping length
-        return lambda prev, s: training_reward(prev, s, shaping_length(self.the_task.variant))
-
-    def held_out_seeds(self) -> np.ndarray:
-        return held_out_seeds(self.eval_envs)  # the same held-out task seeds as DAgger's
-
-    def validation_seeds(self) -> np.ndarray:
-        """Task seeds past the training table (BraxPushT draws its starts from seeds 0 .. TABLE - 1)."""
-        return TABLE + np.arange(self.validation_envs or max(8, self.eval_envs // 4), dtype=np.int64)
-
-
-def shaping_length(variant: str) -> float:
-    """The shaping's length scale on a scene variant, m: 0.1 between the chapter's walls, 0.78 m apart; the same
-    fraction of gym-pusht's, 497 px (mm) apart, 0.064 (its T and pusher are the chapter's: its arena is smaller)."""
-    from mjx_pusht.model import gym_pusht as frame
-    from mjx_pusht.task.rules import WORKSPACE_HALF
-
-    lo, hi = frame.WALL_INNER_PX
-    return 0.1 if variant == "chapter" else 0.1 * (hi - lo) * frame.PX / (2 * WORKSPACE_HALF)
-
-
-def training_reward(prev, s, length: float = 0.1):
-    """The reward PPO is trained on (module docstring), from one world's env states before and after a step;
-    `length`: the shaping's length scale (`shaping_length`), the chapter's by default."""
-    import jax.numpy as jnp
-
-    from mjx_pusht.task.rules import distance_to_tee, wrap_angle
-
-    def phi(state):
-        x = state.obs["state"]
-        pose = x[2:5]
-        far = jnp.linalg.norm(pose[:2]) / length + jnp.abs(wrap_angle(pose[2])) / 1.0
-        reach = distance_to_tee(x[0:2], pose) / length
-        return -(far + reach) / 3.0
-
-    m = s.metrics
-    return (m["coverage"] - 1.0) + SUCCESS_BONUS * m["success"].astype(m["coverage"].dtype) + SHAPING * (phi(s) - phi(prev))
-
-
-def to_checkpoint(params, obs_type: str, act: str = "mean") -> tuple[dict, dict]:
-    """Brax's (normaliser, policy, value) params -> (layers, meta) of a policy.py checkpoint."""
-    normalizer, policy = params[0], params[1]
-    layers = policy["params"]
-    names = sorted((k for k in layers if k.startswith("hidden_")), key=lambda k: int(k.split("_")[1]))
-    dense = {f"Dense_{i}": {"kernel": np.asarray(layers[k]["kernel"]), "bias": np.asarray(layers[k]["bias"])}
-             for i, k in enumerate(names)}
-    meta = {"method": "ppo", "obs_type": obs_type, "activation": "silu", "act": act,
-            "in_mean": [float(v) for v in np.asarray(normalizer.mean)],
-            "in_std": [float(v) for v in np.asarray(normalizer.std)]}
-    return dense, meta
-
-
-def _judge(env, cfg: PPOConfig):
-    """A jitted judge: checkpoint layers and meta -> {"mean", "sample"} x {"held_out", "validation"} per-episode
-    success and final coverage, and the count of episodes whose observation went non-finite. Both actions run in one
-    batch (held-out and validation seeds, each twice), so judging the action not saved costs little on a GPU."""
-    import jax
-    import jax.numpy as jnp
-
-    from mjx_pusht.train.ppo_policy import ppo_action
-
-    held, val = cfg.held_out_seeds(), cfg.validation_seeds()
-    seeds = np.concatenate([held, val, held, val])
-    sample = jnp.asarray(np.repeat([0.0, 1.0], len(held) + len(val)), jnp.float32)
-    s0 = env.reset(seeds)
-
-    def episode(dense, mean, std, s, noise):
-        meta = {"in_mean": mean, "in_std": std, "activation": "silu"}
-
-        def body(s, _):
-            obs = s.obs[cfg.obs_type]
-            action = cfg.the_task.from_velocity(ppo_action(dense, meta, obs, s.key, s.step, noise), s.obs)
-            return env.advance_one(s, action), None
-
-        s, _ = jax.lax.scan(body, s, None, cfg.max_steps)
-        return s.metrics["success"], s.metrics["coverage"], jnp.isfinite(s.obs[cfg.obs_type]).all()
-
-    run = jax.jit(jax.vmap(episode, in_axes=(None, None, None, 0, 0)))
-
-    def judge(dense, meta):
-        success, cov, finite = (np.asarray(v) for v in run(dense, jnp.asarray(meta["in_mean"], jnp.float32),
-                                                             jnp.asarray(meta["in_std"], jnp.float32), s0, sample))
-        n, out = len(held) + len(val), {"non_finite": int((~finite).sum())}
-        for i, act in enumerate(PPO_ACTS):
-            parts = {"held_out": slice(i * n, i * n + len(held)), "validation": slice(i * n + len(held), (i + 1) * n)}
-            for name, part in parts.items():
-                out[act, name] = (success[part].astype(bool), cov[part].astype(float))
-        return out
-
-    return judge
-
-
-def _std_change(before, after) -> float | None:
-    """The largest relative change of the observation normaliser's std over the inputs since the last judgement:
-    one far-out training observation moves it at once (Brax's running statistics), and every input the policy
-    sees with it (a suspect for a collapse, recorded per judgement as `norm_std_change`)."""
-    if before is None:
-        return None
-    return float(np.max(np.abs(np.asarray(after) / np.asarray(before) - 1.0)))
-
-
-def _finite(tree) -> bool:
-    import jax
-
-    return all(bool(np.isfinite(np.asarray(x)).all()) for x in jax.tree.leaves(tree))
 
 
 class _Stop(Exception):
@@ -279,7 +67,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     Each curve row has the held-out success of the action the policy is saved with (`cfg.act`) and of both
     actions (success_mean, success_sample), the saved action's success on the validation seeds, and Brax's own
     loss metrics of the epoch before it (brax_*: policy, value and entropy losses, KL, the Gaussian's mean and least
-    sigma, its largest and least pre-tanh mean), and norm_std_change (`_std_change`).
+    sigma, its largest and least pre-tanh mean), and norm_std_change (`ppo_judge.std_change`).
     `resume`: go on from the last judged policy in `out` (Brax's `restore_params`: the normaliser, policy and
     value networks; Brax restores no optimiser state, so Adam starts afresh) up to `cfg.timesteps`.
     `minutes`: stop at the first judgement past this much training wall-clock (resumable from there). `until`: stop at
@@ -325,7 +113,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
     # compiled the judge before Brax's epoch lowered that epoch to another HLO text than one that did not
     # (`..._func_wrapper_3` against `_1`), and the processes hung in its compile (study/distributed.py's
     # same_program_text has why, notebook lead23). The others' judgement is thrown away.
-    judge = _judge(PushTEnv(backend=backend, reset_kind=cfg.reset, action_type=task.action_type, episode=episode,
+    judge = make_judge(PushTEnv(backend=backend, reset_kind=cfg.reset, action_type=task.action_type, episode=episode,
                             scene=task.scene(), keep_states=False, randomize=cfg.randomize), cfg)
     ckpt.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter() - (curve[-1]["wall_seconds"] if curve else 0.0)
@@ -356,7 +144,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
             last["skip"] = False
             return
         step = int(step) + done
-        if not _finite(params):  # the normaliser's running mean holds every training observation: one NaN reaches it
+        if not finite(params):  # the normaliser's running mean holds every training observation: one NaN reaches it
             raise bad(step, "a training observation, the normaliser or the networks went non-finite")
         t_judge = time.perf_counter()
         dense, meta = to_checkpoint(params, cfg.obs_type, cfg.act)
@@ -375,7 +163,7 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
                       "learn_seconds": now - last["t"] - t_judge if curve else 0.0, "wall_seconds": now - t0,
                       "validation_success": float(judged[cfg.act, "validation"][0].mean()), "validation_beta": 0.0}
                      | {f"success_{a}": float(judged[a, "held_out"][0].mean()) for a in PPO_ACTS}
-                     | {"norm_std_change": _std_change(last["in_std"], meta["in_std"])})
+                     | {"norm_std_change": std_change(last["in_std"], meta["in_std"])})
         last["t"], last["params"], last["in_std"] = now, params, meta["in_std"]
         save(ckpt / f"policy_{len(curve) - 1:03d}.msgpack", dense, meta)
         save(out / "policy.msgpack", dense, meta)
@@ -431,17 +219,6 @@ def train_ppo(cfg: PPOConfig, backend: str, out: Path, *, resume: bool = False, 
         print(f"keeping judgement {kept['iteration']}'s policy: {kept['validation_success']:.1%} on the "
               f"{len(cfg.validation_seeds())} validation seeds (held-out {kept['success']:.1%})")
     return curve, digest
-
-
-def weights_digest(params, obs_type: str) -> str:
-    """16 hex digits of SHA-256 over the policy's layers as float32 (the checkpoint's `Dense_i` kernels and biases,
-    in the order jax.tree.leaves gives a loaded checkpoint's): equal digests, equal weights."""
-    import hashlib
-
-    import jax
-
-    dense, _ = to_checkpoint(params, obs_type)
-    return hashlib.sha256(b"".join(np.asarray(a, np.float32).tobytes() for a in jax.tree.leaves(dense))).hexdigest()[:16]
 
 
 def _save_resume(path: Path, cfg: PPOConfig, params, curve: list[dict]) -> None:

@@ -1,4 +1,4 @@
-"""LeRobot's own Diffusion Policy as benchmarks/diffusion_pusht.sh trains and scores it (issue 54), shrunk to a CPU:
+"""LeRobot's own Diffusion Policy as benchmarks/diffusion_pusht.sh trains and scores it, shrunk to a CPU:
 `lerobot-train --policy.type=diffusion` on `mjx-pusht demos`, evaluating on `--env.type=mjx_pusht` as it trains (the
 curve's points, read back by benchmarks/diffusion_curve.py), then `lerobot-eval` of its checkpoint on gym-pusht
 itself and on the plugin's env."""
@@ -274,12 +274,12 @@ def test_a_stop_at_no_checkpoint_before_the_end_is_one_line_before_the_run_start
 
 
 @pytest.mark.parametrize("settings, line", [
-    ({"FROM": "x"}, "issue54-hold: FROM and STOP_AT are for the run on GPU 0 alone; give SMALL=0 with them"),
-    ({"SIZE0": "200"}, "issue54-hold: SIZE0=200 trains the 200 episodes on GPU 0; give SMALL=0 with it"),
+    ({"FROM": "x"}, "diffusion-hold: FROM and STOP_AT are for the run on GPU 0 alone; give SMALL=0 with them"),
+    ({"SIZE0": "200"}, "diffusion-hold: SIZE0=200 trains the 200 episodes on GPU 0; give SMALL=0 with it"),
     ({"SMALL": "0", "BATCH": "abc"}, "BATCH must be a whole number above 0, got 'abc'")])
 def test_the_one_hold_stage_refuses_a_bad_setting_before_any_run_starts(tmp_path, settings, line):
-    """gpu.sh issue54-hold on the lent host: a refused setting is its one line and exit 2, no run folder made."""
-    p = subprocess.run(["bash", "benchmarks/gpu.sh", "issue54-hold", "h200"], cwd=ROOT, capture_output=True, text=True,
+    """gpu.sh diffusion-hold on the lent host: a refused setting is its one line and exit 2, no run folder made."""
+    p = subprocess.run(["bash", "benchmarks/gpu.sh", "diffusion-hold", "h200"], cwd=ROOT, capture_output=True, text=True,
                        timeout=60, env={**os.environ, **settings, "HOME": str(tmp_path), "OUT": str(tmp_path / "out")})
     assert (p.returncode, p.stderr.strip().splitlines()) == (2, [line])
     assert not (tmp_path / "diffusion").exists()

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Issue 56's runs in one hold of 4 GPUs (see ../shared/gpu/README.md for the wheels; jax 0.10.2 in $HOME/jsite):
-#   bash benchmarks/train_devices.sh start [PLAN]  # a plan (default: plan, below) in the background, its own session
-#   bash benchmarks/train_devices.sh watch    # back to back: copies what is finished into $OUT every 15 s
+# Training on several GPUs, a plan of runs for one hold of 4 GPUs (the wheels carried as docs/offline-gpu.md says;
+# jax 0.10.2 in $HOME/jsite):
+#   bash tools/offline-gpu/train_devices.sh start [PLAN]  # a plan (default: plan, below) in the background, its own session
+#   bash tools/offline-gpu/train_devices.sh watch    # back to back: copies what is finished into $OUT every 15 s
 # A hold ends when its device time does, so the plan runs its most needed figures first and every run is copied
 # back as it finishes (a watch cut at its limit still returns what is under $OUT). Session 15's hold (notebook
 # lead15): PPO on MJX-JAX scaled (3.8x on 4 H200s) but cannot reach 95% in 3 minutes; MJX-Warp failed on several GPUs
@@ -17,13 +18,13 @@
 # Weak scaling (benchmarks/train_scaling.py --per-device): each GPU one GPU's episodes and minibatch share.
 # DRY=1 prints the commands instead of running them (a check of the plan's order and choices on any machine).
 set -uo pipefail
-cd "$(dirname "$0")/.." || exit 1
+cd "$(dirname "$0")/../.." || exit 1
 root=$PWD runs=$HOME/runs
 mkdir -p "$runs"
 case "${1:-}" in
   start)
     (cd "$runs" && setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' "$runs/devices.pid" \
-      bash "$root/benchmarks/train_devices.sh" "${2:-plan}" > "$runs/devices.log" 2>&1 < /dev/null &)
+      bash "$root/tools/offline-gpu/train_devices.sh" "${2:-plan}" > "$runs/devices.log" 2>&1 < /dev/null &)
     sleep "${WAIT:-20}"; cp "$runs/devices.log" "${OUT:-/tmp}/" ;;
   plan|ppo-wide|ppo-apart|ppo-procs)
     export PYTHONPATH=$HOME/jsite:$HOME/site:$root PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
@@ -142,5 +143,5 @@ case "${1:-}" in
     done
     nvidia-smi --query-gpu=index,utilization.gpu,memory.used --format=csv > "$out/nvidia-smi.csv" 2>&1
     tail -n 4 "$runs/devices.log"; true ;;
-  *) echo "usage: train_devices.sh start [plan|ppo-wide|ppo-apart|ppo-procs]|watch (issue 56's plans on a 4-GPU machine)" >&2; exit 2 ;;
+  *) echo "usage: train_devices.sh start [plan|ppo-wide|ppo-apart|ppo-procs]|watch (plans of training on a 4-GPU machine)" >&2; exit 2 ;;
 esac

@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # The wheels lerobot-eval and lerobot-train (ACT, and Diffusion Policy: diffusers, accelerate) need on a GPU machine
 # that has Python 3.12, torch 2.11 (CUDA), jax, numpy, pyarrow, Pillow, tqdm and matplotlib but no package registry,
-# beside this project's own (../shared/gpu/prepare.sh): downloaded here, tarred and cut into parts (one a device
+# beside this project's own (.gpu/: docs/offline-gpu.md): downloaded here, tarred and cut into parts (one a device
 # call) as large as a call carries beside the tree (64 MiB in all), written to .gpu-lerobot/K/.
-#   bash benchmarks/lerobot_wheels.sh            # then, per part K, carry [".gpu-lerobot/K"] and run
+#   bash tools/offline-gpu/lerobot_wheels.sh            # then, per part K, carry [".gpu-lerobot/K"] and run
 #   mkdir -p $HOME/lr && cp .gpu-lerobot/K/* $HOME/lr/
 # and after the last part:
 #   cd $HOME/lr && cat part.* | tar x && python3 -m pip install -q --no-index --no-deps --no-compile \
