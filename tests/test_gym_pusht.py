@@ -153,6 +153,11 @@ def test_info_carries_gym_pushts_keys():
     (_, i1), (_, i2) = theirs.reset(seed=3), ours.reset(seed=3)
     assert set(i1) <= set(i2) and i2["is_success"] is False
     np.testing.assert_array_equal(i2["goal_pose"], i1["goal_pose"])
+    for seed in (3, 11, 0):  # the block's pose as gym-pusht's info gives it: its angle unwrapped, not the observation's
+        (o1, i1), (o2, i2) = theirs.reset(seed=seed), ours.reset(seed=seed)
+        np.testing.assert_allclose(i2["block_pose"], i1["block_pose"], atol=1e-9)
+        assert o2[4] == pytest.approx(o1[4], abs=1e-9)
+    assert i1["block_pose"][2] < 0 < o1[4]  # seed 0 (the last) starts across gym-pusht's wrap
     *_, i1 = theirs.step(np.array([256.0, 256.0]))
     *_, i2 = ours.step(np.array([256.0, 256.0]))
     assert set(i1) <= set(i2)

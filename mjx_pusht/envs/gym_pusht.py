@@ -97,7 +97,8 @@ def gym_view(obs_type: str, obs: dict, coverage, terminated, xp, dtype):
     info = {
         "pos_agent": agent,
         "vel_agent": frame.velocity_to_px(obs["pusher_vel"], xp),
-        "block_pose": xp.concatenate([origin, angle[..., None]], axis=-1),
+        # gym-pusht's info gives its body's own angle, unwrapped (its observation wraps it to [0, 2 pi)): the hinge's
+        "block_pose": xp.concatenate([origin, (_GOAL_YAW - s[..., 4])[..., None]], axis=-1),
         "goal_pose": _goal(origin.shape[:-1] + (3,), agent.dtype, xp),
         "n_contacts": n_contacts(s[..., 0:2], s[..., 2:5], corners, xp),
         "is_success": terminated,
@@ -145,7 +146,7 @@ def gym_view_row(obs_type: str, obs: dict, coverage: float, terminated: bool):
     info = {
         "pos_agent": agent,
         "vel_agent": np.array([_GC * lx - _GS * ly, _GS * lx + _GC * ly]),
-        "block_pose": np.array([ox, oy, angle]),
+        "block_pose": np.array([ox, oy, _GOAL_YAW - yaw]),  # unwrapped, as gym-pusht's (gym_view)
         "goal_pose": np.array(frame.GOAL_PX),
         "n_contacts": int(touch or wall),
         "is_success": terminated,
