@@ -90,6 +90,15 @@ def test_replaying_an_episodes_actions_in_the_drop_in_reproduces_its_states(demo
     assert acts.min() >= 0 and acts.max() <= 512 and np.ptp(acts, 0).min() > 50
 
 
+def test_each_episodes_first_state_is_gym_pushts_own_observation_of_that_seed(demos):
+    """observation.state is gym-pusht's `agent_pos`, as gym-pusht itself returns it at `reset(seed=...)`."""
+    pytest.importorskip("gym_pusht")
+    theirs = gym.make("gym_pusht/PushT-v0", obs_type="pixels_agent_pos")
+    for seed, ep in zip((5, 9), episodes(demos), strict=True):
+        obs, _ = theirs.reset(seed=seed)
+        assert np.array_equal(np.float32(obs["agent_pos"]), np.float32(ep["observation.state"][0]))
+
+
 def test_an_existing_dataset_is_kept_without_replace_and_bad_input_is_one_line(demos, capsys):
     before = {p: p.read_bytes() for p in demos.rglob("*.parquet")}
     assert main(["demos", "--seeds", "1", "--backend", "cpu", "--out", str(demos)]) == 1
