@@ -211,6 +211,18 @@ class FeedbackPool:
         self.workers = workers
         self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                         initializer=_die_with_parent, initargs=(os.getpid(),))
+        FeedbackPool.live.add(self)
+
+    live: set = set()  # the pools not yet closed: an interrupted command ends them before it exits (`end_all`)
+
+    @staticmethod
+    def end_all() -> None:
+        """End every live pool's workers now (an interrupted command: their episodes are not wanted) and release
+        the pool's semaphores, which an exit without this leaves to the resource tracker's "leaked" warning."""
+        for p in list(FeedbackPool.live):
+            for proc in list((getattr(p.pool, "_processes", None) or {}).values()):
+                proc.terminate()
+            p.close()
 
     def run(self, scenario: Scenario, seeds, *, combos=None, poses=None) -> Rollouts:
         seeds = np.asarray(seeds, np.int64)
@@ -225,6 +237,7 @@ class FeedbackPool:
         return Rollouts.concat([j.result() for j in jobs])
 
     def close(self) -> None:
+        FeedbackPool.live.discard(self)
         self.pool.shutdown(cancel_futures=True)
 
 

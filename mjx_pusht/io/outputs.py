@@ -229,13 +229,16 @@ def _owner(path: Path) -> tuple[list[str], dict]:
 def _refuse_another_runs_folder(path: Path, command: str) -> None:
     """Refuse `path` when it is a folder another run writes inside its own (a train's eval/, whose results the
     train wrote as its judgement): --replace there would remove that run's files. The run that holds the folder
-    above (train judging its policy) may."""
+    above (train judging its policy) may. The run is known by its run file (a folder merely holding a policy file
+    is a user's, and its eval/ theirs to write)."""
     parent = path.resolve().parent
     if parent == path.resolve() or parent in _HELD:
         return
-    held, owner = _owner(parent)
-    who = owner.get("command")
-    if who in OWN and path.resolve().name in OWN[who] and (held or (parent / RUN_FILE).exists()):
+    try:
+        who = json.loads((parent / RUN_FILE).read_text()).get("command")
+    except (OSError, ValueError, AttributeError):
+        return
+    if who in OWN and path.resolve().name in OWN[who]:
         raise OutputError(f"--out {path} is part of the {who} run in {parent} (its {path.resolve().name}/); "
                           f"{command} never writes into another run's folder, whatever the flags: choose another --out")
 

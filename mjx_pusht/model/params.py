@@ -154,7 +154,8 @@ def check_values(name: str, values, where: str) -> list[float]:
 def check_params(params, where: str = "params") -> tuple[tuple[str, tuple[float, ...]], ...]:
     """(name, values) pairs: each a known NAME once, its values within bounds, the grid at most MAX_COMBINATIONS
     combinations. Returned as tuples of floats."""
-    if isinstance(params, (str, bytes, dict)) or not hasattr(params, "__iter__"):
+    if isinstance(params, (str, bytes, dict)) or not hasattr(params, "__iter__") or (
+            isinstance(params, np.ndarray) and params.ndim == 0):
         raise ParamError(f"{where} must be (name, values) pairs, got {params!r}")
     out = []
     for pair in params:
