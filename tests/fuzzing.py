@@ -23,7 +23,7 @@ from hypothesis.extra import numpy as hnp
 from mjx_pusht.errors import MjxPushtError
 
 BIG = "MJX_PUSHT_FUZZ_EXAMPLES" in os.environ
-FUZZ_EXAMPLES = int(os.environ.get("MJX_PUSHT_FUZZ_EXAMPLES", "30"))
+FUZZ_EXAMPLES = int(os.environ.get("MJX_PUSHT_FUZZ_EXAMPLES", "50"))
 FUZZ = settings(max_examples=FUZZ_EXAMPLES, derandomize=not BIG, database=None, print_blob=True,
                 deadline=datetime.timedelta(seconds=20),  # a first call builds a model; CI's 2 cores are shared
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture,

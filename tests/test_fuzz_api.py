@@ -36,6 +36,7 @@ def _rows(r) -> dict:
                                           max_size=2))
 @example(field="controller", value="expert", options={})  # was AttributeError 'open_loop'
 @example(field="controller", value=42, options={})
+@example(field="params", value=np.zeros((1, 2, 1)), options={})  # found: an array as a parameter's name, TypeError
 @example(field="reset", value="chapter", options={"bogus": 1})  # was accepted and ignored
 @example(field="reset", value="chapter", options={"threads": 0})
 @example(field="reset", value="chapter", options={"nthread": 0})

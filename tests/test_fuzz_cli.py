@@ -136,6 +136,8 @@ def _try(argv, world, owned: list[str]):
 @example(command="eval", data=["--video", "users/picture.gif", "--out", "fresh"])  # overwrote a user's picture
 @example(command="sweep", data=["--coordinator", "127.0.0.1:12345", "--out", "fresh"])  # ran alone, or hung
 @example(command="sweep", data=["--coordinator", "127.0.0.1:99999", "--out", "fresh"])  # OverflowError
+@example(command="sweep", data=["--share-out", "--backend", "gym-pusht", "--out", "users"])  # found: left .run.json
+@example(command="sweep", data=["--share-out", "--out", "root"])  # found: wrote its table into / (as root)
 @example(command="demos", data=["--success-threshold", "\r0", "--out", "fresh"])  # found: a value's \r made 2 lines
 def test_every_command_keeps_the_property(command, data, worlds):
     world = _world(worlds / f"w{next(_count)}")

@@ -50,9 +50,10 @@ def one_line(capsys, *words) -> str:
 @pytest.mark.parametrize("command", RUNS)
 def test_out_root_is_refused_and_leaves_nothing_in_it(command, capsys):
     before = sorted(os.listdir("/"))
-    assert main([*RUNS[command], "--out", "/"]) == 1
-    one_line(capsys, "--out /")
-    assert sorted(os.listdir("/")) == before
+    for extra in ([], ["--share-out"], ["--replace", "--share-out"]):
+        assert main([*RUNS[command], "--out", "/", *extra]) == 1
+        one_line(capsys, "--out / is the filesystem's root")
+        assert sorted(os.listdir("/")) == before
 
 
 @pytest.mark.parametrize("command", RUNS)

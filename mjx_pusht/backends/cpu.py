@@ -213,16 +213,7 @@ class FeedbackPool:
                                         initializer=_die_with_parent, initargs=(os.getpid(),))
         FeedbackPool.live.add(self)
 
-    live: set = set()  # the pools not yet closed: an interrupted command ends them before it exits (`end_all`)
-
-    @staticmethod
-    def end_all() -> None:
-        """End every live pool's workers now (an interrupted command: their episodes are not wanted) and release
-        the pool's semaphores, which an exit without this leaves to the resource tracker's "leaked" warning."""
-        for p in list(FeedbackPool.live):
-            for proc in list((getattr(p.pool, "_processes", None) or {}).values()):
-                proc.terminate()
-            p.close()
+    live: set = set()  # the pools not yet closed: an interrupted command ends them (cli.commands.end_interrupted)
 
     def run(self, scenario: Scenario, seeds, *, combos=None, poses=None) -> Rollouts:
         seeds = np.asarray(seeds, np.int64)

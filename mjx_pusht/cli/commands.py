@@ -57,8 +57,11 @@ def end_interrupted(code: int) -> None:
     down under it: SIGSEGV after the one-line message, or 10-18 s waiting for it (`train`, 4 and 3 of 16 runs,
     notebook lead22). What the command wrote is whole already: files by rename, --out's lock released; a
     checkpoint being written was waited for (`main`); CPU worker processes are ended here."""
-    if "mjx_pusht.backends.cpu" in sys.modules:
-        sys.modules["mjx_pusht.backends.cpu"].FeedbackPool.end_all()
+    if "mjx_pusht.backends.cpu" in sys.modules:  # its episodes are not wanted; closed, its semaphores are released
+        for pool in list(sys.modules["mjx_pusht.backends.cpu"].FeedbackPool.live):  # (else: "leaked semaphore")
+            for proc in list((getattr(pool.pool, "_processes", None) or {}).values()):
+                proc.terminate()
+            pool.close()
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)

@@ -23,7 +23,9 @@ def prepare_out_dir(path: Path) -> Path:
     try:  # a symlink to itself (a loop) or to nothing: mkdir would fail on it, resolve() raise RuntimeError
         if os.path.islink(path) and not os.path.exists(path):
             raise OutputError(f"--out {path} is a symlink to nothing (or a loop): give a folder")
-        path.resolve()
+        if path.resolve() == Path(path.resolve().anchor):  # --share-out would write a run's files among the system's
+            raise OutputError(f"--out {path} is the filesystem's root: give a folder of the run's own, such as "
+                              "outputs/run")
     except RuntimeError as e:
         raise OutputError(f"--out {path}: {e}") from None
     try:
@@ -159,6 +161,7 @@ INSIDE = {
 }
 _HELD: dict[Path, int] = {}  # folders this process has locked, and the descriptors holding their locks
 _CREATED: dict[Path, list] = {}  # --out folders this process made, and the folders it made above them
+_CLAIMS: dict[Path, str] = {}  # folders whose run file this process wrote where there was none, and its command
 
 
 def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool = False, reads=(),
@@ -208,6 +211,8 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
             remove_own(path / name)
         print(f"--replace: removed the earlier {command} results in {path} ({', '.join(held)})")
     _refuse_to_remove_inputs(path, command, reads)  # this run writes over its own files: none may be an input
+    if not (path / RUN_FILE).exists():
+        _CLAIMS[path.resolve()] = command
     atomic_write_json(path / RUN_FILE, mine)
     return path
 
@@ -368,6 +373,9 @@ class held_folders:
     def __exit__(self, kind, exc, tb):
         for key in set(_HELD) - self.before:
             os.close(_HELD.pop(key))
+            command = _CLAIMS.pop(key, None)
+            if exc is not None and command and not any(os.path.lexists(key / n) for n in OWN[command]):
+                (key / RUN_FILE).unlink(missing_ok=True)  # refused after its claim (a backend's check): no trace
             if exc is not None and key in _CREATED and _only_claim(key):
                 for name in os.listdir(key):
                     if (key / name).is_dir():

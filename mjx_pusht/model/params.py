@@ -140,7 +140,7 @@ def parse_param(text: str) -> tuple[str, list[float]]:
 
 def check_values(name: str, values, where: str) -> list[float]:
     """A parameter's values: a non-empty list of real numbers within its BOUNDS (the CLI's and the API's check)."""
-    if name not in PARAMS:
+    if not isinstance(name, str) or name not in PARAMS:  # an array as a name: not compared element by element
         raise ParamError(f"{where}: unknown parameter {name!r}; choose from {', '.join(PARAMS)}")
     if isinstance(values, (str, bytes)) or not hasattr(values, "__len__") or not len(values):
         raise ParamError(f"{where}: {name}'s values must be a non-empty sequence of numbers, got {values!r}")
