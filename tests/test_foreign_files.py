@@ -12,20 +12,11 @@ nothing the command did not write is removed.
 from __future__ import annotations
 
 import pytest
+from helpers import RUNS, one_line
 
 from mjx_pusht.cli import main
 from mjx_pusht.io.outputs import OutputError, claim_out_dir, held_folders, remove_own
 
-# The cheapest run of each command; every refusal below comes before any simulation.
-RUNS = {
-    "sweep": ("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--no-progress"),
-    "eval": ("eval", "--backend", "cpu", "--seeds", "2", "--max-steps", "3", "--no-rerun", "--no-progress"),
-    "scene": ("scene", "--no-rerun"),
-    "compare": ("compare", "--backend", "mjx-warp", "--seeds", "2"),
-    "train": ("train", "--backend", "cpu", "--envs", "8", "--iterations", "1", "--fit-steps", "5", "--hidden", "16",
-              "--eval-envs", "8", "--no-rerun", "--record", "0", "--no-progress"),
-    "demos": ("demos", "--backend", "cpu", "--seeds", "2", "--max-steps", "5", "--no-progress"),
-}
 # A user's files where a command might write: at the top, and in each folder some command writes its own into.
 USERS = ("notes.md", "data/mine.txt", "meta/notes.md", ".parts/mine.txt", "eval/per_episode.parquet",
          "checkpoints/mine.txt", "sweep/per_seed.parquet")
@@ -41,13 +32,6 @@ def users_files(folder, names=USERS) -> dict:
         (folder / name).parent.mkdir(parents=True, exist_ok=True)
         (folder / name).write_text(f"the user's {name}")
     return tree(folder)
-
-
-def one_line(capsys, *words) -> str:
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "Traceback" not in err[0], err
-    assert all(w in err[0] for w in words), err[0]
-    return err[0]
 
 
 @pytest.mark.parametrize("command", RUNS)

@@ -14,38 +14,10 @@ import sys
 import time
 
 import pytest
+from fuzzing import snapshot
+from helpers import RUNS, one_line
 
 from mjx_pusht.cli import main
-
-RUNS = {
-    "sweep": ("sweep", "--backend", "cpu", "--seeds", "2", "--steps", "5", "--no-rerun", "--no-progress"),
-    "eval": ("eval", "--backend", "cpu", "--seeds", "2", "--max-steps", "3", "--no-rerun", "--no-progress"),
-    "scene": ("scene", "--no-rerun"),
-    "compare": ("compare", "--backend", "mjx-warp", "--seeds", "2"),
-    "train": ("train", "--backend", "cpu", "--envs", "8", "--iterations", "1", "--fit-steps", "5", "--hidden", "16",
-              "--eval-envs", "8", "--no-rerun", "--record", "0", "--no-progress"),
-    "demos": ("demos", "--backend", "cpu", "--seeds", "2", "--max-steps", "5", "--no-progress"),
-}
-
-
-def snapshot(folder) -> dict:
-    """Every entry under `folder` (hidden ones, symlinks and folders too), each with its bytes or its target."""
-    out = {}
-    for root, dirs, files in os.walk(folder):
-        for name in dirs + files:
-            p = os.path.join(root, name)
-            rel = os.path.relpath(p, folder)
-            out[rel] = (os.readlink(p) if os.path.islink(p) else None if os.path.isdir(p)
-                        else open(p, "rb").read())
-    return out
-
-
-def one_line(capsys, *words) -> str:
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "Traceback" not in err[0], err
-    assert all(w in err[0] for w in words), err[0]
-    return err[0]
-
 
 @pytest.mark.parametrize("command", RUNS)
 def test_out_root_is_refused_and_leaves_nothing_in_it(command, capsys):
