@@ -30,7 +30,6 @@ elif _os.environ.get("MUJOCO_GL") in ("egl", "osmesa") and _sys.platform.startsw
         _os.environ["MJX_PUSHT_GL_MISSING"] = _os.environ.pop("MUJOCO_GL")
 
 
-
 def _end_early(signum, frame):  # noqa: ARG001 - a signal handler's signature
     _os.write(2, b"\nmjx-pusht: interrupted before the command started: nothing was written\n")
     _os._exit(128 + signum)
