@@ -3,7 +3,8 @@ its --out (and eval's --video) pointed at folders a user or another run owns (te
 
 The property, per try: either exit 0, every file that existed before unchanged, anything new inside the run's own
 fresh --out (or its fresh --video); or a refusal, exit 1 or 2 and one stderr line `mjx-pusht: error: ...`, and
-nothing anywhere added, changed or removed (no `.lock`, no folder, no probe). The cheap commands run for real (CPU
+nothing outside the run's own fresh --out added, changed or removed (no `.lock`, no folder, no probe; inside it, a
+run that failed once running keeps what --resume needs). The cheap commands run for real (CPU
 backend, a few steps); `train`'s and `compare`'s doors are the same claim_out_dir (tests/test_refused_writes_nothing.py
 covers them), and the multi-process flags are fuzzed through `Processes` in test_fuzz_api.py (a valid pair here would
 wait for a peer). Each `@example` is a case a hostile pass found.
@@ -16,6 +17,7 @@ import io
 import itertools
 import json
 import os
+import sys
 
 import pytest
 from hypothesis import event, example, given
@@ -54,7 +56,9 @@ GOOD = {  # a valid value per flag, drawn half the time, so that tries get past 
     "--seeds": ["1", "3", "0:2", "5,7"], "--steps": ["3", "10"], "--seed": ["0", "7"], "--chunk": ["1", "2"],
     "--break": ["none", "split-tee", "free-tee"], "--pusher": ["cylinder", "capsule"], "--record": ["0", "1"],
     "--param": ["kv=10,20", "tee_mass=0.5"], "--randomize": ["kv=0.5:1.5", "tee_mass=0.8:1.2"],
-    "--controller": ["expert", "zero", "random"], "--action": ["velocity", "position", "target"],
+    "--controller": ["expert", "zero", "random", *(f"ctl_fuzz:{n}" for n in (
+        "nan", "inf_later", "neg_inf_one_row", "shape", "none", "text", "raises", "ints", "huge", "as_list",
+        "not_callable", "missing"))], "--action": ["velocity", "position", "target"],
     "--task": ["chapter", "gym-pusht", "gym-pusht-easy"], "--reset": ["task", "easy", "chapter"],
     "--goal": ["fixed", "random"], "--success-threshold": ["0.9", "0.5"], "--max-steps": ["2", "4"],
     "--frame-skip": ["5", "10"], "--video-episodes": ["1", "2"], "--video-size": ["32", "48"], "--batch": ["1", "2"],
@@ -65,9 +69,31 @@ VIDEOS = st.sampled_from([None, "fresh.gif", "users/picture.gif", "fresh.avi", "
 _count = itertools.count()
 
 
+# A user's controllers (`--controller ctl_fuzz:NAME`), each handing back something a controller should not
+CONTROLLERS = """
+import numpy as np
+def nan(obs, t): return np.full(obs["state"].shape[:-1] + (2,), np.nan)
+def inf_later(obs, t): return np.full(obs["state"].shape[:-1] + (2,), np.inf if t >= 2 else 0.0)
+def neg_inf_one_row(obs, t):
+    a = np.zeros(obs["state"].shape[:-1] + (2,)); a[..., -1:, 0] = -np.inf; return a
+def shape(obs, t): return np.zeros(3)
+def none(obs, t): return None
+def text(obs, t): return np.full(obs["state"].shape[:-1] + (2,), "a")
+def raises(obs, t): raise ZeroDivisionError("boom")
+def ints(obs, t): return np.zeros(obs["state"].shape[:-1] + (2,), int)
+def huge(obs, t): return np.full(obs["state"].shape[:-1] + (2,), 1e300)
+def as_list(obs, t): return [[0.0, 0.0]] * len(obs["state"])
+not_callable = 3
+"""
+
+
 @pytest.fixture(scope="module")
 def worlds(tmp_path_factory):
-    return tmp_path_factory.mktemp("worlds")
+    root = tmp_path_factory.mktemp("worlds")
+    (root / "ctl_fuzz.py").write_text(CONTROLLERS)
+    sys.path.insert(0, str(root))
+    yield root
+    sys.path.remove(str(root))
 
 
 def _world(root):
@@ -128,7 +154,12 @@ def _try(argv, world, owned: list[str], replaced: list[str]):
     else:
         assert code in (1, 2), (argv, code, err.getvalue()[-2000:])
         assert len(lines) == 1 and lines[0].startswith("mjx-pusht: error: "), (argv, err.getvalue()[-2000:])
-        assert after == before, f"{argv}: a refused run changed {set(after) ^ set(before) or 'files'}"
+        # nothing anywhere, but in the run's own fresh --out: a run that failed once running (a user's controller
+        # raising at its first step) keeps what --resume needs there; refusals at the door leave nothing at all
+        # (tests/test_refused_writes_nothing.py)
+        moved = {p for p in set(before) | set(after) if before.get(p, "new") != after.get(p, "gone")}
+        outside = [p for p in moved if not any(p == o or p.startswith(o + "/") for o in owned)]
+        assert not outside, f"{argv}: a refused run changed {sorted(outside)[:5]}"
 
 
 @FUZZ
@@ -141,6 +172,8 @@ def _try(argv, world, owned: list[str], replaced: list[str]):
 @example(command="eval", data=["--replace", "--video", "users/picture.gif", "--out", "fresh"])  # documented: it may
 @example(command="sweep", data=["--coordinator", "127.0.0.1:12345", "--out", "fresh"])  # ran alone, or hung
 @example(command="sweep", data=["--coordinator", "127.0.0.1:99999", "--out", "fresh"])  # OverflowError
+@example(command="eval", data=["--controller", "ctl_fuzz:raises", "--out", "fresh"])  # a user's controller failing
+@example(command="eval", data=["--controller", "ctl_fuzz:inf_later", "--out", "fresh"])
 @example(command="sweep", data=["--share-out", "--backend", "gym-pusht", "--out", "users"])  # found: left .run.json
 @example(command="sweep", data=["--share-out", "--out", "root"])  # found: wrote its table into / (as root)
 @example(command="demos", data=["--success-threshold", "\r0", "--out", "fresh"])  # found: a value's \r made 2 lines
