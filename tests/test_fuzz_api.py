@@ -1,6 +1,6 @@
 """The Python API's boundary, fuzzed (tests/fuzzing.py: the property, the budget, the odd values).
 
-Entries: `Scenario`/`SceneSpec`/`Schedule` and `make_backend` (and a run of what they accept), the functional env's
+Entries: `Scenario`, `SceneSpec`, `Schedule` and `make_backend` (and a run of what they accept), the functional env's
 constructor, `reset` and `step`, both gym ids (make, reset with seeds and options, step), their vector envs
 (`set_attr`, `call`, reset options, step), the drop-in's reset options, a gym-pusht policy's observation
 (`boundary.check_gym_pusht_obs`) and the multi-process options (`Processes`). Each `@example` is a case a hostile
@@ -50,6 +50,22 @@ def test_scenario_and_make_backend(field, value, options):
     backend = holds(lambda: make_backend("cpu", scenario, **options), check=lambda b: None)
     if backend is not None and scenario.controller is None and scenario.schedule.nudge_steps <= 1000:
         holds(lambda: _rows(backend.run([0, 1])))
+
+
+@FUZZ
+@given(scene=st.dictionaries(st.sampled_from(["break_it", "pusher", "variant"]),
+                             st.one_of(st.sampled_from(["none", "split-tee", "free-tee", "capsule", "cylinder",
+                                                        "chapter", "gym-pusht"]), ODD), max_size=2),
+       schedule=st.dictionaries(st.sampled_from(["settle_steps", "nudge_steps", "nudge_ctrl"]),
+                                st.one_of(st.integers(-2, 60), st.lists(ODD, max_size=3), ODD), max_size=2))
+def test_scene_spec_and_schedule_then_a_run(scene, schedule):
+    """SceneSpec's and Schedule's fields, then the chapter study they make run on the CPU: finite rows or one line."""
+    from mjx_pusht import Scenario, Schedule, SceneSpec, make_backend
+
+    spec = holds(lambda: SceneSpec(**scene), check=lambda s: None)
+    plan = holds(lambda: Schedule(**{"settle_steps": 5, "nudge_steps": 5, **schedule}), check=lambda s: None)
+    if spec is not None and plan is not None and plan.settle_steps + plan.nudge_steps <= 200:
+        holds(lambda: _rows(make_backend("cpu", Scenario(spec, plan)).run([0, 1])))
 
 
 @FUZZ
