@@ -77,7 +77,7 @@ class Signals:
     Python runs a handler only when the main thread is back in Python: a main thread waiting in native code (a
     jax.distributed barrier, a long MuJoCo rollout) would hold a SIGTERM off for as long, where `kill`, `timeout` and
     Slurm expect an end. So the signal also wakes a watcher thread (`signal.set_wakeup_fd`), which gives the main
-    thread TERM_GRACE seconds for its clean-up and then ends the process itself with the same line and 143."""
+    thread TERM_GRACE seconds to run its handler, and if it has not, ends the process itself with one line and 143."""
 
     TERM_GRACE = 5.0
 
@@ -102,7 +102,7 @@ class Signals:
                 if signal.SIGTERM not in data:
                     continue
                 time.sleep(self.TERM_GRACE)
-                if self.wake is None:  # the command ended in its own time (a call of main() from Python)
+                if self.wake is None or self.got:  # ended in its own time, or the main thread is handling it
                     return
                 os.write(2, b"\nmjx-pusht: terminated (SIGTERM); finished files are whole (each written by rename)\n")
                 os._exit(143)
