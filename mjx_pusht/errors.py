@@ -13,7 +13,19 @@ import importlib.util
 
 
 class MjxPushtError(Exception):
-    """Bad input or an unrunnable request: the message says what is wrong, in the library's terms."""
+    """Bad input or an unrunnable request: the message says what is wrong, in the library's terms, on one line
+    (a value shown in it, an array's repr say, has its line breaks folded here, whoever raised it)."""
+
+    def __init__(self, *args):
+        if args and isinstance(args[0], str):
+            args = (one_line(args[0]), *args[1:])
+        super().__init__(*args)
+
+
+def one_line(text: str) -> str:
+    """`text` on one line: any line break (\\n, \\r, a Unicode one a value echoed in the message held) folded into
+    a space; a text of one line is returned as it is."""
+    return text if len(text.strip().splitlines()) <= 1 else " ".join(text.split())
 
 
 class ConfigError(MjxPushtError, ValueError):

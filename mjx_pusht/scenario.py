@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from mjx_pusht import boundary
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model.scene import SceneSpec
 from mjx_pusht.task.schedule import Schedule
@@ -42,10 +43,10 @@ class Scenario:
         object.__setattr__(self, "randomize", check_randomize(self.randomize, self.scene))
         if self.params and self.randomize:
             raise ConfigError("a Scenario sweeps a parameter grid or randomises physics per episode, not both")
+        boundary.CONTROLLER("Scenario's controller", self.controller)
         if self.episode is not None and not isinstance(self.episode, Episode):
             raise ConfigError(f"Scenario's episode must be an Episode, got {self.episode!r}")
-        if self.reset not in RESETS:
-            raise ConfigError(f"unknown reset {self.reset!r}; choose from {', '.join(RESETS)}")
+        boundary.OneOf(tuple(RESETS))("reset", self.reset)
         targets = getattr(self.controller, "action_type", None) == "target"
         if self.controller is not None and targets != (self.scene.variant == "gym-pusht"):
             raise ConfigError("the gym-pusht scene's pusher is on position servos: its actions are targets "

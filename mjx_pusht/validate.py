@@ -32,20 +32,15 @@ RENDER_MODES = (None, "rgb_array")
 log = logging.getLogger("mjx_pusht")
 
 
-def _show(value, limit: int = 60) -> str:
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
+from mjx_pusht.boundary import _show  # noqa: E402 - one way to show a value in a one-line message
 
 
 def choice(name: str, value, options) -> object:
-    """`value` if it is one of `options`, else a one-line error listing them."""
-    try:
-        ok = value in options
-    except TypeError:  # an unhashable value (a list) against a set of names
-        ok = False
-    if not ok:
-        raise ConfigError(f"unknown {name} {_show(value)}; choose from {', '.join(map(str, options))}")
-    return value
+    """`value` if it is one of `options`, else a one-line error listing them (boundary.OneOf: an array or a list is
+    compared as a value, never element by element)."""
+    from mjx_pusht.boundary import OneOf
+
+    return OneOf(tuple(options))(name, value)
 
 
 def render_mode(value, human: bool = False) -> str | None:
@@ -155,7 +150,10 @@ def seed_array(value, name: str = "seeds") -> np.ndarray:
     except ValueError:  # a ragged list
         raise ConfigError(f"{name} must be integers (a 1-D array), got {_show(value)}") from None
     if a.dtype == object:
-        a = np.asarray([seed(s, name) for s in a.reshape(-1)], np.int64)
+        given = [seed(s, name) for s in a.reshape(-1)]
+        if a.ndim == 0 or None in given:  # None: no seeds at all, or a None among them (the fuzzer's find)
+            raise ConfigError(f"{name} must be integers (a 1-D array), got {_show(value)}")
+        a = np.asarray(given, np.int64).reshape(a.shape)
     if a.dtype.kind not in "iu" or a.ndim > 1:
         raise ConfigError(f"{name} must be integers (a 1-D array), got {a.dtype} of shape {a.shape}")
     if a.size and (a.min() < 0 or (a.dtype.kind == "u" and a.max() > SEED_MAX)):
@@ -182,6 +180,9 @@ def reset_options(options, known: tuple, where: str) -> dict:
         return {}
     if not isinstance(options, dict):
         raise ConfigError(f"options must be a dict (or None), got {_show(options)}")
+    from mjx_pusht.boundary import reset_options as honoured
+
+    honoured(options, known, where)  # this package's options that `where` cannot honour are refused, not ignored
     unused = sorted(map(str, set(options) - set(known)))
     if unused:
         log.debug("%s.reset ignores option(s) it does not use: %s", where, ", ".join(unused))
@@ -192,9 +193,12 @@ def starts(value, rows: int, lo, hi, what: str = "[tee x, y, yaw, pusher x, y]")
     """reset_to_state: (5,) for every reset row or (rows, 5), finite, positions within [lo, hi] per column
     (the walls; NaN bounds for columns that are angles). Returns (rows, 5) float64."""
     try:
-        a = np.asarray(value, np.float64)
+        a = np.asarray(value)
+        if a.dtype.kind not in "fiu" and a.dtype != object:  # bools were 0 and 1, complex its real part
+            raise TypeError(a.dtype)
+        a = a.astype(np.float64)
     except (TypeError, ValueError):
-        raise ConfigError(f"reset_to_state is {what}: numbers, got {_show(value)}") from None
+        raise ConfigError(f"reset_to_state is {what}: real numbers, got {_show(value)}") from None
     if a.shape not in ((5,), (rows, 5)):
         raise ConfigError(f"reset_to_state is {what}: shape (5,) or ({rows}, 5), got {a.shape}")
     a = np.broadcast_to(a, (rows, 5))

@@ -20,6 +20,25 @@ def cli(*args, cwd=None, env=None) -> subprocess.CompletedProcess:
                           cwd=cwd, env=env or ENV)
 
 
+# The cheapest run of each command (the refusal tests' base: their refusals come before any simulation)
+RUNS = {
+    "sweep": ("sweep", "--backend", "cpu", "--seeds", "2", "--steps", "5", "--no-rerun", "--no-progress"),
+    "eval": ("eval", "--backend", "cpu", "--seeds", "2", "--max-steps", "3", "--no-rerun", "--no-progress"),
+    "scene": ("scene", "--no-rerun"),
+    "compare": ("compare", "--backend", "mjx-warp", "--seeds", "2"),
+    "train": ("train", "--backend", "cpu", "--envs", "8", "--iterations", "1", "--fit-steps", "5", "--hidden", "16",
+              "--eval-envs", "8", "--no-rerun", "--record", "0", "--no-progress"),
+    "demos": ("demos", "--backend", "cpu", "--seeds", "2", "--max-steps", "5", "--no-progress"),
+}
+
+def one_line(capsys, *words) -> str:
+    """The one stderr line a refused command printed (capsys), holding each of `words`."""
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    assert all(w in err[0] for w in words), err[0]
+    return err[0]
+
+
 def train_run(tmp_path_factory, *args):
     """`mjx-pusht train ARGS --out DIR` in a fresh temporary folder, as a user runs it; DIR when it succeeded."""
     out = tmp_path_factory.mktemp("train") / "run"

@@ -21,8 +21,7 @@ EVAL = ("eval", "--backend", "cpu", "--max-steps", "3", "--no-rerun", "--no-prog
 
 def tree(folder) -> dict:
     """Every file under `folder` (recursively, hidden ones too) and its bytes."""
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()
-            and p.name != ".lock"}
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
 def refused(r, *words) -> str:
@@ -44,6 +43,10 @@ def test_eval_and_sweep_into_a_train_folder_are_refused_with_or_without_replace_
         refused(r, "holds train's results", "policy.msgpack", "whatever the flags")
         r = cli("sweep", "--backend", "cpu", "--seeds", "2", "--no-rerun", "--no-progress", "--out", str(run), *extra)
         refused(r, "holds train's results", "policy.msgpack")
+        # the train's own judgement (run/eval) is the train's: an eval --replace there would overwrite it
+        r = cli(*EVAL, "--seeds", "3", "--controller", f"policy:{run / 'policy.msgpack'}", "--out", str(run / "eval"),
+                *extra)
+        refused(r, "part of the train run", "never writes into another run's folder")
         assert tree(run) == before
     # the policy is still there to evaluate, elsewhere
     r = cli(*EVAL, "--seeds", "2", "--controller", f"policy:{run / 'policy.msgpack'}", "--out", str(tmp_path / "e"))

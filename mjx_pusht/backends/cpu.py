@@ -211,6 +211,9 @@ class FeedbackPool:
         self.workers = workers
         self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                         initializer=_die_with_parent, initargs=(os.getpid(),))
+        FeedbackPool.live.add(self)
+
+    live: set = set()  # the pools not yet closed: an interrupted command ends them (cli.commands.end_interrupted)
 
     def run(self, scenario: Scenario, seeds, *, combos=None, poses=None) -> Rollouts:
         seeds = np.asarray(seeds, np.int64)
@@ -225,6 +228,7 @@ class FeedbackPool:
         return Rollouts.concat([j.result() for j in jobs])
 
     def close(self) -> None:
+        FeedbackPool.live.discard(self)
         self.pool.shutdown(cancel_futures=True)
 
 

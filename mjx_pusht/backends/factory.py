@@ -3,7 +3,7 @@ the protocol (base.py) knows no implementation, and each implementation knows on
 
 from __future__ import annotations
 
-from mjx_pusht import validate
+from mjx_pusht import boundary, validate
 from mjx_pusht.backends.base import IMPL, Backend, resolve
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.scenario import Scenario
@@ -14,6 +14,7 @@ def make_backend(name: str, scenario, **kwargs) -> Backend:
     name, _ = resolve(name)
     if not isinstance(scenario, Scenario):
         raise ConfigError(f"make_backend takes a Scenario, got {type(scenario).__name__}")
+    kwargs = boundary.check(boundary.BACKEND_OPTIONS[name], kwargs, f"make_backend({name!r})")
     # a backend's rollout runs max_steps control steps in one call (a scan on MJX, a control table on the CPU): the
     # CLI's --max-steps bound. An env's own episode may be longer (it steps one control step a call).
     # (A schedule's steps are bounded by Schedule itself.)

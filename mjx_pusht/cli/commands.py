@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import errno
 import os
+import signal
 import sys
+import threading
+import time
 from pathlib import Path
 
 from mjx_pusht.cli.compare import cmd_compare
@@ -14,7 +17,7 @@ from mjx_pusht.cli.eval import cmd_eval
 from mjx_pusht.cli.parser import UsageError, build_parser
 from mjx_pusht.cli.scene import cmd_scene, cmd_tree
 from mjx_pusht.cli.sweep import cmd_sweep
-from mjx_pusht.errors import MjxPushtError, missing_extra, needs
+from mjx_pusht.errors import MjxPushtError, missing_extra, needs, one_line
 
 
 DAGGER_MODULES = ("flax", "optax")  # what DAgger imports of the train extra (PPO adds Brax and orbax)
@@ -53,16 +56,100 @@ def end_interrupted(code: int) -> None:
     thread waits for an XLA compile on JAX's thread pool; the compile runs on, and at exit JAX's CPU client was torn
     down under it: SIGSEGV after the one-line message, or 10-18 s waiting for it (`train`, 4 and 3 of 16 runs,
     notebook lead22). What the command wrote is whole already: files by rename, --out's lock released; a
-    checkpoint being written was waited for (`main`)."""
+    checkpoint being written was waited for (`main`); CPU worker processes are ended here."""
+    if "mjx_pusht.backends.cpu" in sys.modules:  # its episodes are not wanted; closed, its semaphores are released
+        for pool in list(sys.modules["mjx_pusht.backends.cpu"].FeedbackPool.live):  # (else: "leaked semaphore")
+            for proc in list((getattr(pool.pool, "_processes", None) or {}).values()):
+                proc.terminate()
+            pool.close()
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)
 
 
+class Signals:
+    """SIGINT and SIGTERM while a command runs, as one KeyboardInterrupt: the command's own clean-up runs (chunks,
+    checkpoints kept), then one line and exit 130 (SIGINT) or 143 (SIGTERM, 128 + 15, as a shell reports a process
+    it ended). `got` remembers which came: a Ctrl-C inside a C extension's import surfaces as `ImportError:
+    initialization failed`, which is then the interrupt too. Only the main thread may set handlers; a SIGINT the
+    parent ignores (a background job) stays ignored.
+
+    Python runs a handler only when the main thread is back in Python: a main thread waiting in native code (a
+    jax.distributed barrier, a long MuJoCo rollout) would hold a SIGTERM off for as long, where `kill`, `timeout` and
+    Slurm expect an end. So the signal also wakes a watcher thread (`signal.set_wakeup_fd`), which gives the main
+    thread TERM_GRACE seconds to run its handler, and if it has not, ends the process itself with one line and 143."""
+
+    TERM_GRACE = 5.0
+
+    def __init__(self):
+        self.got, self.old, self.wake = None, {}, None
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                if signal.getsignal(sig) is not signal.SIG_IGN:
+                    self.old[sig] = signal.signal(sig, self._interrupt)
+            if signal.SIGTERM in self.old:
+                r, w = os.pipe()
+                os.set_blocking(w, False)
+                self.wake = (r, w, signal.set_wakeup_fd(w, warn_on_full_buffer=False))
+                threading.Thread(target=self._watch, args=(r,), daemon=True, name="sigterm-watch").start()
+        return self
+
+    def _watch(self, r: int) -> None:
+        with os.fdopen(r, "rb", buffering=0) as pipe:
+            while data := pipe.read(16):  # b"" once __exit__ closed the other end
+                if signal.SIGTERM not in data:
+                    continue
+                time.sleep(self.TERM_GRACE)
+                if self.wake is None or self.got:  # ended in its own time, or the main thread is handling it
+                    return
+                os.write(2, b"\nmjx-pusht: terminated (SIGTERM); finished files are whole (each written by rename)\n")
+                os._exit(143)
+
+    def _interrupt(self, signum, frame):
+        self.got = signum
+        raise KeyboardInterrupt
+
+    def __exit__(self, *exc):
+        for sig, handler in self.old.items():
+            signal.signal(sig, handler)
+        if self.wake is not None:
+            r, w, old = self.wake
+            self.wake = None
+            signal.set_wakeup_fd(old)
+            os.close(w)  # the watcher reads the end of its pipe and returns
+
+    def code(self) -> int:
+        return 128 + (self.got or signal.SIGINT)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command. Bad input (an `MjxPushtError`) is one line and a non-zero exit; anything else is a bug
     and keeps its traceback."""
-    from mjx_pusht.io.outputs import finish_background_writes, held_folders
+    with Signals() as signals:
+        return _main(argv, signals)
+
+
+def _interrupted(args, signals: Signals, argv) -> int:
+    from mjx_pusht.io.outputs import finish_background_writes
+
+    if signals.old:  # a second Ctrl-C while the line is written and the writes are waited for: not a traceback
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    code = signals.code()
+    what = "terminated (SIGTERM)" if code == 143 else "interrupted"
+    if args is None:
+        print(f"\nmjx-pusht: {what} before the command started: nothing was written", file=sys.stderr)
+    else:
+        finish_background_writes()  # a checkpoint being written is whole before the line says what is kept
+        print(f"\nmjx-pusht: {what}: {kept(args)}", file=sys.stderr)
+    if argv is None:  # the process's own command (not a call from Python): it ends here
+        end_interrupted(code)
+    return code
+
+
+def _main(argv, signals: Signals) -> int:
+    from mjx_pusht.io.outputs import held_folders
 
     args = None
     try:
@@ -70,27 +157,28 @@ def main(argv: list[str] | None = None) -> int:
         if args.verbose:
             os.environ["MJX_PUSHT_VERBOSE"] = "1"
         with held_folders():  # the --out folder is locked while the command runs
-            return COMMANDS[args.command](args)
+            code = COMMANDS[args.command](args)
+        if code == 130 and signals.got:  # a command that caught the interrupt and said what it kept
+            if argv is None:  # ends now: atexit's jax.distributed shutdown would wait for peers still running
+                end_interrupted(signals.code())
+            return signals.code()
+        return code
     except UsageError as e:
-        print(f"mjx-pusht: error: {e}", file=sys.stderr)
+        print(f"mjx-pusht: error: {one_line(str(e))}", file=sys.stderr)
         return 2
     except MjxPushtError as e:
-        print(f"mjx-pusht: error: {e}", file=sys.stderr)
+        print(f"mjx-pusht: error: {one_line(str(e))}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        if args is None:
-            raise
-        finish_background_writes()  # a checkpoint being written is whole before the line says what is kept
-        print(f"\nmjx-pusht: interrupted: {kept(args)}", file=sys.stderr)
-        if argv is None:  # the process's own command (not a call from Python): it ends here
-            end_interrupted(130)
-        return 130
+        return _interrupted(args, signals, argv)
     except OSError as e:
         if args is None or e.errno not in DISK_ERRORS:
             raise  # not the disk or the path: a bug, with its traceback
         print(f"mjx-pusht: error: writing {e.filename or args.out} failed ({e.strerror}); {kept(args)}", file=sys.stderr)
         return 1
     except ImportError as e:  # an optional extra's module met where no `requires` stood: still one line
+        if signals.got:  # Ctrl-C inside an extension's import: "initialization failed"
+            return _interrupted(args, signals, argv)
         err = missing_extra(e, f"mjx-pusht {argv[0] if argv else sys.argv[1]}")
         if err is None:
             raise

@@ -26,8 +26,7 @@ NEVER = 2**31 - 1  # an env's own step limit when gymnasium's TimeLimit ends its
 def check_kwargs(obs_type: str, action_type: str, observation_size: int = IMAGE_SIZE) -> None:
     validate.choice("obs_type", obs_type, OBS_TYPES)
     validate.choice("action_type", action_type, ACTION_TYPES)
-    if obs_type.startswith("pixels"):
-        validate.image_size(observation_size, "observation_size")
+    validate.image_size(observation_size, "observation_size")  # the space's shape even where no image is drawn
 
 
 def check_starts(starts, rows: int) -> np.ndarray:

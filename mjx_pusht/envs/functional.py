@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from mjx_pusht import validate
+from mjx_pusht import boundary, validate
 from mjx_pusht.envs import physics as per_episode
 from mjx_pusht.envs.observation import Observes
 from mjx_pusht.envs.resets import Resets
@@ -93,8 +93,10 @@ class PushTEnv(Resets, Observes):
         from mjx_pusht.backends.base import BackendError
         from mjx_pusht.scenario import Scenario
 
-        if self.action_type not in ACTION_TYPES:
-            raise ConfigError(f"unknown action type {self.action_type!r}; choose from {', '.join(ACTION_TYPES)}")
+        given = {k: getattr(self, k) for k in boundary.FUNCTIONAL_ENV}
+        boundary.check(boundary.FUNCTIONAL_ENV, given, "PushTEnv")
+        boundary.refuse_combinations(boundary.COMBINATIONS["functional_env"], given)
+        boundary.OneOf(tuple(ACTION_TYPES))("action type", self.action_type)  # an array is refused, not compared
         self.pixels, self.threads = validate.pixels(self.pixels), validate.positive_int("threads", self.threads)
         self.episode = episode_with_goal(self.episode, self.goal, self.scene.variant)
         if self.backend not in ("cpu", "mjx-jax", "mjx-warp"):
@@ -208,6 +210,7 @@ class PushTEnv(Resets, Observes):
 
     def _step_cpu(self, state: State, action) -> State:
         """The batch's control step on MuJoCo C: the same episode.py functions on NumPy arrays."""
+        boundary.env_state(state, State)
         return self._step_checked(state, validate.actions(action, (len(state.step), 2), -np.inf, np.inf))
 
     def _step_checked(self, state: State, action: np.ndarray) -> State:
@@ -251,6 +254,7 @@ class PushTEnv(Resets, Observes):
         import jax
         import jax.numpy as jnp
 
+        boundary.env_state(state, State)
         action = jnp.asarray(action)
         validate.actions_shape_on_device(action, len(state.step))  # (n, 2), never reshaped; traced too
         if not isinstance(action, jax.core.Tracer):

@@ -40,6 +40,7 @@ import math
 
 import numpy as np
 
+from mjx_pusht.task import goals
 from mjx_pusht.errors import requires
 
 with requires("the gymnasium environments", "gym"):  # the extra is optional: say what to install, in one line
@@ -99,7 +100,7 @@ class PushTGymEnv(OneWorld, Pictures, gym.Env):
                                validate.episode_limit(max_episode_steps), frame_skip,
                                success_threshold=success_threshold, goal=goal, randomize=randomize)
         self.observation_space, self.action_space = single_spaces(obs_type, action_type, observation_size, np.float64,
-                                                                  goal != "fixed")
+                                                                  goals.check(goal) != "fixed")
         self._low, self._high = action_bounds(action_type)
         self.metadata = {**self.metadata, "render_fps": self._fps}
         self._state = None

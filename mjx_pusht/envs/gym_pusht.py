@@ -28,6 +28,7 @@ import math
 
 import numpy as np
 
+from mjx_pusht.task import goals
 from mjx_pusht import validate
 from mjx_pusht.envs import gym as base  # first: says which extra brings gymnasium if it is missing
 from mjx_pusht.envs import physics
@@ -256,7 +257,7 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         self.visualization_width, self.visualization_height = visualization_width, visualization_height
         self.render_size = visualization_width
         self.observation_space, self.action_space = gym_pusht_spaces(obs_type, observation_width, observation_height,
-                                                                     goal=goal != "fixed")
+                                                                     goal=goals.check(goal) != "fixed")
         self.k_p, self.k_v, self.control_hz, self.dt = frame.KP, frame.KV, 10, 0.01  # as gym-pusht names them
         self._env = functional("cpu", obs_type, "target", observation_width, reset_kind, None, 10,
                                variant="gym-pusht", success_threshold=success_threshold, goal=goal, randomize=randomize)

@@ -7,14 +7,14 @@ they lie. NumPy is a copy to the host by nature; it is what the CPU backend has 
 
 from __future__ import annotations
 
+from mjx_pusht import boundary
 from mjx_pusht.errors import ConfigError
 
 ARRAY_TYPES = ("jax", "torch", "numpy")
 
 
 def check_array_type(array_type: str) -> str:
-    if array_type not in ARRAY_TYPES:
-        raise ConfigError(f"unknown array_type {array_type!r}; choose from {', '.join(ARRAY_TYPES)}")
+    boundary.OneOf(tuple(ARRAY_TYPES))("array_type", array_type)  # an array is refused, not compared
     if array_type == "torch":
         try:
             import torch  # noqa: F401

@@ -12,7 +12,9 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from mjx_pusht.task import goals
 from mjx_pusht import validate
+from mjx_pusht.boundary import MAX_ENVS
 from mjx_pusht.envs import physics
 from mjx_pusht.envs.common import (
     Pictures,
@@ -76,7 +78,7 @@ class PushTVectorEnv(Pictures, VectorEnv):
         from mjx_pusht.envs.wrappers import AutoReset, StartPool
 
         self._check_args(obs_type, action_type, observation_size)
-        self.num_envs = validate.positive_int("num_envs", num_envs)
+        self.num_envs = validate.positive_int("num_envs", num_envs, 1, MAX_ENVS)  # 2**40 was numpy's MemoryError
         validate.render_mode(render_mode)
         validate.image_size(render_size, "render_size")
         max_episode_steps = validate.episode_limit(max_episode_steps)  # -1 or None: no limit, as gymnasium says
@@ -98,7 +100,7 @@ class PushTVectorEnv(Pictures, VectorEnv):
                                 max_episode_steps, frame_skip, threads, variant, success_threshold, goal, randomize)
         self._dtype = np.float64 if self.backend == "cpu" else np.dtype(self._env.runner.dtype)
         self.single_observation_space, self.single_action_space = self._single_spaces(
-            obs_type, action_type, observation_size, self._dtype, goal != "fixed")
+            obs_type, action_type, observation_size, self._dtype, goals.check(goal) != "fixed")
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.metadata["render_fps"] = self._fps
@@ -340,6 +342,9 @@ class PushTVectorEnv(Pictures, VectorEnv):
     def call(self, name: str, *args, **kwargs) -> tuple:
         """`name` called (or read, if not callable) on each sub-environment: one result per env, as SyncVectorEnv
         returns."""
+        from mjx_pusht import boundary
+
+        boundary.attribute(self, name)
         if name == "render":
             frames = self.render(*args, **kwargs)
             return (None,) * self.num_envs if frames is None else tuple(frames)
@@ -351,9 +356,19 @@ class PushTVectorEnv(Pictures, VectorEnv):
         return self.call(name)
 
     def set_attr(self, name: str, values) -> None:
+        from mjx_pusht import boundary
+
+        own = self.__dict__.setdefault("_users_attrs", set())
         values = values if isinstance(values, (list, tuple)) else [values] * self.num_envs
-        if len(values) != self.num_envs or any(v != values[0] for v in values[1:]):
+        if len(values) != self.num_envs or not all(_same(v, values[0]) for v in values[1:]):
             raise ConfigError(f"the {self.num_envs} environments are one batch: set_attr needs one value for all")
-        setattr(self, name, values[0])
+        setattr(self, name, boundary.set_attr(self, name, values[0], own))
+        own.add(name)
 
 
+def _same(a, b) -> bool:
+    """Whether two set_attr values are one value (arrays compared whole, not as an ambiguous truth value)."""
+    try:
+        return a is b or bool(a == b)
+    except (ValueError, TypeError):
+        return np.array_equal(np.asarray(a), np.asarray(b))

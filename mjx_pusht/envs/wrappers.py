@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mjx_pusht import boundary
 from mjx_pusht import validate
 from mjx_pusht.envs import physics as per_episode
 from mjx_pusht.errors import ConfigError
@@ -123,8 +124,7 @@ class AutoReset:
 
     def __init__(self, env, mode: str = "same_step", depth: int = 8, final_pixels: bool = False,
                  donate: bool = False, image_pool: bool = True):
-        if mode not in MODES:
-            raise ConfigError(f"unknown autoreset mode {mode!r}; choose from {', '.join(MODES)}")
+        boundary.OneOf(tuple(MODES))("autoreset mode", mode)  # an array is refused, not compared
         self.env, self.mode, self.depth = env, mode, int(depth)
         self.final_pixels = final_pixels
         # the new episodes' first images from the pool (one render a step), where two would be needed

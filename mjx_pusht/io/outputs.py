@@ -20,6 +20,14 @@ def prepare_out_dir(path: Path) -> Path:
     if not str(path).strip():  # Path('') is the current folder, which a run would write into
         raise OutputError("--out is empty: give a folder, such as outputs/run")
     path = Path(path)
+    try:  # a symlink to itself (a loop) or to nothing: mkdir would fail on it, resolve() raise RuntimeError
+        if os.path.islink(path) and not os.path.exists(path):
+            raise OutputError(f"--out {path} is a symlink to nothing (or a loop): give a folder")
+        if path.resolve() == Path(path.resolve().anchor):  # --share-out would write a run's files among the system's
+            raise OutputError(f"--out {path} is the filesystem's root: give a folder of the run's own, such as "
+                              "outputs/run")
+    except RuntimeError as e:
+        raise OutputError(f"--out {path}: {e}") from None
     try:
         if path.exists() and not path.is_dir():
             raise OutputError(f"--out {path} is a file, not a folder")
@@ -137,7 +145,8 @@ OWN = {
               "checkpoints", "eval"),
     "demos": ("data", "meta", ".demos-partial"),
 }
-BOOKKEEPING = (RUN_FILE, ".lock")  # the run file and the lock every claimed folder holds
+# the run file, and the lock file runs of earlier versions left (the lock is now the OS's, on the folder itself)
+BOOKKEEPING = (RUN_FILE, ".lock")
 # Inside the folders a command writes, the files it puts there: a file matching none of these is a user's, and no
 # command removes it (a user's data/mine.txt in demos' data/ stays, and the folder is refused).
 _DATASET = ("data/chunk-*/file-*.parquet", "meta/info.json", "meta/stats.json", "meta/tasks.parquet",
@@ -150,8 +159,9 @@ INSIDE = {
     "meta": tuple(p.removeprefix("meta/") for p in _DATASET if p.startswith("meta/")),
     ".demos-partial": _DATASET,
 }
-_HELD: dict[Path, object] = {}  # folders this process has locked, and their open lock files
+_HELD: dict[Path, int] = {}  # folders this process has locked, and the descriptors holding their locks
 _CREATED: dict[Path, list] = {}  # --out folders this process made, and the folders it made above them
+_CLAIMS: dict[Path, str] = {}  # folders whose run file this process wrote where there was none, and its command
 
 
 def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool = False, reads=(),
@@ -169,17 +179,10 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
 
     path = prepare_out_dir(path)
     _lock(path)
+    _refuse_another_runs_folder(path, command)
     mine = {"command": command,
             "fingerprint": hashlib.sha256(json.dumps(fingerprint, sort_keys=True, default=str).encode()).hexdigest()}
-    held = _results_in(path)
-    try:
-        owner = json.loads((path / RUN_FILE).read_text())
-        if not isinstance(owner, dict):
-            raise ValueError(RUN_FILE)
-    except (OSError, ValueError):
-        # results from before the run file existed are known by their name, chunks by their manifest (whose
-        # seeds and settings the resume check compares); a lone summary.json by nobody
-        owner = {"command": next((RESULTS[n] for n in held if n in RESULTS), None) or _chunks_command(path)}
+    held, owner = _owner(path)
     who = owner.get("command")
     if held:
         foreign = held if who != command else [n for n in held if n not in OWN[command]]  # a policy in an eval's folder
@@ -208,8 +211,41 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
             remove_own(path / name)
         print(f"--replace: removed the earlier {command} results in {path} ({', '.join(held)})")
     _refuse_to_remove_inputs(path, command, reads)  # this run writes over its own files: none may be an input
+    if not (path / RUN_FILE).exists():
+        _CLAIMS[path.resolve()] = command
     atomic_write_json(path / RUN_FILE, mine)
     return path
+
+
+def _owner(path: Path) -> tuple[list[str], dict]:
+    """The results `path` holds, and its run file (or, without one, the command those results are of)."""
+    held = _results_in(path)
+    try:
+        owner = json.loads((path / RUN_FILE).read_text())
+        if not isinstance(owner, dict):
+            raise ValueError(RUN_FILE)
+    except (OSError, ValueError):
+        # results from before the run file existed are known by their name, chunks by their manifest (whose
+        # seeds and settings the resume check compares); a lone summary.json by nobody
+        owner = {"command": next((RESULTS[n] for n in held if n in RESULTS), None) or _chunks_command(path)}
+    return held, owner
+
+
+def _refuse_another_runs_folder(path: Path, command: str) -> None:
+    """Refuse `path` when it is a folder another run writes inside its own (a train's eval/, whose results the
+    train wrote as its judgement): --replace there would remove that run's files. The run that holds the folder
+    above (train judging its policy) may. The run is known by its run file (a folder merely holding a policy file
+    is a user's, and its eval/ theirs to write)."""
+    parent = path.resolve().parent
+    if parent == path.resolve() or parent in _HELD:
+        return
+    try:
+        who = json.loads((parent / RUN_FILE).read_text()).get("command")
+    except (OSError, ValueError, AttributeError):
+        return
+    if who in OWN and path.resolve().name in OWN[who]:
+        raise OutputError(f"--out {path} is part of the {who} run in {parent} (its {path.resolve().name}/); "
+                          f"{command} never writes into another run's folder, whatever the flags: choose another --out")
 
 
 def _listed(names: list[str], most: int = 6) -> str:
@@ -307,26 +343,23 @@ def _refuse_to_remove_inputs(path: Path, command: str, reads) -> None:
 
 
 def _lock(path: Path) -> None:
-    """Hold an exclusive lock on `path` until `release` (or this process's end): a second run into the
-    same folder stops in one line instead of racing this one for its chunk files."""
+    """Hold an exclusive lock on `path` until `held_folders` lets go (or this process ends): a second run into the
+    same folder stops in one line instead of racing this one for its chunk files. The lock is the kernel's, on the
+    folder itself (flock on its descriptor): no lock file is written, so a refused run leaves none, and a killed
+    run's lock goes with its process."""
     import fcntl
 
     key = path.resolve()
     if key in _HELD:
         return
-    f = open(path / ".lock", "a+")  # noqa: SIM115 - held open for the run's length
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
     try:
-        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
-        f.seek(0)
-        pid = f.read().strip() or "?"
-        f.close()
-        raise OutputError(f"--out {path} is in use by another mjx-pusht run (pid {pid}); wait for it to finish "
+        os.close(fd)
+        raise OutputError(f"--out {path} is in use by another mjx-pusht run; wait for it to finish "
                           "or choose another --out") from None
-    f.truncate(0)
-    f.write(str(os.getpid()))
-    f.flush()
-    _HELD[key] = f
+    _HELD[key] = fd
 
 
 class held_folders:
@@ -339,7 +372,10 @@ class held_folders:
 
     def __exit__(self, kind, exc, tb):
         for key in set(_HELD) - self.before:
-            _HELD.pop(key).close()
+            os.close(_HELD.pop(key))
+            command = _CLAIMS.pop(key, None)
+            if exc is not None and command and not any(os.path.lexists(key / n) for n in OWN[command]):
+                (key / RUN_FILE).unlink(missing_ok=True)  # refused after its claim (a backend's check): no trace
             if exc is not None and key in _CREATED and _only_claim(key):
                 for name in os.listdir(key):
                     if (key / name).is_dir():

@@ -8,6 +8,7 @@ sees. GIFs need only Pillow; MP4 needs imageio with its ffmpeg (`pip install 'mj
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +23,9 @@ class VideoError(MjxPushtError, RuntimeError):
     """A video that cannot be written (format, missing encoder, unwritable path): one line."""
 
 
-def check_path(path: Path) -> Path:
-    """Fail before any work if the video could not be written."""
+def check_path(path: Path, replace: bool = False) -> Path:
+    """Fail before any work if the video could not be written, or would overwrite a file (a user's, an earlier
+    run's) without `replace` saying to."""
     path = Path(path)
     if path.suffix.lower() not in FORMATS:
         raise VideoError(f"--video must end in .gif or .mp4, got {path.name!r}")
@@ -34,6 +36,8 @@ def check_path(path: Path) -> Path:
         raise VideoError(f"cannot write the video: folder {parent} does not exist")
     if path.is_dir():
         raise VideoError(f"--video {path} is a folder; give a file name such as {path / 'episodes'}{path.suffix}")
+    if os.path.lexists(path) and not replace:
+        raise VideoError(f"--video {path} already exists; pass --replace to overwrite it, or give another name")
     try:  # the folder must take a new file now, not after the episodes have run
         import tempfile
 
@@ -136,7 +140,7 @@ def episode_grid(model, qpos: np.ndarray, layout, seeds, frame_skip: int, succes
 
 def write(path: Path, frames: np.ndarray, fps: float) -> None:
     """GIF through Pillow, MP4 through imageio's ffmpeg; written to a temporary name, then moved into place."""
-    path = check_path(path)
+    path = check_path(path, replace=True)  # whether it may overwrite was checked before the episodes ran
     tmp = path.with_name("." + path.name + ".partial" + path.suffix)  # hidden until whole, as record.py's
     try:
         _encode(tmp, path, frames, fps)

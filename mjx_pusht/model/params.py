@@ -140,7 +140,7 @@ def parse_param(text: str) -> tuple[str, list[float]]:
 
 def check_values(name: str, values, where: str) -> list[float]:
     """A parameter's values: a non-empty list of real numbers within its BOUNDS (the CLI's and the API's check)."""
-    if name not in PARAMS:
+    if not isinstance(name, str) or name not in PARAMS:  # an array as a name: not compared element by element
         raise ParamError(f"{where}: unknown parameter {name!r}; choose from {', '.join(PARAMS)}")
     if isinstance(values, (str, bytes)) or not hasattr(values, "__len__") or not len(values):
         raise ParamError(f"{where}: {name}'s values must be a non-empty sequence of numbers, got {values!r}")
@@ -154,7 +154,8 @@ def check_values(name: str, values, where: str) -> list[float]:
 def check_params(params, where: str = "params") -> tuple[tuple[str, tuple[float, ...]], ...]:
     """(name, values) pairs: each a known NAME once, its values within bounds, the grid at most MAX_COMBINATIONS
     combinations. Returned as tuples of floats."""
-    if isinstance(params, (str, bytes, dict)) or not hasattr(params, "__iter__"):
+    if isinstance(params, (str, bytes, dict)) or not hasattr(params, "__iter__") or (
+            isinstance(params, np.ndarray) and params.ndim == 0):
         raise ParamError(f"{where} must be (name, values) pairs, got {params!r}")
     out = []
     for pair in params:

@@ -57,11 +57,13 @@ _PROBES, _CHECKS = (1.0, 2.0, 4.0), (0.5, 3.0)
 def check(randomize, scene, where: str = "randomize") -> tuple[tuple[str, tuple[float, float]], ...]:
     """(name, (lo, hi)) pairs in PARAMS order: known names that mean something on `scene`'s task (a SceneSpec),
     finite factors lo <= hi whose values (factor x the scene's own) stay within params.BOUNDS."""
-    if randomize is None or (hasattr(randomize, "__len__") and not len(randomize)):
-        return ()
-    try:
+    try:  # a 0-d array has a __len__ that raises; a name that is not a string cannot be looked up
+        if randomize is None or not len(randomize):
+            return ()
         pairs = list(randomize.items() if isinstance(randomize, dict) else randomize)
         pairs = [(name, tuple(r)) for name, r in pairs]
+        if not all(isinstance(name, str) for name, _ in pairs):
+            raise TypeError(randomize)
     except (TypeError, ValueError):
         raise ParamError(f"{where} must map names to (lo, hi) scale factors, got {randomize!r}") from None
     if len({n for n, _ in pairs}) != len(pairs):

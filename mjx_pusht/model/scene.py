@@ -11,6 +11,7 @@ from typing import Literal
 
 import mujoco
 
+from mjx_pusht import boundary
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model import gym_pusht_scene
 from mjx_pusht.model.target import target_mjcf
@@ -121,12 +122,9 @@ class SceneSpec:
     variant: str = "chapter"
 
     def __post_init__(self) -> None:
-        if self.break_it not in BREAK_MODES:
-            raise ConfigError(f"unknown break mode {self.break_it!r}; choose from {', '.join(BREAK_MODES)}")
-        if self.pusher not in PUSHER_SHAPES:
-            raise ConfigError(f"unknown pusher shape {self.pusher!r}; choose from {', '.join(PUSHER_SHAPES)}")
-        if self.variant not in VARIANTS:
-            raise ConfigError(f"unknown scene variant {self.variant!r}; choose from {', '.join(VARIANTS)}")
+        boundary.OneOf(tuple(BREAK_MODES))("break mode", self.break_it)  # an array is refused, not compared
+        boundary.OneOf(tuple(PUSHER_SHAPES))("pusher shape", self.pusher)  # an array is refused, not compared
+        boundary.OneOf(tuple(VARIANTS))("scene variant", self.variant)  # an array is refused, not compared
         if self.variant != "chapter" and (self.break_it, self.pusher) != ("none", "cylinder"):
             raise ConfigError(f"the {self.variant} scene is the welded T with a cylinder pusher "
                               "(break modes and pusher shapes are the chapter's)")

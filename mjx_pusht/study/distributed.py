@@ -38,15 +38,15 @@ class Processes:
     coordinator: str | None = None
     peer_timeout: float = 300.0  # seconds to wait for every process to join, and to agree
 
-    def __post_init__(self) -> None:
-        if self.num_processes < 1:
-            raise DistributedError(f"--num-processes must be at least 1, got {self.num_processes}")
-        if not 0 <= self.process_id < self.num_processes:
-            raise DistributedError(f"--process-id must be from 0 to {self.num_processes - 1}, got {self.process_id}")
-        if self.num_processes > 1 and not self.coordinator:
-            raise DistributedError("several processes need --coordinator HOST:PORT (process 0's address)")
-        if self.coordinator and (":" not in self.coordinator or not self.coordinator.rsplit(":", 1)[1].isdigit()):
-            raise DistributedError(f"--coordinator must be HOST:PORT, got {self.coordinator!r}")
+    def __post_init__(self) -> None:  # the boundary's declared rules, before any network use
+        from mjx_pusht import boundary
+
+        given = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        names = {"process_id": "--process-id", "num_processes": "--num-processes", "coordinator": "--coordinator",
+                 "peer_timeout": "--peer-timeout"}
+        for name, value in given.items():
+            boundary.PROCESSES[name](names[name], value, DistributedError)
+        boundary.refuse_combinations(boundary.COMBINATIONS["processes"], given, DistributedError)
 
     @property
     def many(self) -> bool:

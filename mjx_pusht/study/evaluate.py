@@ -49,7 +49,7 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
     if video is not None:
         from mjx_pusht.io.video import check_grid, check_path
 
-        check_path(video)  # a bad name, a missing encoder or a size too large fails now, not after the episodes
+        check_path(video, replace)  # a bad name, a missing encoder or a size too large fails now, not after the episodes
         check_grid(video_size, min(video_episodes, len(seeds)), max_steps)
     name, why = resolve(backend)
     config = {"command": "eval", "backend": name, "controller": spec, "action": controller.action_type,

@@ -26,6 +26,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from mjx_pusht import boundary
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.controller_base import Controller, Wrapper
 from mjx_pusht.task.reset import CLEARANCE, PUSHER_RADIUS
@@ -37,8 +38,7 @@ MARGIN = T_REACH + 2 * PUSHER_RADIUS + CLEARANCE  # 0.146 m: from the goal's ori
 
 
 def check(goal: str) -> str:
-    if goal not in GOALS:
-        raise ConfigError(f"unknown goal {goal!r}; choose from {', '.join(GOALS)}")
+    boundary.OneOf(tuple(GOALS))("goal", goal)  # an array is refused, not compared
     return goal
 
 

@@ -25,6 +25,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from mjx_pusht import boundary
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model.layout import PUSHER_START_Y
 from mjx_pusht.task.rules import T_REACH, distance_to_tee
@@ -95,8 +96,7 @@ def start_poses(seeds: Sequence[int] | np.ndarray, *, reset: str = "chapter") ->
     The generators are computed for all seeds at once (pcg64.Streams, well under 1 us a seed),
     not constructed one by one (~20 us a seed).
     """
-    if reset not in RESETS:
-        raise ConfigError(f"unknown reset {reset!r}; choose from {', '.join(RESETS)}")
+    boundary.OneOf(tuple(RESETS))("reset", reset)  # an array is refused, not compared
     seeds = np.asarray(seeds, dtype=np.int64).reshape(-1)
     if reset == "gym-pusht":
         return gym_pusht_starts(seeds)

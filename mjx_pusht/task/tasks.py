@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from mjx_pusht import boundary
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model import gym_pusht as frame
 from mjx_pusht.model.gym_pusht import KP, KV
@@ -143,8 +144,7 @@ TASKS["gym-pusht-easy"] = dataclasses.replace(
 
 
 def get(name: str) -> Task:
-    if name not in TASKS:
-        raise ConfigError(f"unknown task {name!r}; choose from {', '.join(TASKS)}")
+    boundary.OneOf(tuple(TASKS))("task", name)  # an array is refused, not compared
     return TASKS[name]
 
 

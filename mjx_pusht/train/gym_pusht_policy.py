@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mjx_pusht.boundary import check_gym_pusht_obs
 from mjx_pusht.task.controllers import ControllerError, seed_key
 from mjx_pusht.task.gym_pusht_obs import controller_obs, gym_pusht_action
 from mjx_pusht.task.tasks import TASKS, as_targets
@@ -58,10 +59,15 @@ class GymPushtPolicy:
 
     def __call__(self, obs) -> np.ndarray:
         """gym-pusht's action (2,) float32: the agent's target in its pixels, for `obs` of `self.obs_type`."""
+        check_gym_pusht_obs(obs, self.obs_type)  # a wrong, non-finite or foreign observation: one line, no NaN out
         if self.obs_type == "state":
             one = np.asarray(obs)[None]
         else:
             one = {k: np.asarray(obs[k])[None] for k in ("pixels", "agent_pos")}
+            if one["pixels"].shape[1:3] != (self.controller.pixels,) * 2:
+                raise ControllerError(f"this policy looks at {self.controller.pixels} x {self.controller.pixels} images, "
+                                      f"got {one['pixels'].shape[1]} x {one['pixels'].shape[2]}: make the env with "
+                                      f"observation_width={self.controller.pixels}, observation_height={self.controller.pixels}")
         world = controller_obs(one, self.obs_type, self.task)
         target, self._carry = self._targets.act(self._carry, world, self._t, self._key)
         self._t += 1
