@@ -117,3 +117,14 @@ def test_a_policy_acts_alike_on_yaws_two_pi_apart(policy):
     acts = [ctrl.act(carry, observe(pusher, tee + [0, 0, 2 * math.pi * k]), 0, key)[0] for k in (-2, -1, 0, 1)]
     for a in acts[1:]:
         assert a == pytest.approx(acts[0], abs=1e-5)
+
+
+@pytest.mark.parametrize("obs", [np.full(5, np.nan), np.array([1, 2, 3, 4, np.inf]), None, "state", np.zeros(8),
+                                 {"pixels": np.zeros((96, 96, 3), np.uint8), "agent_pos": np.zeros(2)}])
+def test_the_policy_refuses_an_observation_it_cannot_read_in_one_line_never_nan(obs):
+    from mjx_pusht.errors import MjxPushtError
+    from mjx_pusht.train.gym_pusht_policy import GymPushtPolicy
+
+    with pytest.raises(MjxPushtError) as e:
+        GymPushtPolicy(PPO)(obs)
+    assert "\n" not in str(e.value)
