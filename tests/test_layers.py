@@ -19,7 +19,8 @@ ROOT = Path(__file__).resolve().parent.parent / "mjx_pusht"
 # Lowest first. A name is a subpackage or a top-level module of mjx_pusht; "" is the package's own
 # __init__ (the public API, which imports from everywhere and is imported by nothing inside).
 LAYERS = (
-    ("errors", "validate"),  # the one error base, and the one validation layer every entry point checks through
+    ("errors", "validate", "boundary"),  # the one error base; the validation layer and the declared rules every entry
+    # point checks its inputs through
     ("model",),
     ("task", "scenario"),  # the scenario is what to simulate: a scene, a reset, a controller, an episode
     ("render",),
