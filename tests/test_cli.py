@@ -72,6 +72,8 @@ def _one_line_error(capsys, argv, code):
         ["scene", "--seed", "-1"],
         ["sweep", "--steps", "0"],
         ["sweep", "--break", "nope"],
+        ["train", "--seed", "18446744073709551616"],  # was an OverflowError traceback
+        ["train", "--seed", "2147483648"],  # JAX's key takes 32 bits: 2**31 would start as seed 0's networks do
     ],
 )
 def test_bad_flags_get_one_line_and_exit_2(capsys, argv):

@@ -120,6 +120,7 @@ def test_a_policy_acts_alike_on_yaws_two_pi_apart(policy):
 
 
 @pytest.mark.parametrize("obs", [np.full(5, np.nan), np.array([1, 2, 3, 4, np.inf]), None, "state", np.zeros(8),
+                                 np.zeros(5, complex), np.zeros((2, 5)),
                                  {"pixels": np.zeros((96, 96, 3), np.uint8), "agent_pos": np.zeros(2)}])
 def test_the_policy_refuses_an_observation_it_cannot_read_in_one_line_never_nan(obs):
     from mjx_pusht.errors import MjxPushtError
@@ -128,3 +129,14 @@ def test_the_policy_refuses_an_observation_it_cannot_read_in_one_line_never_nan(
     with pytest.raises(MjxPushtError) as e:
         GymPushtPolicy(PPO)(obs)
     assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("seed", [-1, "x", 2**63, 1.5])
+def test_the_policy_refuses_a_seed_that_is_not_an_episodes(seed):
+    from mjx_pusht.errors import MjxPushtError
+    from mjx_pusht.train.gym_pusht_policy import GymPushtPolicy
+
+    with pytest.raises(MjxPushtError, match="seed must be an integer"):
+        GymPushtPolicy(PPO, seed=seed)
+    with pytest.raises(MjxPushtError, match="seed must be an integer"):
+        GymPushtPolicy(PPO).reset(seed=seed)

@@ -126,6 +126,15 @@ def _seed(text: str) -> int:
     return v
 
 
+def _train_seed(text: str) -> int:
+    """A training seed: JAX's key takes 32 bits of it (with 64-bit types off, as here), so seeds 2**31 apart would
+    start the same networks: refused, not folded."""
+    v = _nonneg(text)
+    if v > 2**31 - 1:
+        raise argparse.ArgumentTypeError(f"training seeds are integers from 0 to 2**31-1 (JAX's key), got {v}")
+    return v
+
+
 REPLACE_HELP = "overwrite --out even if it holds another command's, or other seeds' or settings', finished results"
 SHARE_HELP = ("write into an --out that holds files this command did not write (they are left alone; by default such "
               "an --out is refused)")
@@ -324,7 +333,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="stop at the first held-out judgement at or above this success rate, in (0, 1] (the time "
                         "to a goal rate; the stop chose that judgement, so judge the policy again on other seeds, "
                         "eval --seeds, for a rate the stop did not pick)")
-    t.add_argument("--seed", type=_nonneg, default=0, help="initialisation and sampling seed (default 0)")
+    t.add_argument("--seed", type=_train_seed, default=0, help="initialisation and sampling seed (default 0)")
     t.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     t.add_argument("--record", type=_nonneg, default=4, help="held-out episodes in eval/eval.rrd (default 4)")
     t.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip train.rrd and eval/eval.rrd")

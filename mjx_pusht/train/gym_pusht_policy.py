@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mjx_pusht import validate
 from mjx_pusht.boundary import check_gym_pusht_obs
 from mjx_pusht.task.controllers import ControllerError, seed_key
 from mjx_pusht.task.gym_pusht_obs import controller_obs, gym_pusht_action
@@ -47,14 +48,14 @@ class GymPushtPolicy:
         self.obs_type = "pixels_agent_pos" if self.controller.pixels else "state"
         self.task = task
         self._targets = as_targets(self.controller)
-        self._key = seed_key([seed])  # a sampling policy's draws are keyed by seed and step
+        self._key = seed_key([validate.seed(seed)])  # a sampling policy's draws are keyed by seed and step
         self.reset()
 
     def reset(self, seed: int | None = None) -> None:
         """Forget the last episode: the policy's memory, and the step count. `seed`: the episode's (the one given to
         `env.reset`), which keys a sampling policy's draws as `eval` keys them, so the episode is eval's to the bit."""
         if seed is not None:
-            self._key = seed_key([seed])
+            self._key = seed_key([validate.seed(seed)])
         self._carry, self._t = self._targets.init(self._key), 0
 
     def __call__(self, obs) -> np.ndarray:
