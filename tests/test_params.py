@@ -92,3 +92,12 @@ def test_bad_param_is_one_line(tmp_path, capsys):
     assert main(["sweep", "--seeds", "3", "--param", "gain=5", "--out", str(tmp_path / "o")]) != 0
     err = capsys.readouterr().err.strip()
     assert "NAME=VALUES" in err and "\n" not in err and not (tmp_path / "o").exists()
+
+
+def test_a_param_this_scene_cannot_take_is_refused_before_the_folder_is_claimed(tmp_path, capsys):
+    """kp on the chapter's velocity servos: one line, and no run file left in --out (it left .run.json and
+    .parts/manifest.json, the check running when the backend built the model)."""
+    out = tmp_path / "o"
+    assert main(["sweep", "--backend", "cpu", "--seeds", "2", "--steps", "5", "--param", "kp=1", "--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "velocity servos" in err and "\n" not in err and not out.exists()

@@ -28,6 +28,11 @@ def cmd_sweep(args) -> int:
     schedule = Schedule(nudge_steps=args.steps)
     config = {"backend": name, "break_it": args.break_it, "steps": args.steps, "params": [[n, list(v)] for n, v in params]}
     scenario = Scenario(SceneSpec(args.break_it), schedule, params, randomize=args.randomize)
+    if params:  # checked on the scene before the folder is claimed: a refused flag leaves nothing behind
+        from mjx_pusht.model.params import check_scene
+        from mjx_pusht.model.scene import build_model
+
+        check_scene(build_model(scenario.scene), params)
     if scenario.randomize:  # an unrandomised sweep's config (and so its fingerprint) stays as it was
         config["randomize"] = [[n, list(r)] for n, r in scenario.randomize]
     if processes.many:  # one sweep, one table: every process must have been given the same one

@@ -194,6 +194,14 @@ def apply(model: mujoco.MjModel, values: dict[str, float]) -> mujoco.MjModel:
     return m
 
 
+def check_scene(model: mujoco.MjModel, params) -> None:
+    """Each parameter's values set on the scene's model once, so that one that means nothing on this scene (kp on
+    velocity servos) is refused before a run claims its folder, not when its backend builds the model."""
+    for name, values in params:
+        for v in values:
+            apply(model, {name: v})
+
+
 def warning_bits(data: mujoco.MjData) -> int:
     """The MuJoCo warnings `data` has raised since it was made, as a bitmask of 1 << mjtWarning."""
     return sum(1 << i for i, n in enumerate(data.warning.number) if n > 0)
