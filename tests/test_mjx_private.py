@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from helpers import ENV, cli
 
-from mjx_pusht.backends import mjx_private
+from mjx_pusht.model import mjx_private
 
 PACKAGE = Path(mjx_private.__file__).resolve().parents[1]
 

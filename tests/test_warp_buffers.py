@@ -45,7 +45,7 @@ def test_the_dry_step_finds_every_warp_module_a_real_step_launches(mjx_warp_runs
     import mujoco
     import warp as wp
 
-    from mjx_pusht.backends import mjx_private
+    from mjx_pusht.model import mjx_private
     from mjx_pusht.backends.mjx import MjxConfig, mjx_model, simulated_scene
     from mjx_pusht.backends.warp_kernels import scene_modules
 

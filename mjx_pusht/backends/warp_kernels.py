@@ -17,7 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import mujoco
 
-from mjx_pusht.backends import mjx_private
+from mjx_pusht.model import mjx_private
 
 
 @contextlib.contextmanager

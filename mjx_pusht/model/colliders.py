@@ -93,7 +93,7 @@ def mujoco_c_kind(model: mujoco.MjModel, g1: int, g2: int) -> str:
 
 
 def mjx_warp_kind(t1: int, t2: int, disableflags: int) -> str:
-    from mjx_pusht.backends import mjx_private
+    from mjx_pusht.model import mjx_private
 
     wd, wprim, wtypes = mjx_private.warp_collision()
     CollisionType, GeomType = wtypes.CollisionType, wtypes.GeomType
@@ -111,7 +111,7 @@ def mjx_warp_kind(t1: int, t2: int, disableflags: int) -> str:
 
 
 def mjx_jax_kind(t1: int, t2: int) -> str:
-    from mjx_pusht.backends import mjx_private
+    from mjx_pusht.model import mjx_private
 
     jd, jtypes = mjx_private.jax_collision()
     GeomType = jtypes.GeomType

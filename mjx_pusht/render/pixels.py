@@ -288,7 +288,7 @@ class WarpRenderer:
             use_textures=False, use_shadows=False, cam_active=[CAMERA], enabled_geom_groups=[0],
             enable_specular=False, enable_emission=False, enable_per_light_ambient=False)
         self._ctx = self.context.pytree()
-        from mjx_pusht.backends import mjx_private
+        from mjx_pusht.model import mjx_private
 
         render_context = mjx_private.render_context()
         self._adr = int(render_context.get(self._ctx).rgb_adr.numpy()[self.view.camera(CAMERA).id])

@@ -7,6 +7,8 @@ launches), the collider report (which function collides each geom pair) and the 
 camera's pixels start). They are the first thing an MJX release may move, so every such import goes through this
 module, which knows the MJX releases it was checked against and refuses any other in one line rather than
 failing deep inside a step. docs/study/backends.md plans the move to the public `mujoco_warp` package.
+It sits in `model`, the lowest layer that reads MJX (the collider report), so that render and backends, above it,
+can use it too.
 """
 
 from __future__ import annotations
