@@ -3,11 +3,15 @@
 #                 needs: the package, and warp-lang where a GPU is; not the training and test stack)
 #   make test   - everything CI checks: the test suite, the docs site built strict, and LeRobot's own tools
 #                 on the plugin (tests/lerobot/, in a Python 3.12 venv of its own: lerobot 0.6.1's pins)
-# Parts: make pytest (the suite alone), make docs, make test-lerobot.
+# Parts: make pytest (the suite alone), make docs, make test-lerobot; make quick: the suite without its slow tests.
+# Both install the tested set, requirements/lock.txt (pyproject.toml declares the ranges a user's own environment
+# may hold; the lock is the one point in them CI proves). make test-newest: the newest versions the ranges allow,
+# by hand (docs/install.md has its last result).
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+LOCK := requirements/lock.txt
 # what `make run` needs: the base, and warp-lang (388 MB) only where a GPU is, which `auto` then runs MJX-Warp on
 # (without one it picks MuJoCo C). `make test` after it installs the rest; the full install stamps this too, so
 # `make run` after `make test` installs nothing. Fresh clone, this 2-core machine: 1.5 min and 1.5 GB against the
@@ -23,18 +27,18 @@ LEROBOT_VENV := .venv-lerobot
 # the stamp is renamed when the install line changes, so that an older venv is brought up to it
 LEROBOT_STAMP := $(LEROBOT_VENV)/.installed-diffusion
 
-.PHONY: run test pytest test-lerobot docs scene bench clean
+.PHONY: run test pytest quick python312 test-lerobot test-newest docs scene bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 
-$(RUN_STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install -q -e '.$(RUN_EXTRAS)'
+$(RUN_STAMP): pyproject.toml $(LOCK) | $(BIN)/python
+	$(BIN)/python -m pip install -q -c $(LOCK) -e '.$(RUN_EXTRAS)'
 	touch $(RUN_STAMP)
 
-$(STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install -q -e '.[warp,gym,video,train,test]'
+$(STAMP): pyproject.toml $(LOCK) | $(BIN)/python
+	$(BIN)/python -m pip install -q -c $(LOCK) -e '.[warp,gym,video,train,test]'
 	touch $(STAMP) $(RUN_STAMP)
 
 run: $(RUN_STAMP)
@@ -60,8 +64,13 @@ test: $(STAMP) $(VENV)/.docs-installed
 pytest: $(STAMP)
 	$(BIN)/python -m pytest -q
 
+# the quick loop while developing: the suite without the tests that compile MJX or run MJX-Warp (the test stack
+# is installed first: `make run` alone installs none of it)
+quick: $(STAMP)
+	$(BIN)/python -m pytest -q -m "not slow"
+
 $(VENV)/.docs-installed: $(STAMP)
-	$(BIN)/python -m pip install -q -e '.[docs]'
+	$(BIN)/python -m pip install -q -c $(LOCK) -e '.[docs]'
 	touch $@
 
 docs: $(VENV)/.docs-installed
@@ -75,11 +84,36 @@ $(LEROBOT_STAMP): pyproject.toml plugins/lerobot_env_mjx_pusht/pyproject.toml
 		'pytest>=8' 'pytest-timeout>=2.3' 'pytest-xdist>=3.6' -e '.[warp,gym]' -e plugins/lerobot_env_mjx_pusht
 	touch $(LEROBOT_STAMP)
 
+# the Python 3.12 the LeRobot venv is made with (docs/lerobot.md's by-hand install uses it)
+python312:
+	@test -n "$(PYTHON312)" || { echo "no Python 3.12 on the PATH or under ~/.pyenv/versions: set PYTHON312=/path/to/python3.12" >&2; exit 2; }
+	@echo $(PYTHON312)
+
 test-lerobot: $(LEROBOT_STAMP)
 	$(LEROBOT_VENV)/bin/python -m pytest -q tests/lerobot
+
+# The matrix's second leg, by hand (not in `make test`: CI's time): a venv of the newest versions pyproject.toml's
+# ranges allow (MuJoCo 4.0 with MJX-JAX; Python 3.12 where found), no lock, then the quick loop one test file a
+# process (a crash or a hang is that file's alone, cut at 600 s: docs/install.md says why) and the fidelity test.
+# Each run resolves afresh, so the venv is remade every time; the last line lists the files that failed.
+NEWEST_VENV := .venv-newest
+test-newest:
+	rm -rf $(NEWEST_VENV)
+	$(or $(PYTHON312),$(PYTHON)) -m venv $(NEWEST_VENV)
+	$(NEWEST_VENV)/bin/python -m pip install -q --upgrade pip
+	$(NEWEST_VENV)/bin/python -m pip install -q --upgrade --upgrade-strategy eager -e '.[warp,gym,video,train,test]'
+	$(NEWEST_VENV)/bin/python -m pip check
+	$(NEWEST_VENV)/bin/python -c "import sys, mujoco, jax, numpy; print('newest leg: Python', sys.version.split()[0], \
+		'mujoco', mujoco.__version__, 'jax', jax.__version__, 'numpy', numpy.__version__)"
+	@failed=; for f in tests/test_*.py; do \
+		timeout 600 $(NEWEST_VENV)/bin/python -m pytest -q -p no:cacheprovider -n 0 -m "not slow" $$f >$(NEWEST_VENV)/last.log 2>&1; \
+		rc=$$?; echo "$$f rc=$$rc $$(tail -n 1 $(NEWEST_VENV)/last.log)"; \
+		[ $$rc = 0 ] || [ $$rc = 5 ] || failed="$$failed $$f"; done; \
+	timeout 900 $(NEWEST_VENV)/bin/python -m pytest -q -p no:cacheprovider -n 0 -m slow tests/test_compare.py || failed="$$failed tests/test_compare.py"; \
+	if [ -n "$$failed" ]; then echo "make test-newest: failed:$$failed"; exit 1; fi
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks.harness
 
 clean:
-	rm -rf $(VENV) $(LEROBOT_VENV) .jax_cache site outputs/scene outputs/sweep
+	rm -rf $(VENV) $(LEROBOT_VENV) $(NEWEST_VENV) .jax_cache site outputs/scene outputs/sweep

@@ -44,11 +44,12 @@ def test_the_dry_step_finds_every_warp_module_a_real_step_launches(mjx_warp_runs
     """The up-front parallel compile is only complete if the recorded step saw every module the real one uses."""
     import mujoco
     import warp as wp
-    from mujoco.mjx.third_party import mujoco_warp as mjw
 
+    from mjx_pusht.model import mjx_private
     from mjx_pusht.backends.mjx import MjxConfig, mjx_model, simulated_scene
     from mjx_pusht.backends.warp_kernels import scene_modules
 
+    mjw = mjx_private.mujoco_warp()
     for break_it in ("none", "split-tee"):
         model = mjx_model(simulated_scene(Scenario(SceneSpec(break_it)), "warp"), MjxConfig(impl="warp"))
         found = {module for module, _ in scene_modules(model, "cpu")}

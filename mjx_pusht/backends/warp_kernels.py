@@ -17,8 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import mujoco
 
-# Warp's own module for the wrappers MJX registers with jax.ffi; JAX loads it when tracing.
-_FFI_MODULE = "mujoco.mjx.warp.ffi"
+from mjx_pusht.model import mjx_private
 
 
 @contextlib.contextmanager
@@ -73,9 +72,8 @@ def _ffi_callbacks_held():
 def scene_modules(model: mujoco.MjModel, device=None) -> set:
     """(module, block_dim) for every Warp module one MuJoCo Warp step launches on `model`; nothing is compiled."""
     import warp as wp
-    from mujoco.mjx.third_party import mujoco_warp as mjw
-
-    need: set = {(wp.get_module(_FFI_MODULE), None)}
+    mjw = mjx_private.mujoco_warp()
+    need: set = {(wp.get_module(mjx_private.FFI_MODULE), None)}
     with wp.ScopedDevice(device):
         m = mjw.put_model(model)
         # one world, small buffers: the kernels a step creates depend on the model, not the batch;

@@ -37,10 +37,10 @@ def cmd_scene(args) -> int:
           f"{run.gap_max_dev[0]:.4f} m from the 0.06 weld ({verdict})")
     print(f"metrics: {out / 'metrics.json'}")
     if args.rerun:
-        from mjx_pusht.io.record import record_run
+        from mjx_pusht.io.record import record_run, viewer_command
 
         record_run(out / "scene.rrd", backend.model, run)
-        print(f"recording: {out / 'scene.rrd'} - open it with: rerun {out / 'scene.rrd'}")
+        print(f"recording: {out / 'scene.rrd'} - open it with: {viewer_command(out / 'scene.rrd')}")
     else:
         drop_stale(out / "scene.rrd")
     if args.compare_welded:

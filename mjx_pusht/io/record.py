@@ -24,6 +24,18 @@ SEED_SPACING = 0.95  # metres between side-by-side workspaces (each is 0.86 m wi
 SERIES_COLORS = {"welded": TEE_COLOR, "split_tee": STEM_SPLIT_COLOR, "free_tee": [230, 200, 60], "measured": TEE_COLOR}
 
 
+def viewer_command(path: Path) -> str:
+    """The command that opens the recording `path`: rerun-sdk installs its viewer beside this Python (a venv's
+    bin/), which a venv's user need not have on PATH; bare `rerun` was printed where only .venv/bin/rerun exists."""
+    import shutil
+    import sys
+
+    here = Path(sys.executable).parent / "rerun"
+    on_path = shutil.which("rerun")
+    exe = "rerun" if on_path and Path(on_path).resolve() == here.resolve() else str(here) if here.exists() else "rerun"
+    return f"{exe} {path}"
+
+
 def replay(model: mujoco.MjModel, qpos: np.ndarray) -> dict[str, np.ndarray]:
     """World poses of the moving bodies and the weld gap, per frame of a (T, nq) qpos trace."""
     data = mujoco.MjData(model)

@@ -93,9 +93,10 @@ def mujoco_c_kind(model: mujoco.MjModel, g1: int, g2: int) -> str:
 
 
 def mjx_warp_kind(t1: int, t2: int, disableflags: int) -> str:
-    from mujoco.mjx.third_party.mujoco_warp._src import collision_driver as wd
-    from mujoco.mjx.third_party.mujoco_warp._src import collision_primitive as wprim
-    from mujoco.mjx.third_party.mujoco_warp._src.types import CollisionType, GeomType
+    from mjx_pusht.model import mjx_private
+
+    wd, wprim, wtypes = mjx_private.warp_collision()
+    CollisionType, GeomType = wtypes.CollisionType, wtypes.GeomType
 
     key = (GeomType(min(t1, t2)), GeomType(max(t1, t2)))
     kind = wd.MJ_COLLISION_TABLE.get(key)
@@ -110,8 +111,10 @@ def mjx_warp_kind(t1: int, t2: int, disableflags: int) -> str:
 
 
 def mjx_jax_kind(t1: int, t2: int) -> str:
-    from mujoco.mjx._src import collision_driver as jd
-    from mujoco.mjx._src.types import GeomType
+    from mjx_pusht.model import mjx_private
+
+    jd, jtypes = mjx_private.jax_collision()
+    GeomType = jtypes.GeomType
 
     fn = jd._COLLISION_FUNC.get((GeomType(min(t1, t2)), GeomType(max(t1, t2))))
     if fn is None:

@@ -288,8 +288,9 @@ class WarpRenderer:
             use_textures=False, use_shadows=False, cam_active=[CAMERA], enabled_geom_groups=[0],
             enable_specular=False, enable_emission=False, enable_per_light_ambient=False)
         self._ctx = self.context.pytree()
-        from mujoco.mjx.warp import render_context
+        from mjx_pusht.model import mjx_private
 
+        render_context = mjx_private.render_context()
         self._adr = int(render_context.get(self._ctx).rgb_adr.numpy()[self.view.camera(CAMERA).id])
         # The camera hangs from the world: its pose is a constant (a fresh mjx.Data holds zeros there).
         import mujoco

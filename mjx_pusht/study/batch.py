@@ -61,7 +61,7 @@ def record(path: Path, rows: str, backend, r, combos, pick, writer, summary: dic
     trace and written by `writer` (or an earlier run's recording removed when this run is not recorded);
     its time joins the summary."""
     from mjx_pusht.io.outputs import atomic_write_json, drop_stale
-    from mjx_pusht.io.record import row_labels
+    from mjx_pusht.io.record import row_labels, viewer_command
 
     if not (rerun and n > 0):
         drop_stale(path)
@@ -71,7 +71,7 @@ def record(path: Path, rows: str, backend, r, combos, pick, writer, summary: dic
     writer(path, backend.model, traced, r, row_labels(r, shown))
     summary["timing"]["recording"] = round(clock.lap("recording"), 3)
     atomic_write_json(path.parent / "summary.json", summary)
-    print(f"recording: {path} ({len(shown)} {rows} side by side) - open it with: rerun {path}")
+    print(f"recording: {path} ({len(shown)} {rows} side by side) - open it with: {viewer_command(path)}")
 
 
 def warn_mujoco(summary: dict, rows: str) -> None:

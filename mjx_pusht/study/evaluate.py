@@ -35,7 +35,7 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
     from mjx_pusht.study.batch import record as record_rows
     from mjx_pusht.study.batch import start_batch, warn_mujoco
     from mjx_pusht.study.seeds import parse_seeds
-    from mjx_pusht.study.stats import summarize_episodes
+    from mjx_pusht.study.stats import steps_text, summarize_episodes
     from mjx_pusht.study.sweep import finish, run_sweep
     from mjx_pusht.task.controllers import describe
     from mjx_pusht.task.tasks import get as get_task
@@ -88,7 +88,7 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
     atomic_write_json(out / "summary.json", summary)
     lo, hi = summary["success_rate_ci95"]
     print(f"success: {summary['n_success']} of {summary['n_finite']} episodes ({summary['success_rate']:.1%}, "
-          f"95% interval {lo:.1%}-{hi:.1%}); median steps to success {summary['median_steps_to_success']}; "
+          f"95% interval {lo:.1%}-{hi:.1%}); median steps to success {steps_text(summary['median_steps_to_success'])}; "
           f"median final coverage {summary['final_coverage'].get('median', float('nan')):.3f}")
     warn_mujoco(summary, "episodes")
     if summary["n_non_finite"]:

@@ -8,6 +8,7 @@ import numpy as np
 
 from mjx_pusht.backends.results import Rollouts
 from mjx_pusht.study.outcomes import DIVERGED_M
+from mjx_pusht.study.stats import steps_text
 
 
 def plots(out: Path, mjx_r: Rollouts, cpu_r: Rollouts, div: np.ndarray, impl: str) -> None:
@@ -156,12 +157,12 @@ def render_episodes_markdown(r: dict) -> str:
         "",
         "| run | success rate (95% interval) | median steps to success |",
         "| --- | --- | --- |",
-        f"| CPU (MuJoCo C, float64) | {rate(r['cpu'])} | {r['cpu']['median_steps_to_success']} |",
-        f"| {r['impl']} | {rate(r['mjx'])} | {r['mjx']['median_steps_to_success']} |",
+        f"| CPU (MuJoCo C, float64) | {rate(r['cpu'])} | {steps_text(r['cpu']['median_steps_to_success'])} |",
+        f"| {r['impl']} | {rate(r['mjx'])} | {steps_text(r['mjx']['median_steps_to_success'])} |",
     ]
     if f32:
         lines.append(f"| CPU from float32-rounded starts | {rate(r['cpu_f32_starts'])} | "
-                     f"{r['cpu_f32_starts']['median_steps_to_success']} |")
+                     f"{steps_text(r['cpu_f32_starts']['median_steps_to_success'])} |")
     lines += [
         "",
         f"Success rate difference {r['impl']} - CPU: {d['difference']:+.2%} (paired 95% interval "

@@ -47,6 +47,12 @@ def warning_summary(r: Rollouts) -> dict:
             "mujoco_warnings": warning_names(bits)}
 
 
+def steps_text(median_steps: float | None) -> str:
+    """A summary's median steps to success as a reader reads it: a number of steps, or why there is none (the
+    summary keeps None, JSON's null; a printed "None" read as a bug)."""
+    return "- (no episode succeeded)" if median_steps is None else f"{median_steps:g}"
+
+
 def summarize_episodes(r: Rollouts) -> dict:
     """The episode outcomes: success rate and interval over finite episodes, steps to success, coverage, return."""
     ep = r.episode
@@ -63,7 +69,7 @@ def summarize_episodes(r: Rollouts) -> dict:
         "success_rate": k / n if n else 0.0,
         "success_rate_ci95": [lo, hi],
         "steps_to_success": distribution(steps),
-        "median_steps_to_success": float(np.median(steps)) if steps.size else None,
+        "median_steps_to_success": float(np.median(steps)) if steps.size else None,  # None: no success to count
         "final_coverage": distribution(np.asarray(ep["coverage"])[finite]),
         "best_coverage": distribution(np.asarray(ep["best_coverage"])[finite]),
         "return": distribution(np.asarray(ep["return"])[finite]),
