@@ -33,7 +33,7 @@ from mjx_pusht.task.rules import CTRL_LIMIT, array_namespace
 from mjx_pusht.train.layers import activation as _activation
 from mjx_pusht.train.layers import mlp as _mlp
 from mjx_pusht.train.layers import rowwise as _rowwise
-from mjx_pusht.train.ppo_policy import apply_ppo
+from mjx_pusht.train.ppo_policy import apply_ppo, ppo_input
 
 FORMAT = "mjx_pusht.policy/2"  # /1: one head, the last action as memory (notebook, change 12)
 OBS_TYPES = ("state", "keypoints", "pixels_agent_pos")
@@ -380,21 +380,9 @@ class PolicyController(Controller):
         a 0 there would read as pursuing contact 0, a memory the student never had at a start)."""
         return super().init(key) - CarryFormat.of(self.meta).offset
 
-    @property
-    def task(self):
-        """The task it was trained on (task/tasks.py; a checkpoint that names none: the chapter's)."""
-        from mjx_pusht.task.tasks import TASKS
-
-        return TASKS.get((self.meta.get("config") or {}).get("task") or "chapter", TASKS["chapter"])
-
     def act(self, carry, obs, t, key):
         if self.meta.get("method") == "ppo":
-            x = obs[self.meta["obs_type"]]
-            # a PPO network reads the raw yaw: handed in its task's window, a yaw 2 pi off (gym-pusht's own [0, 2 pi)
-            # observation) reads as the one it trained on. The other inputs (keypoints; DAgger's cos and sin) are
-            # the same whichever way round the yaw is counted.
-            x = self.task.observed(x) if self.meta["obs_type"] == "state" else x
-            return apply_ppo(self.params, self.meta, x, key, t), carry
+            return apply_ppo(self.params, self.meta, ppo_input(self.meta, obs), key, t), carry
         x = features(obs, self.meta["obs_type"], carry, CarryFormat.of(self.meta), self.reads_goal)
         action, memory = apply(self.params, self.meta, x, obs.get("pixels"))
         return action, memory

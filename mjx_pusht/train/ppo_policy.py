@@ -18,6 +18,19 @@ from mjx_pusht.task.rules import CTRL_LIMIT, array_namespace
 from mjx_pusht.train.layers import mlp, rowwise
 
 
+def ppo_input(meta: dict, obs: dict):
+    """What a PPO network reads of an observation dict: its obs_type's array, and for state the yaw in its task's
+    window (task/tasks.py `Task.observed`; a checkpoint that names no task: the chapter's), so a yaw 2 pi off, as
+    gym-pusht's own [0, 2 pi) observation gives it, reads as the one it trained on. Keypoints are the same whichever
+    way round the yaw is counted."""
+    from mjx_pusht.task.tasks import TASKS
+
+    x = obs[meta["obs_type"]]
+    if meta["obs_type"] != "state":
+        return x
+    return TASKS.get((meta.get("config") or {}).get("task") or "chapter", TASKS["chapter"]).observed(x)
+
+
 def apply_ppo(params: dict, meta: dict, obs, key=None, t=None):
     """A PPO policy (ppo.py) on raw observations (..., obs size): Brax's normalisation, its MLP (silu between
     layers), then its action (`ppo_action`): with meta["act"] "mean" (or absent), tanh of the Gaussian's location,
