@@ -229,7 +229,9 @@ FUNCTIONAL_ENV = {"backend": OneOf(("cpu", "mjx-jax", "mjx-warp")), "action_type
                   "scene": Instance("mjx_pusht.model.scene:SceneSpec", "a SceneSpec"),
                   "episode": Instance("mjx_pusht.task.episode:Episode", "an Episode"),
                   "keypoints": Flag(), "keep_states": Flag(), "raster": Flag(),
-                  "threads": Int(1, MAX_WORKERS), "graph_mode": Maybe(Instance(str, "a graph mode's name"))}
+                  "threads": Int(1, MAX_WORKERS), "graph_mode": Maybe(Instance(str, "a graph mode's name")),
+                  # MJX's buffers, as make_backend's (None: the measured defaults; -1 and 0 were taken as given)
+                  "contacts_per_world": Maybe(Int(1, 10_000)), "rows_per_world": Maybe(Int(1, 100_000))}
 CONTROLLER = Maybe(Instance("mjx_pusht.task.controller_base:Controller",
                             "a Controller (task.controllers.load('expert') makes one from its name)"))
 # The reset options this package reads, and which entries honour each: an entry given one it cannot honour refuses

@@ -70,12 +70,20 @@ def test_scene_spec_and_schedule_then_a_run(scene, schedule):
 
 @FUZZ
 @given(field=st.sampled_from(["backend", "reset_kind", "action_type", "episode", "scene", "pixels", "keypoints",
-                              "goal", "threads", "keep_states", "graph_mode", "randomize", "raster"]), value=ODD)
+                              "goal", "threads", "keep_states", "graph_mode", "randomize", "raster",
+                              "contacts_per_world", "rows_per_world"]), value=ODD)
 @example(field="graph_mode", value="bogus")  # accepted on the CPU
 @example(field="scene", value="x")  # was AttributeError
 @example(field="threads", value=0)
 def test_functional_env_constructor(field, value):
     holds(lambda: PushTEnv(**{field: value}), check=lambda env: None)
+
+
+@pytest.mark.parametrize("kw", [{"contacts_per_world": -1}, {"rows_per_world": 0}, {"contacts_per_world": 2.5}])
+def test_mjx_buffer_sizes_that_are_no_size_are_refused_on_every_backend(kw):
+    """A fresh hostile pass found both accepted (docs/notebook/hostile5.md); on MJX, -1 was taken as given."""
+    with pytest.raises(MjxPushtError, match="must be an integer from 1"):
+        PushTEnv(**kw)
 
 
 @functools.cache
