@@ -38,7 +38,7 @@ def make_judge(env, cfg):
     import jax
     import jax.numpy as jnp
 
-    from mjx_pusht.train.ppo_policy import ppo_action
+    from mjx_pusht.train.ppo_policy import ppo_action, ppo_input
 
     held, val = cfg.held_out_seeds(), cfg.validation_seeds()
     seeds = np.concatenate([held, val, held, val])
@@ -49,7 +49,8 @@ def make_judge(env, cfg):
         meta = {"in_mean": mean, "in_std": std, "activation": "silu"}
 
         def body(s, _):
-            obs = s.obs[cfg.obs_type]
+            # what the checkpoint's controller reads (the yaw in the task's window), so the judge is eval's episodes
+            obs = ppo_input({"obs_type": cfg.obs_type, "config": {"task": cfg.task}}, s.obs)
             action = cfg.the_task.from_velocity(ppo_action(dense, meta, obs, s.key, s.step, noise), s.obs)
             return env.advance_one(s, action), None
 
