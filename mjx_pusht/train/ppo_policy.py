@@ -15,6 +15,7 @@ import numpy as np
 
 from mjx_pusht.task.controllers import ControllerError, uniform_hash
 from mjx_pusht.task.rules import CTRL_LIMIT, array_namespace
+from mjx_pusht.task.tasks import TASKS
 from mjx_pusht.train.layers import mlp, rowwise
 
 
@@ -23,8 +24,6 @@ def ppo_input(meta: dict, obs: dict):
     window (task/tasks.py `Task.observed`; a checkpoint that names no task: the chapter's), so a yaw 2 pi off, as
     gym-pusht's own [0, 2 pi) observation gives it, reads as the one it trained on. Keypoints are the same whichever
     way round the yaw is counted."""
-    from mjx_pusht.task.tasks import TASKS
-
     x = obs[meta["obs_type"]]
     if meta["obs_type"] != "state":
         return x
