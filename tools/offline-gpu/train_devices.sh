@@ -26,7 +26,7 @@ case "${1:-}" in
     (cd "$runs" && setsid nohup bash -c 'echo $$ > "$0"; exec "$@"' "$runs/devices.pid" \
       bash "$root/tools/offline-gpu/train_devices.sh" "${2:-plan}" > "$runs/devices.log" 2>&1 < /dev/null &)
     sleep "${WAIT:-20}"; cp "$runs/devices.log" "${OUT:-/tmp}/" ;;
-  plan|ppo-wide|ppo-apart|ppo-procs)
+  plan|ppo-wide|ppo-apart|ppo-procs|pair)
     export PYTHONPATH=$HOME/jsite:$HOME/site:$root PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
     export MJX_PUSHT_JAX_CACHE=$HOME/jax_cache NCCL_NVLS_ENABLE=0 TORCH_SYMM_MEM_DISABLE_MULTICAST=1 NVSHMEM_DISABLE_NVLS=1
     cd "$runs" || exit 1
@@ -77,6 +77,32 @@ case "${1:-}" in
       wait
       run python3 -m benchmarks.train_scaling --collect --devices "1,$n" --goal 0.95 --out procs > procs-collect.log 2>&1
       tail -n 6 procs-collect.log; echo "$(date +%T) plan done"; exit 0
+    fi
+    if [ "$1" = pair ]; then
+      # One GPU against two of the same host, side by side in one plan (GPU_LIST: the two, default 0,1; the others
+      # may train meanwhile): DAgger from pixels as one program over the two (weak scaling, to 90% or 5 minutes),
+      # then PPO on MJX-Warp as a process a GPU (Brax's pmap over the processes, weak scaling, T env steps a GPU,
+      # the whole budget: PPO over processes refuses --until).
+      IFS=, read -r g0 g1 <<< "${GPU_LIST:-0,1}"
+      # shellcheck disable=SC2086  # the recipes: lists of flags
+      {
+      scale "$g0" 0.9 pair-px 1 $px_per "" --backend mjx-warp $px --seed 0 > pair-px-1.log 2>&1
+      scale "$g0,$g1" 0.9 pair-px 2 $px_per "" --backend mjx-warp $px --seed 0 > pair-px-2.log 2>&1
+      }
+      t=${T:-60000000}
+      w() { echo --algo ppo --backend mjx-warp --envs $((8192 * $1)) --batch $((512 * $1)) --timesteps $((t * $1)) \
+              --iterations 8 $common; }  # the run on N GPUs: N x one GPU's envs, minibatch and steps
+      # shellcheck disable=SC2046  # the recipe: a list of flags
+      scale "$g0" 0.95 pair-ppo 1 "" "" $(w 1) > pair-ppo-1.log 2>&1
+      for k in 1 0; do  # process 0 last: it listens at the coordinator, the other waits for it
+        # shellcheck disable=SC2046  # the recipe: a list of flags
+        run env CUDA_VISIBLE_DEVICES=$([ $k = 0 ] && echo "$g0" || echo "$g1") timeout 420 python3 -m mjx_pusht train \
+          $(w 2) --num-processes 2 --process-id $k --coordinator 127.0.0.1:${PORT:-29517} --out pair-ppo/devices-2 \
+          > "pair-ppo-2-p$k.log" 2>&1 &
+      done
+      wait
+      run python3 -m benchmarks.train_scaling --collect --devices 1,2 --goal 0.95 --out pair-ppo > pair-ppo-collect.log 2>&1
+      tail -n 6 pair-px-2.log pair-ppo-collect.log; echo "$(date +%T) plan done"; exit 0
     fi
     if [ "$1" = ppo-apart ]; then
       # four one-GPU PPO runs at once, a process a GPU (seeds 0-3, MINUTES long, no --until): if each keeps one GPU's
@@ -132,7 +158,7 @@ case "${1:-}" in
     out=${OUT:?watch copies into \$OUT}; t=0
     while :; do
       (cd "$runs" && tar czf "$out/devices.tgz" --exclude='*.msgpack' --exclude='*.f32' --exclude='*.parquet' \
-        --exclude='*.rrd' --exclude='checkpoint*' ./*.log $(ls -d probe-* px-* ppo-* wide apart-? procs 2>/dev/null | grep -v '\.log$') 2>/dev/null)
+        --exclude='*.rrd' --exclude='checkpoint*' ./*.log $(ls -d probe-* px-* ppo-* pair-* wide apart-? procs 2>/dev/null | grep -v '\.log$') 2>/dev/null)
       for p in "$runs"/*/devices-*/policy.msgpack; do
         [ -f "$p" ] && [ -f "$(dirname "$p")/summary.json" ] && grep -q '"eval"' "$(dirname "$p")/summary.json" && \
           cp "$p" "$out/$(basename "$(dirname "$(dirname "$p")")")-$(basename "$(dirname "$p")").msgpack"
@@ -143,5 +169,5 @@ case "${1:-}" in
     done
     nvidia-smi --query-gpu=index,utilization.gpu,memory.used --format=csv > "$out/nvidia-smi.csv" 2>&1
     tail -n 4 "$runs/devices.log"; true ;;
-  *) echo "usage: train_devices.sh start [plan|ppo-wide|ppo-apart|ppo-procs]|watch (plans of training on a 4-GPU machine)" >&2; exit 2 ;;
+  *) echo "usage: train_devices.sh start [plan|ppo-wide|ppo-apart|ppo-procs|pair]|watch (plans of training on a 4-GPU machine)" >&2; exit 2 ;;
 esac
