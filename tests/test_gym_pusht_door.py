@@ -21,6 +21,7 @@ gym = pytest.importorskip("gymnasium")
 POLICIES = Path(__file__).resolve().parents[1] / "outputs" / "reports" / "train"
 PPO = POLICIES / "ppo-state-gym-pusht-h200" / "seed-0" / "policy.msgpack"
 DAGGER = POLICIES / "dagger-state-gym-pusht-h200" / "seed-0" / "policy.msgpack"
+PIXELS = str(POLICIES / "dagger-pixels-gym-pusht-h200-16k" / "seed-{}" / "policy.msgpack")
 # Starts that gym-pusht's observation shows 2 pi away from the block's body angle (it wraps to [0, 2 pi)), on which
 # the committed PPO policy failed in a plain loop while eval (which read the body) scored them; and two that do not
 ACROSS_THE_WRAP = [2000000000, 2000000016, 2000000024, 2000000047]
@@ -36,7 +37,7 @@ def plain_loop(path, seeds):
     out, wrapped = [], []
     for seed in seeds:
         obs, info = env.reset(seed=int(seed))
-        wrapped.append(not math.isclose(obs[4], env.unwrapped.block.angle))
+        wrapped.append(policy.obs_type == "state" and not math.isclose(obs[4], env.unwrapped.block.angle))
         policy.reset(seed=int(seed))
         steps, first = 0, None
         while True:
@@ -80,6 +81,16 @@ def test_the_committed_dagger_student_in_a_plain_gym_pusht_loop_is_eval_on_gym_p
     loop, _ = plain_loop(DAGGER, seeds)
     assert_same_episodes(loop, eval_rows(DAGGER, seeds, tmp_path))
     assert sum(ok for ok, *_ in loop) >= 2
+
+
+@pytest.mark.slow  # a 1024 x 3 student and its image reader a step on the CPU, gym-pusht rendering: ~15 s a policy
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_committed_pixel_policy_in_a_plain_gym_pusht_loop_is_eval_on_gym_pusht_episode_for_episode(seed, tmp_path):
+    # gym-pusht renders the 96 x 96 image the student reads, in the loop and in the backend alike
+    seeds = [SEEDS[1], SEEDS[-1]]
+    loop, _ = plain_loop(PIXELS.format(seed), seeds)
+    assert_same_episodes(loop, eval_rows(PIXELS.format(seed), seeds, tmp_path))
+    assert any(ok for ok, *_ in loop)
 
 
 def test_the_yaw_a_controller_is_handed_lies_in_the_tasks_window_however_gym_pusht_wraps_it():

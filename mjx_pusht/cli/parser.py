@@ -267,12 +267,13 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     t.add_argument("--share-out", action="store_true", help=SHARE_HELP)
     t.add_argument("--envs", type=_worlds, default=None,
-                   help="episodes rolled out per iteration (default 4096; DAgger on cpu 256)")
-    t.add_argument("--iterations", type=_positive, default=10,
-                   help="DAgger iterations, or PPO's held-out judgements over the run (default 10)")
+                   help="episodes rolled out per iteration (default 4096; DAgger on cpu 256; 16384 in the pixel recipe)")
+    t.add_argument("--iterations", type=_positive, default=None,
+                   help="DAgger iterations, or PPO's held-out judgements over the run (default 10; 300 in the pixel "
+                        "recipe: DAgger from pixels_agent_pos on gym-pusht's task on MJX, docs/training.md)")
     t.add_argument("--timesteps", type=_positive, default=None, help="PPO: env control steps in all (default 50M)")
     t.add_argument("--fit-steps", type=_positive, default=None,
-                   help="DAgger: gradient steps per iteration (default 2000; on cpu 1000)")
+                   help="DAgger: gradient steps per iteration (default 2000; on cpu 1000; 10000 in the pixel recipe)")
     t.add_argument("--batch", type=_positive, default=None,
                    help="DAgger: samples per gradient step (default 4096; on cpu 1024); PPO: Brax's batch_size "
                         "(default 256)")
@@ -281,19 +282,19 @@ def build_parser() -> argparse.ArgumentParser:
                         "trunk the T's pose (all teach the actions from the true pose; default 512, at most --batch)")
     t.add_argument("--image-steps", type=_positive, default=None,
                    help="DAgger from pixels: gradient steps an iteration that teach the image trunk the T's pose, "
-                        "apart from the --fit-steps that teach the actions (default: as many as --fit-steps)")
+                        "apart from the --fit-steps that teach the actions (default: as many as --fit-steps; 4000 in the pixel recipe)")
     t.add_argument("--late-fits", type=_positive, default=None,
                    help="DAgger: fits of --fit-steps after each rollout once the expert's share is at most 1%% "
                         "(default 1): late in a run the student under-fits a ring that changes little")
     t.add_argument("--first-fits", type=_positive, default=None,
                    help="DAgger: the first fit is made from this many initialisations and the one with the lowest "
-                        "training loss kept (default 1): where a run starts, its loss holds through the run")
+                        "training loss kept (default 1; 4 in the pixel recipe): where a run starts, its loss holds through the run")
     t.add_argument("--action-eps", type=_positive_or_off, default=None,
                    help="DAgger: weigh each action's squared error by (0.1^2 + eps^2) / (|label|^2 + eps^2), eps in m/s "
                         "('off': plain squared error; default: the task's, gym-pusht 0.01, chapter off): a nudge of a "
                         "few mm is learned as precisely, relative to its size, as a 0.1 m/s move")
-    t.add_argument("--keep", choices=("last", "best"), default="last",
-                   help="DAgger: the run's policy is the last fit (default), or the fit whose next rollout succeeded "
+    t.add_argument("--keep", choices=("last", "best"), default=None,
+                   help="DAgger: the run's policy is the last fit (default; best in the pixel recipe), or the fit whose next rollout succeeded "
                         "most on that iteration's fresh training seeds once the expert's share there is at most 1%%; "
                         "PPO: the judged policy that succeeded most on validation seeds past its training starts "
                         "(both chosen without the held-out seeds)")
@@ -310,7 +311,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--minibatches", type=_positive, default=None,
                    help="PPO: Brax's num_minibatches, each of --batch unrolls (default 32): a round of updates takes "
                         "--batch x this x 20 env steps")
-    t.add_argument("--hidden", type=_widths, default=(256, 256, 256), help="hidden widths (default 256,256,256)")
+    t.add_argument("--hidden", type=_widths, default=None,
+                   help="hidden widths (default 256,256,256; 1024,1024,1024 in the pixel recipe)")
     t.add_argument("--lr", type=_positive_float, default=None, help="Adam's learning rate (default 1e-3; PPO 3e-4)")
     t.add_argument("--beta-decay", type=_fraction, default=None,
                    help="DAgger: the expert's share of control steps: 1, then times this each iteration (default 0.7)")
@@ -319,7 +321,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "faster, its last trims coarser, so a student's small errors still move the T; default), or "
                         "the expert as is")
     t.add_argument("--max-samples", type=_int_at_least(1, 1 << 30, " samples"), default=None,
-                   help="DAgger: dataset ring size (default 8,000,000)")
+                   help="DAgger: dataset ring size (default 8,000,000; 32,000,000 in the pixel recipe)")
     _task_args(t, "start distribution of the chapter task trained and judged on (default task)")
     randomize_arg(t)  # training's episodes and every held-out judgement at each episode's drawn physics
     t.add_argument("--eval-envs", type=_worlds, default=None,
@@ -328,7 +330,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="control steps before an episode is truncated, in training and in every judgement (default "
                         "300, the task's; eval --max-steps judges a policy at the same length)")
     t.add_argument("--minutes", type=_positive_float, default=None,
-                   help="training's budget, its last judgement included: no rollout or fit starts that would pass it")
+                   help="training's budget, its last judgement included: no rollout or fit starts that would pass it "
+                        "(default none; 19.5 in the pixel recipe)")
     t.add_argument("--until", type=_rate, default=None, metavar="SUCCESS",
                    help="stop at the first held-out judgement at or above this success rate, in (0, 1] (the time "
                         "to a goal rate; the stop chose that judgement, so judge the policy again on other seeds, "
