@@ -14,7 +14,7 @@ from gymnasium.vector.utils import batch_space
 
 from mjx_pusht.task import goals
 from mjx_pusht import validate
-from mjx_pusht.boundary import MAX_ENVS
+from mjx_pusht.boundary import BYTES_PER_CPU_ENV, MAX_ENVS, fits
 from mjx_pusht.envs import physics
 from mjx_pusht.envs.common import (
     Pictures,
@@ -83,6 +83,9 @@ class PushTVectorEnv(Pictures, VectorEnv):
         validate.image_size(render_size, "render_size")
         max_episode_steps = validate.episode_limit(max_episode_steps)  # -1 or None: no limit, as gymnasium says
         self.backend, _ = resolve(backend)
+        if self.backend == "cpu":  # its worlds live in this machine's memory (an MJX batch's on the device)
+            fits(f"num_envs={self.num_envs:,} on the cpu backend", self.num_envs, BYTES_PER_CPU_ENV,
+                 "make fewer envs, or several vector envs one after another")
         self.obs_type, self.action_type, self.render_mode = obs_type, action_type, render_mode
         # by enum, by value ("SameStep"), by name ("SAME_STEP") or in snake case ("same_step")
         names = {k: m for m in AutoresetMode for k in (m, m.value, m.name, m.name.lower())}

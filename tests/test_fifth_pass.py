@@ -1,0 +1,43 @@
+"""The fifth hostile pass's findings, each run again as written (docs/notebook/hostile5.md; what changed for each:
+docs/notebook/boundary.md, "after the fifth pass")."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from helpers import one_line
+
+import mjx_pusht  # noqa: F401  (registers the gym ids)
+from mjx_pusht.boundary import BYTES_PER_CPU_ENV, BYTES_PER_SEED, available_memory
+from mjx_pusht.cli import main
+from mjx_pusht.errors import ConfigError
+
+EVAL = ["eval", "--backend", "cpu", "--max-steps", "2", "--seeds", "2", "--no-rerun", "--no-progress"]
+
+
+def _over_memory(per: int) -> int:
+    """A count whose estimate is past what this machine has available now (twice it)."""
+    return 2 * available_memory() // per + 1
+
+
+@pytest.mark.parametrize("command", ["eval", "sweep", "demos", "compare"])
+def test_seeds_past_this_machines_memory_are_refused_at_once_and_write_nothing(command, tmp_path, capsys):
+    n = _over_memory(BYTES_PER_SEED)  # 2**30, the count's own bound, was OOM-killed at 19 GB: refused by memory
+    assert n <= 1 << 30, "this machine has more memory than 2**30 seeds need: the count's own bound refuses first"
+    base = {"eval": EVAL[:5], "sweep": ["sweep", "--backend", "cpu", "--steps", "2"],
+            "demos": ["demos", "--backend", "cpu"], "compare": ["compare", "--backend", "mjx-warp"]}[command]
+    t = time.perf_counter()
+    assert main([*base, "--seeds", f"0:{n}", "--out", str(tmp_path / "o")]) == 1
+    assert time.perf_counter() - t < 1.0
+    one_line(capsys, "--seeds", "GiB of memory", "available")
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_cpu_vector_env_past_this_machines_memory_is_refused():
+    n = min(_over_memory(BYTES_PER_CPU_ENV), 2**24)
+    with pytest.raises(ConfigError, match="num_envs=.*GiB of memory"):
+        gym.make_vec("mjx_pusht/PushT-v0", num_envs=n, backend="cpu")
