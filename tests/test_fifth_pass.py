@@ -41,3 +41,22 @@ def test_a_cpu_vector_env_past_this_machines_memory_is_refused():
     n = min(_over_memory(BYTES_PER_CPU_ENV), 2**24)
     with pytest.raises(ConfigError, match="num_envs=.*GiB of memory"):
         gym.make_vec("mjx_pusht/PushT-v0", num_envs=n, backend="cpu")
+
+
+def test_a_mujoco_gl_that_names_no_gl_breaks_only_pixels():
+    # MUJOCO_GL=bogus was mujoco's RuntimeError at import: even `tree` died; set aside as a missing library is
+    import subprocess
+    import sys
+
+    from helpers import ENV, cli
+
+    env = {**ENV, "MUJOCO_GL": "bogus"}
+    r = cli("tree", env=env)
+    assert r.returncode == 0 and "kinematic tree" in r.stdout, r.stderr[-500:]
+    code = ("import gymnasium as gym, mjx_pusht\n"
+            "from mjx_pusht.render.pixels import PixelsError\n"
+            "try:\n    gym.make('mjx_pusht/PushT-v0', obs_type='pixels').reset(seed=0)\n"
+            "except PixelsError as e:\n    print('REFUSED', e)\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert "REFUSED MUJOCO_GL='bogus' is not a GL MuJoCo knows: set MUJOCO_GL to egl, osmesa or glfw" in p.stdout, \
+        p.stderr[-500:]
