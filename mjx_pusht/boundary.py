@@ -229,6 +229,24 @@ def fits(what: str, count: int, per: int, hint: str, error=ConfigError) -> None:
                     f" each, measured), more than the {_size(have)} this machine has available: {hint}")
 
 
+def jax_cache(path=None):
+    """The folder of XLA's compile cache (`path`, else $MJX_PUSHT_JAX_CACHE, else ~/.cache/mjx_pusht/jax), refused
+    in one line where it or a folder above it is a file: checked before a command claims its --out (a file there was
+    a FileExistsError traceback once the run's .run.json was written)."""
+    from pathlib import Path
+
+    given = path or os.environ.get("MJX_PUSHT_JAX_CACHE")
+    cache = Path(given or Path.home() / ".cache" / "mjx_pusht" / "jax")
+    where = f"MJX_PUSHT_JAX_CACHE={given}" if given and not path else f"the JAX compile cache {cache}"
+    for p in (cache, *cache.parents):
+        if p.exists() and not p.is_dir():
+            raise ConfigError(f"{where}: {p} is a file, not a folder: point it at a folder (XLA's compile cache, "
+                              "made if missing) or unset it")
+        if p.exists():
+            break
+    return cache
+
+
 # Peak memory per item, measured (this 2-core CPU, peak RSS between two counts): an eval's episode (its table row,
 # seeds, chunks: 150 MB at 16,384 seeds, 312 MB at 131,072; --max-steps 1) and a CPU vector env's world (its
 # MjData and buffers: 312 MB at 256 envs, 2.06 GB at 4,096, after a reset and a step).

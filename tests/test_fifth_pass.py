@@ -60,3 +60,13 @@ def test_a_mujoco_gl_that_names_no_gl_breaks_only_pixels():
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
     assert "REFUSED MUJOCO_GL='bogus' is not a GL MuJoCo knows: set MUJOCO_GL to egl, osmesa or glfw" in p.stdout, \
         p.stderr[-500:]
+
+
+@pytest.mark.parametrize("below", ["", "/sub"])
+def test_a_file_as_the_jax_cache_is_one_line_before_any_file(below, tmp_path, monkeypatch, capsys):
+    # was FileExistsError's traceback from the cache's set-up, after .run.json was written into --out
+    (tmp_path / "f").write_text("x")
+    monkeypatch.setenv("MJX_PUSHT_JAX_CACHE", str(tmp_path / "f") + below)
+    assert main([*EVAL[:1], "--backend", "mjx-jax", *EVAL[3:], "--out", str(tmp_path / "o")]) == 1
+    one_line(capsys, "MJX_PUSHT_JAX_CACHE=", "is a file, not a folder")
+    assert not (tmp_path / "o").exists()

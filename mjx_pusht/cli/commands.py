@@ -156,6 +156,10 @@ def _main(argv, signals: Signals) -> int:
         args = build_parser().parse_args(argv)
         if args.verbose:
             os.environ["MJX_PUSHT_VERBOSE"] = "1"
+        if getattr(args, "backend", "cpu") not in ("cpu", "gym-pusht"):  # one that may compile: its cache, at the door
+            from mjx_pusht.boundary import jax_cache
+
+            jax_cache()
         with held_folders():  # the --out folder is locked while the command runs
             code = COMMANDS[args.command](args)
         if code == 130 and signals.got:  # a command that caught the interrupt and said what it kept
