@@ -342,10 +342,16 @@ def attribute(env, name) -> None:
         raise UnknownAttribute(f"the vector env has no attribute {name!r}")
 
 
-def env_state(value, kind) -> None:
-    """The functional env's `step` takes the State its `reset` or `step` returned (None was an AttributeError)."""
+def env_state(value, kind, backend: str) -> None:
+    """The functional env's `step` takes the State its `reset` or `step` returned (None was an AttributeError), from
+    an env of its own backend: a cpu State's worlds are MuJoCo C's, an MJX State's arrays (the other's was a raw
+    TypeError or AttributeError deep in the step)."""
     if not isinstance(value, kind):
         raise ConfigError(f"step takes the State that reset or step returned, got {_show(value)}")
+    on_cpu = type(value.data).__module__ == "mjx_pusht.backends.cpu"
+    if on_cpu != (backend == "cpu"):
+        raise ConfigError(f"this PushTEnv runs on {backend}, but the State came from "
+                          f"{'a cpu' if on_cpu else 'an MJX'} env's reset or step: step each env's own States")
 
 
 def check_gym_pusht_obs(obs, obs_type: str) -> None:

@@ -70,3 +70,19 @@ def test_a_file_as_the_jax_cache_is_one_line_before_any_file(below, tmp_path, mo
     assert main([*EVAL[:1], "--backend", "mjx-jax", *EVAL[3:], "--out", str(tmp_path / "o")]) == 1
     one_line(capsys, "MJX_PUSHT_JAX_CACHE=", "is a file, not a folder")
     assert not (tmp_path / "o").exists()
+
+
+def test_a_state_from_the_other_backends_env_is_the_packages_one_line():
+    # a cpu State to an MJX env was JAX's TypeError (_Lockstep), an MJX one to a cpu env AttributeError ('copy');
+    # no step compiles here: both are refused at the door
+    from mujoco import mjx
+
+    from mjx_pusht.envs.functional import PushTEnv
+
+    cpu, jx = PushTEnv(), PushTEnv(backend="mjx-jax")
+    state = cpu.reset(np.arange(2))
+    with pytest.raises(ConfigError, match="runs on mjx-jax, but the State came from a cpu env"):
+        jx.step(state, np.zeros((2, 2)))
+    with pytest.raises(ConfigError, match="runs on cpu, but the State came from an MJX env"):
+        cpu.step(state._replace(data=mjx.make_data(jx.model)), np.zeros((2, 2)))
+    assert np.isfinite(cpu.step(state, np.zeros((2, 2))).obs["state"]).all()  # its own State still steps
