@@ -86,3 +86,44 @@ def test_a_state_from_the_other_backends_env_is_the_packages_one_line():
     with pytest.raises(ConfigError, match="runs on cpu, but the State came from an MJX env"):
         cpu.step(state._replace(data=mjx.make_data(jx.model)), np.zeros((2, 2)))
     assert np.isfinite(cpu.step(state, np.zeros((2, 2))).obs["state"]).all()  # its own State still steps
+
+
+CONTROLLERS = """
+import os
+import numpy as np
+def osexit(obs, t): os._exit(0)
+def cplx(obs, t): return np.zeros(obs["state"].shape[:-1] + (2,), complex)
+def boolean(obs, t): return np.ones(obs["state"].shape[:-1] + (2,), bool)
+def as_list(obs, t): return [[0.0, 0.0]] * len(obs["state"])
+def scalar(obs, t): return 3
+"""
+
+
+@pytest.fixture
+def controllers(tmp_path, monkeypatch):
+    (tmp_path / "ctl5.py").write_text(CONTROLLERS)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    return tmp_path
+
+
+@pytest.mark.parametrize("name, words", [
+    ("osexit", "called os._exit(0)"),  # ended the run silently with exit 0 and no table
+    ("cplx", "dtype complex128; actions are real numbers"),  # the imaginary part dropped with a warning
+    ("boolean", "dtype bool; actions are real numbers"),  # True became a velocity of 1 m/s
+    ("scalar", "returned an action of a int; expected shape (2, 2)"),  # said "shape None"
+])
+def test_a_controllers_bad_actions_are_one_line(name, words, controllers, capsys):
+    assert main([*EVAL, "--controller", f"ctl5:{name}", "--out", str(controllers / "o")]) == 1
+    one_line(capsys, f"controller ctl5:{name}", words)
+    assert os._exit.__module__ == "posix"  # the real one is back
+
+
+def test_a_controller_returning_a_list_of_the_right_shape_runs_as_its_array(controllers, capsys):
+    # was refused as "an action of shape None"; zero actions as a list are the zero controller's episodes
+    from mjx_pusht.io.outputs import read_table
+
+    assert main([*EVAL, "--controller", "ctl5:as_list", "--out", str(controllers / "l")]) == 0
+    assert main([*EVAL, "--controller", "zero", "--out", str(controllers / "z")]) == 0
+    got, want = (read_table(controllers / k / "per_episode.parquet") for k in "lz")
+    for column in ("final_coverage", "pusher_final_x", "pusher_final_y", "tee_final_yaw"):
+        np.testing.assert_array_equal(got[column], want[column])
