@@ -127,3 +127,31 @@ def test_a_controller_returning_a_list_of_the_right_shape_runs_as_its_array(cont
     got, want = (read_table(controllers / k / "per_episode.parquet") for k in "lz")
     for column in ("final_coverage", "pusher_final_x", "pusher_final_y", "tee_final_yaw"):
         np.testing.assert_array_equal(got[column], want[column])
+
+
+@pytest.mark.parametrize("argv, words", [
+    ([*EVAL, "--video-size", "64"], "--video-size only shapes --video's picture"),  # ignored without a word
+    ([*EVAL, "--video-episodes", "2"], "--video-episodes only shapes --video's picture"),
+    (["scene", "--no-rerun", "--smoke", "--steps", "50"], "--smoke is the fixed 120-step run"),  # 50 ignored
+    (["compare", "--evals", "a", "b", "--seeds", "5"], "their seeds are theirs, so --seeds is not taken"),
+])
+def test_a_flag_that_would_be_ignored_is_refused_before_any_file(argv, words, tmp_path, capsys):
+    assert main([*argv, "--out", str(tmp_path / "o")]) == 2
+    one_line(capsys, words)
+    assert not (tmp_path / "o").exists()
+
+
+def test_tree_colliders_honours_the_pusher(capsys):
+    # the table was the cylinder's whatever --pusher said; MuJoCo C's own pair functions tell the shapes apart
+    pytest.importorskip("warp")
+    tables = {}
+    for pusher in ("cylinder", "capsule"):
+        assert main(["tree", "--colliders", "--json", "--pusher", pusher]) == 0
+        import json
+
+        tables[pusher] = {tuple(r["geoms"]): r for r in json.loads(capsys.readouterr().out)}
+    pair = ("tee_bar", "pusher_tip")
+    assert tables["cylinder"][pair]["types"] == ["box", "cylinder"]
+    assert tables["capsule"][pair]["types"] == ["box", "capsule"]
+    assert tables["capsule"][pair]["mujoco_c"] != tables["cylinder"][pair]["mujoco_c"]
+    assert tables["capsule"][pair]["mjx_jax"] == tables["cylinder"][pair]["mjx_jax"]  # MJX-JAX's capsule either way
