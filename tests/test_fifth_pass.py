@@ -155,3 +155,15 @@ def test_tree_colliders_honours_the_pusher(capsys):
     assert tables["capsule"][pair]["types"] == ["box", "capsule"]
     assert tables["capsule"][pair]["mujoco_c"] != tables["cylinder"][pair]["mujoco_c"]
     assert tables["capsule"][pair]["mjx_jax"] == tables["cylinder"][pair]["mjx_jax"]  # MJX-JAX's capsule either way
+
+
+@pytest.mark.parametrize("name", ["tee_mass", "tee_damping", "tee_frictionloss"])
+def test_param_and_randomize_refuse_the_same_parameters_on_gym_pusht(name, tmp_path, capsys):
+    # --param tee_mass=2 on gym-pusht was accepted, --randomize tee_mass=... refused: one rule now, one reason
+    reasons = []
+    for flag, value in (("--randomize", "0.5:2"), ("--param", "2")):
+        assert main([*EVAL, "--task", "gym-pusht", flag, f"{name}={value}", "--out", str(tmp_path / flag)]) == 1
+        line = one_line(capsys, f"{name} means nothing on the gym-pusht task")
+        reasons.append(line.split("gym-pusht task: ")[1])
+        assert not (tmp_path / flag).exists()
+    assert reasons[0] == reasons[1]
