@@ -311,23 +311,25 @@ def reset_options(options, honoured: tuple, where: str) -> None:
                               "leave it out")
 
 
-# A vector env's own attributes that set_attr may change, each with its rule (the next render reads render_size)
-SETTABLE = {"render_size": Int(8, 2048)}
+# A vector env's own attributes that set_attr may change, each with its rule (the next render reads render_size;
+# the next step the success threshold, on every env of the batch, as the single env's attribute)
+SETTABLE = {"render_size": Int(8, 2048), "success_threshold": Real(0, 1, low_open=True)}
 
 
-def set_attr(env, name: str, value, own: set):
+def set_attr(env, name: str, value):
     """A vector env's `set_attr(name, value)`: `value` through the rule of a settable name (`SETTABLE`); any other
-    name of the env's own (its batch size, spaces, threshold) is refused, since setting it would not change the
-    running batch (num_envs) or the running jitted step (the success threshold: give it at make); a user's own
-    attribute is set, as SyncVectorEnv sets it. Returns the value to set."""
+    name of the env's own (its batch size, spaces) is refused, since setting it would not change the running batch
+    (num_envs); a name the env does not have is refused as `call` of it is (a typo was set and never read). Returns
+    the value to set."""
     if not isinstance(name, str) or not name.isidentifier():
         raise ConfigError(f"set_attr takes an attribute's name, got {_show(name)}")
     if name in SETTABLE:
         return SETTABLE[name](name, value)
-    if name not in own and hasattr(env, name):
-        hint = " (give it at make: gym.make_vec(..., success_threshold=x))" if name == "success_threshold" else ""
-        raise ConfigError(f"set_attr({name!r}): {name} is the running vector env's own and cannot be changed{hint}")
-    return value
+    if not hasattr(env, name):
+        raise UnknownAttribute(f"set_attr({name!r}): the vector env has no attribute {name!r}; it may set "
+                               f"{', '.join(SETTABLE)}")
+    raise ConfigError(f"set_attr({name!r}): {name} is the running vector env's own and cannot be changed "
+                      f"(settable: {', '.join(SETTABLE)})")
 
 
 class UnknownAttribute(MjxPushtError, AttributeError):

@@ -167,3 +167,113 @@ def test_param_and_randomize_refuse_the_same_parameters_on_gym_pusht(name, tmp_p
         reasons.append(line.split("gym-pusht task: ")[1])
         assert not (tmp_path / flag).exists()
     assert reasons[0] == reasons[1]
+
+
+def test_a_policy_runs_only_on_the_scene_it_was_trained_on(tmp_path, capsys):
+    # demos took a chapter-task policy (GymPushtPolicy refused the same file), and eval ran a gym-pusht policy on
+    # the chapter task without a word: one check for every entry now (Task.check_policy)
+    from test_tasks import small_policy
+
+    from mjx_pusht.train.gym_pusht_policy import GymPushtPolicy
+    from mjx_pusht.train.policy import load_checkpoint, save
+
+    gym_pusht = small_policy(tmp_path / "g.msgpack")
+    params, meta = load_checkpoint(gym_pusht)
+    chapter = tmp_path / "c.msgpack"
+    save(chapter, params, {**meta, "config": {}})
+    demos = ["demos", "--backend", "cpu", "--seeds", "2", "--max-steps", "3", "--no-progress"]
+    for argv, words in (([*demos, "--controller", f"policy:{chapter}"], "trained on the chapter task, not gym-pusht's"),
+                        ([*EVAL, "--controller", f"policy:{gym_pusht}"], "trained on the gym-pusht task, not chapter's")):
+        assert main([*argv, "--out", str(tmp_path / "o")]) == 1
+        one_line(capsys, words)
+        assert not (tmp_path / "o").exists()
+    with pytest.raises(mjx_pusht.errors.MjxPushtError, match="trained on the chapter task, not gym-pusht's"):
+        GymPushtPolicy(chapter)
+    assert main([*EVAL, "--task", "gym-pusht", "--controller", f"policy:{gym_pusht}", "--out", str(tmp_path / "e")]) == 0
+
+
+def test_a_vectors_reset_mask_is_booleans_only():
+    v = gym.make_vec("mjx_pusht/PushT-v0", num_envs=3, backend="cpu", autoreset_mode="disabled")
+    v.reset(seed=0)
+    for mask in (np.array([1, 0, 1]), np.array([1.0, 0.0, 1.0])):  # the integer one was taken as a mask
+        with pytest.raises(ConfigError, match=r"reset_mask must be \(3,\) booleans"):
+            v.reset(options={"reset_mask": mask})
+    obs, _ = v.reset(options={"reset_mask": np.array([True, False, True])})
+    assert np.isfinite(obs).all()
+
+
+def test_vector_set_attr_of_an_unknown_name_is_refused_as_call_of_it_is():
+    v = gym.make_vec("mjx_pusht/PushT-v0", num_envs=2, backend="cpu")
+    for attempt in (lambda: v.set_attr("bogus_attr", 1), lambda: v.call("bogus_attr")):
+        with pytest.raises(AttributeError, match="no attribute 'bogus_attr'") as e:
+            attempt()
+        assert isinstance(e.value, mjx_pusht.errors.MjxPushtError)
+    assert not hasattr(v, "bogus_attr")
+
+
+def test_a_closed_vector_env_is_not_stepped():
+    v = gym.make_vec("mjx_pusht/PushT-v0", num_envs=2, backend="cpu")
+    v.reset(seed=0)
+    v.close()
+    for attempt in (lambda: v.step(np.zeros((2, 2))), lambda: v.reset(seed=0)):
+        with pytest.raises(ConfigError, match="the vector env is closed"):
+            attempt()
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda e: e.reset(np.zeros(0, int)), "got none"),  # a 0-world State
+    (lambda e: e.reset_to(np.zeros((0, 5))), "got no rows"),
+    (lambda e: e.reset_to(np.array([[0, 0, 0, 0.2, 0.2]], complex)), "real numbers, got complex128"),  # a warning only
+    (lambda e: e.reset_to(np.array([[True] * 5])), "real numbers, got bool"),
+])
+def test_the_functional_envs_resets_refuse_no_worlds_and_complex_starts(call, words):
+    from mjx_pusht.envs.functional import PushTEnv
+
+    with pytest.raises(ConfigError, match=words):
+        call(PushTEnv())
+
+
+def test_autoreset_refuses_a_depth_of_zero_at_construction():
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.envs.wrappers import AutoReset
+
+    for depth in (0, -1, 2.5, True):
+        with pytest.raises(ConfigError, match="AutoReset's depth must be an integer from 1"):
+            AutoReset(PushTEnv(), mode="same_step", depth=depth)
+
+
+@pytest.mark.parametrize("env_id", ["mjx_pusht/PushT-gym-pusht-v0", "mjx_pusht/PushT-v0"])
+def test_vector_set_attr_success_threshold_is_honoured_on_every_env(env_id):
+    # was "cannot be changed"; references: the vector env given the threshold at make, and the drop-in's single env
+    # with its attribute set after make (dropin.md): the same seeds, the same actions, the same steps, rewards, ends
+    def run(env, n):
+        env.reset(seed=3)
+        out = []
+        for _ in range(3):
+            _, reward, terminated, truncated, _ = env.step(np.zeros((n, 2)) if n else np.zeros(2))
+            out.append((np.atleast_1d(reward)[0], np.atleast_1d(terminated)[0]))
+        return out
+
+    kw = dict(num_envs=2, backend="cpu", autoreset_mode="disabled", reset_kind="easy")  # the T near its goal
+    at_make = run(gym.make_vec(env_id, success_threshold=0.05, **kw), 2)
+    after = gym.make_vec(env_id, **kw)
+    default = run(after, 2)
+    after.set_attr("success_threshold", 0.05)
+    assert after.get_attr("success_threshold") == (0.05, 0.05)
+    assert run(after, 2) == at_make != default
+    assert at_make[0][1] and not default[0][1]  # ended at the first step at 0.05, not at 0.95
+    if "gym-pusht" in env_id:
+        single = gym.make(env_id, disable_env_checker=True, reset_kind="easy").unwrapped
+        single.success_threshold = 0.05
+        assert run(single, 0)[0] == at_make[0]
+    with pytest.raises(ConfigError, match="success_threshold must be a finite number in"):
+        after.set_attr("success_threshold", 1.5)
+
+
+def test_sweep_resume_into_an_empty_folder_is_refused_as_trains_is(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    for out in ("empty", "new"):
+        assert main(["sweep", "--backend", "cpu", "--steps", "2", "--seeds", "2", "--no-rerun", "--no-progress",
+                     "--resume", "--out", str(tmp_path / out)]) == 1
+        one_line(capsys, "--resume:", "nothing to resume (run without --resume to start)")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["empty"] and not any((tmp_path / "empty").iterdir())
