@@ -277,3 +277,20 @@ def test_sweep_resume_into_an_empty_folder_is_refused_as_trains_is(tmp_path, cap
                      "--resume", "--out", str(tmp_path / out)]) == 1
         one_line(capsys, "--resume:", "nothing to resume (run without --resume to start)")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["empty"] and not any((tmp_path / "empty").iterdir())
+
+
+def test_demos_rerun_into_their_own_folder_with_the_same_command(tmp_path, capsys):
+    # reliability.md: the same command and settings may rerun into their own folder; demos refused it ("holds a
+    # LeRobot dataset; pass --replace"). The rerun writes the dataset again and swaps it in whole: the same bytes
+    argv = ["demos", "--backend", "cpu", "--seeds", "2", "--max-steps", "3", "--no-progress", "--out", str(tmp_path / "d")]
+    assert main(argv) == 0
+    first = {p.relative_to(tmp_path): p.read_bytes() for p in (tmp_path / "d").rglob("*.parquet")}
+    assert main(argv) == 0
+    assert {p.relative_to(tmp_path): p.read_bytes() for p in (tmp_path / "d").rglob("*.parquet")} == first and first
+    capsys.readouterr()
+    # a dataset this command did not write (no run file: a user's) is still kept, --share-out or not
+    (tmp_path / "u" / "meta").mkdir(parents=True)
+    (tmp_path / "u" / "meta" / "info.json").write_text("{}")
+    assert main([*argv[:-1], str(tmp_path / "u"), "--share-out"]) == 1
+    one_line(capsys, "holds meta, which demos writes but no demos run wrote here")
+    assert sorted(p.name for p in (tmp_path / "u").rglob("*")) == ["info.json", "meta"]
