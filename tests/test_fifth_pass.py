@@ -294,3 +294,29 @@ def test_demos_rerun_into_their_own_folder_with_the_same_command(tmp_path, capsy
     assert main([*argv[:-1], str(tmp_path / "u"), "--share-out"]) == 1
     one_line(capsys, "holds meta, which demos writes but no demos run wrote here")
     assert sorted(p.name for p in (tmp_path / "u").rglob("*")) == ["info.json", "meta"]
+
+
+def test_ctrl_c_while_eval_draws_its_video_is_one_line_saying_what_is_whole(tmp_path, capsys, monkeypatch):
+    import mjx_pusht.io.video as video
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(video, "write", interrupted)  # ^C as the grid is written: exit 130 said nothing
+    out = tmp_path / "o"
+    assert main([*EVAL, "--video", str(tmp_path / "v.gif"), "--out", str(out)]) == 130
+    one_line(capsys, "interrupted: the table and summary in", "are whole", "video was not finished")
+    assert (out / "per_episode.parquet").is_file() and (out / "summary.json").is_file()
+    assert not (tmp_path / "v.gif").exists()
+
+
+def test_ctrl_c_in_demos_on_a_fresh_out_does_not_speak_of_an_earlier_dataset(tmp_path, capsys, monkeypatch):
+    import mjx_pusht.io.demos as demos
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(demos, "rollout_batch", interrupted)
+    argv = ["demos", "--backend", "cpu", "--seeds", "2", "--max-steps", "3", "--no-progress"]
+    assert main([*argv, "--out", str(tmp_path / "d")]) == 130
+    one_line(capsys, "interrupted: no dataset was finished in")

@@ -47,8 +47,9 @@ def kept(args) -> str:
     return {"sweep": f"the finished chunks are kept in {out}/.parts: rerun with --resume to finish",
             "eval": f"the finished chunks are kept in {out}/.parts: rerun with --resume to finish",
             "train": f"the checkpoints written so far are kept in {out}/checkpoints: rerun with --resume to go on",
-            "demos": f"an earlier dataset in {out} is kept as it was (the new one was not finished): rerun to write "
-                     "it"}.get(args.command, f"nothing finished in {out} was removed: rerun to write it")
+            "demos": (f"an earlier dataset in {out} is kept as it was (the new one was not finished): rerun to write it"
+                      if (Path(out) / "meta" / "info.json").exists() else
+                      f"no dataset was finished in {out}: rerun to write it")}.get(args.command, f"nothing finished in {out} was removed: rerun to write it")
 
 
 def end_interrupted(code: int) -> None:
