@@ -320,3 +320,19 @@ def test_ctrl_c_in_demos_on_a_fresh_out_does_not_speak_of_an_earlier_dataset(tmp
     argv = ["demos", "--backend", "cpu", "--seeds", "2", "--max-steps", "3", "--no-progress"]
     assert main([*argv, "--out", str(tmp_path / "d")]) == 130
     one_line(capsys, "interrupted: no dataset was finished in")
+
+
+def test_a_gym_pusht_policys_bool_observation_is_refused():
+    from mjx_pusht.boundary import check_gym_pusht_obs
+
+    for obs in (np.ones(5, bool), [True] * 5):  # positions of 1 px
+        with pytest.raises(ConfigError, match="observation must be real numbers, got bool"):
+            check_gym_pusht_obs(obs, "state")
+
+
+def test_a_sweeps_param_that_means_nothing_leaves_no_run_file(tmp_path, capsys):
+    # the refusal came after .run.json and .parts/manifest.json were written
+    assert main(["sweep", "--backend", "cpu", "--steps", "5", "--seeds", "2", "--param", "kp=1", "--no-rerun",
+                 "--out", str(tmp_path / "o")]) == 1
+    one_line(capsys, "kp means nothing on the chapter task")
+    assert not (tmp_path / "o").exists()
