@@ -45,19 +45,12 @@ def test_a_cpu_vector_env_past_this_machines_memory_is_refused():
 
 def test_a_mujoco_gl_that_names_no_gl_breaks_only_pixels():
     # MUJOCO_GL=bogus was mujoco's RuntimeError at import: even `tree` died; set aside as a missing library is
-    import subprocess
-    import sys
-
-    from helpers import ENV, cli
+    from helpers import ENV, cli, pixels_refusal
 
     env = {**ENV, "MUJOCO_GL": "bogus"}
     r = cli("tree", env=env)
     assert r.returncode == 0 and "kinematic tree" in r.stdout, r.stderr[-500:]
-    code = ("import gymnasium as gym, mjx_pusht\n"
-            "from mjx_pusht.render.pixels import PixelsError\n"
-            "try:\n    gym.make('mjx_pusht/PushT-v0', obs_type='pixels').reset(seed=0)\n"
-            "except PixelsError as e:\n    print('REFUSED', e)\n")
-    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    p = pixels_refusal(env)
     assert "REFUSED MUJOCO_GL='bogus' is not a GL MuJoCo knows: set MUJOCO_GL to egl, osmesa or glfw" in p.stdout, \
         p.stderr[-500:]
 
