@@ -329,3 +329,19 @@ def test_a_sweeps_param_that_means_nothing_leaves_no_run_file(tmp_path, capsys):
                  "--out", str(tmp_path / "o")]) == 1
     one_line(capsys, "kp means nothing on the chapter task")
     assert not (tmp_path / "o").exists()
+
+
+def test_ctrl_c_before_a_sweeps_first_chunk_does_not_send_the_user_to_resume(tmp_path, capsys, monkeypatch):
+    # the line said "rerun with --resume", which (nothing to resume) is now refused: it says to start instead
+    import mjx_pusht.backends.factory as factory
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(factory, "make_backend", interrupted)  # ^C while the backend is built (an MJX compile)
+    argv = ["sweep", "--backend", "cpu", "--steps", "2", "--seeds", "2", "--no-rerun", "--no-progress",
+            "--out", str(tmp_path / "o")]
+    assert main(argv) == 130
+    one_line(capsys, "no chunk was finished yet", "rerun without --resume to start")
+    monkeypatch.undo()
+    assert main(argv) == 0

@@ -44,6 +44,8 @@ def kept(args) -> str:
     out = getattr(args, "out", None)
     if args.command == "train" and not (Path(out) / "checkpoints" / "resume.msgpack").is_file():
         return "no checkpoint was written yet (the first comes with the first judgement): rerun without --resume to start"
+    if args.command in ("sweep", "eval") and not (Path(out) / ".parts").is_dir():  # --resume would find nothing
+        return f"no chunk was finished yet in {out}: rerun without --resume to start"
     return {"sweep": f"the finished chunks are kept in {out}/.parts: rerun with --resume to finish",
             "eval": f"the finished chunks are kept in {out}/.parts: rerun with --resume to finish",
             "train": f"the checkpoints written so far are kept in {out}/checkpoints: rerun with --resume to go on",
