@@ -345,3 +345,15 @@ def test_ctrl_c_before_a_sweeps_first_chunk_does_not_send_the_user_to_resume(tmp
     one_line(capsys, "no chunk was finished yet", "rerun without --resume to start")
     monkeypatch.undo()
     assert main(argv) == 0
+
+
+def test_a_parameter_grid_past_this_machines_memory_is_refused_before_any_file(tmp_path, capsys):
+    # each seed is a row per combination: --seeds alone fits, times the grid does not
+    grid = 16  # --param kv=1..16: 16 combinations
+    n = min(_over_memory(BYTES_PER_SEED) // grid + 1, 1 << 30)
+    assert n * BYTES_PER_SEED < available_memory()
+    kv = ",".join(str(v) for v in range(1, grid + 1))
+    assert main(["sweep", "--backend", "cpu", "--steps", "2", "--seeds", str(n), "--param", f"kv={kv}",
+                 "--no-rerun", "--out", str(tmp_path / "o")]) == 1
+    one_line(capsys, f"{grid} combinations", "GiB of memory")
+    assert not (tmp_path / "o").exists()
