@@ -357,3 +357,18 @@ def test_a_parameter_grid_past_this_machines_memory_is_refused_before_any_file(t
                  "--no-rerun", "--out", str(tmp_path / "o")]) == 1
     one_line(capsys, f"{grid} combinations", "GiB of memory")
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow  # compiles MJX-JAX's step three times (about 2 min on a 2-core CPU)
+def test_vector_set_attr_success_threshold_recompiles_the_mjx_step():
+    # MJX's jitted step holds the threshold as a constant: set after make, it is dropped and compiled again
+    def run(env):
+        env.reset(seed=3)
+        return [tuple(np.asarray(x).tolist() for x in env.step(np.zeros((2, 2)))[1:3]) for _ in range(2)]
+
+    kw = dict(num_envs=2, backend="mjx-jax", autoreset_mode="disabled", reset_kind="easy")
+    at_make = run(gym.make_vec("mjx_pusht/PushT-v0", success_threshold=0.05, **kw))
+    after = gym.make_vec("mjx_pusht/PushT-v0", **kw)
+    default = run(after)
+    after.set_attr("success_threshold", 0.05)
+    assert run(after) == at_make != default and all(at_make[0][1]) and not any(default[0][1])
