@@ -28,6 +28,12 @@ elif _os.environ.get("MUJOCO_GL") in ("egl", "osmesa") and _sys.platform.startsw
 
     if not _cu.find_library({"egl": "EGL", "osmesa": "OSMesa"}[_os.environ["MUJOCO_GL"]]):
         _os.environ["MJX_PUSHT_GL_MISSING"] = _os.environ.pop("MUJOCO_GL")
+# A MUJOCO_GL that is no GL at all (a typo) breaks `import mujoco` the same way: set aside too, the renderer naming
+# it and the names MuJoCo takes (its own list, mujoco/rendering/classic/gl_context.py) when pixels are asked for.
+elif _os.environ.get("MUJOCO_GL", "").lower().strip() not in (
+        "", "disable", "disabled", "off", "false", "0", "enable", "enabled", "on", "true", "1", "glfw",
+        *{"linux": ("glx", "egl", "osmesa"), "win32": ("wgl",), "darwin": ("cgl",)}.get(_sys.platform, ())):
+    _os.environ["MJX_PUSHT_GL_INVALID"] = _os.environ.pop("MUJOCO_GL")
 
 
 def _end_early(signum, frame):  # noqa: ARG001 - a signal handler's signature

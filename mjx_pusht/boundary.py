@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import ipaddress
 import numbers
+import os
 import re
 
 import numpy as np
@@ -191,6 +192,68 @@ def refuse_combinations(rules: tuple, values: dict, error=ConfigError) -> None:
             raise error(message(values) if callable(message) else message.format(**values))
 
 
+def available_memory() -> int | None:
+    """The bytes this machine can still give a process (psutil's `available`, else /proc/meminfo's MemAvailable,
+    else free pages by os.sysconf), or None where none of them says."""
+    try:
+        import psutil
+
+        return int(psutil.virtual_memory().available)
+    except ImportError:
+        pass
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _size(n: float) -> str:
+    return f"{n / 2**30:,.1f} GiB" if n >= 2**30 else f"{n / 2**20:,.0f} MiB"
+
+
+def fits(what: str, count: int, per: int, hint: str, error=ConfigError) -> None:
+    """Refuse, before any work or file, `count` items of about `per` bytes each (`what`: the input that asks for
+    them) where they would not fit in the memory this machine has available now: such a run grew until the
+    kernel killed it (19 GB in 26 s, then the whole machine's OOM killer), where a line and an exit were due."""
+    need = count * per
+    have = available_memory()
+    if have is not None and need > have:
+        raise error(f"{what} needs about {_size(need)} of memory ({_size(per) if per >= 2**20 else f'{per:,} bytes'}"
+                    f" each, measured), more than the {_size(have)} this machine has available: {hint}")
+
+
+def jax_cache(path=None):
+    """The folder of XLA's compile cache (`path`, else $MJX_PUSHT_JAX_CACHE, else ~/.cache/mjx_pusht/jax), refused
+    in one line where it or a folder above it is a file: checked before a command claims its --out (a file there was
+    a FileExistsError traceback once the run's .run.json was written)."""
+    from pathlib import Path
+
+    given = path or os.environ.get("MJX_PUSHT_JAX_CACHE")
+    cache = Path(given or Path.home() / ".cache" / "mjx_pusht" / "jax")
+    where = f"MJX_PUSHT_JAX_CACHE={given}" if given and not path else f"the JAX compile cache {cache}"
+    for p in (cache, *cache.parents):
+        if p.exists() and not p.is_dir():
+            raise ConfigError(f"{where}: {p} is a file, not a folder: point it at a folder (XLA's compile cache, "
+                              "made if missing) or unset it")
+        if p.exists():
+            break
+    return cache
+
+
+# Peak memory per item, measured (this 2-core CPU, peak RSS between two counts): an eval's episode (its table row,
+# seeds, chunks: 150 MB at 16,384 seeds, 312 MB at 131,072; --max-steps 1) and a CPU vector env's world (its
+# MjData and buffers: 312 MB at 256 envs, 2.06 GB at 4,096, after a reset and a step).
+BYTES_PER_SEED = 1_500
+BYTES_PER_CPU_ENV = 460_000
+
+
 # --- the tables ------------------------------------------------------------------------------------------------
 MAX_PROCESSES = 65_536
 MAX_WORKERS = 4_096  # CPU threads or processes one backend may start
@@ -248,23 +311,25 @@ def reset_options(options, honoured: tuple, where: str) -> None:
                               "leave it out")
 
 
-# A vector env's own attributes that set_attr may change, each with its rule (the next render reads render_size)
-SETTABLE = {"render_size": Int(8, 2048)}
+# A vector env's own attributes that set_attr may change, each with its rule (the next render reads render_size;
+# the next step the success threshold, on every env of the batch, as the single env's attribute)
+SETTABLE = {"render_size": Int(8, 2048), "success_threshold": Real(0, 1, low_open=True)}
 
 
-def set_attr(env, name: str, value, own: set):
+def set_attr(env, name: str, value):
     """A vector env's `set_attr(name, value)`: `value` through the rule of a settable name (`SETTABLE`); any other
-    name of the env's own (its batch size, spaces, threshold) is refused, since setting it would not change the
-    running batch (num_envs) or the running jitted step (the success threshold: give it at make); a user's own
-    attribute is set, as SyncVectorEnv sets it. Returns the value to set."""
+    name of the env's own (its batch size, spaces) is refused, since setting it would not change the running batch
+    (num_envs); a name the env does not have is refused as `call` of it is (a typo was set and never read). Returns
+    the value to set."""
     if not isinstance(name, str) or not name.isidentifier():
         raise ConfigError(f"set_attr takes an attribute's name, got {_show(name)}")
     if name in SETTABLE:
         return SETTABLE[name](name, value)
-    if name not in own and hasattr(env, name):
-        hint = " (give it at make: gym.make_vec(..., success_threshold=x))" if name == "success_threshold" else ""
-        raise ConfigError(f"set_attr({name!r}): {name} is the running vector env's own and cannot be changed{hint}")
-    return value
+    if not hasattr(env, name):
+        raise UnknownAttribute(f"set_attr({name!r}): the vector env has no attribute {name!r}; it may set "
+                               f"{', '.join(SETTABLE)}")
+    raise ConfigError(f"set_attr({name!r}): {name} is the running vector env's own and cannot be changed "
+                      f"(settable: {', '.join(SETTABLE)})")
 
 
 class UnknownAttribute(MjxPushtError, AttributeError):
@@ -279,10 +344,16 @@ def attribute(env, name) -> None:
         raise UnknownAttribute(f"the vector env has no attribute {name!r}")
 
 
-def env_state(value, kind) -> None:
-    """The functional env's `step` takes the State its `reset` or `step` returned (None was an AttributeError)."""
+def env_state(value, kind, backend: str) -> None:
+    """The functional env's `step` takes the State its `reset` or `step` returned (None was an AttributeError), from
+    an env of its own backend: a cpu State's worlds are MuJoCo C's, an MJX State's arrays (the other's was a raw
+    TypeError or AttributeError deep in the step)."""
     if not isinstance(value, kind):
         raise ConfigError(f"step takes the State that reset or step returned, got {_show(value)}")
+    on_cpu = type(value.data).__module__ == "mjx_pusht.backends.cpu"
+    if on_cpu != (backend == "cpu"):
+        raise ConfigError(f"this PushTEnv runs on {backend}, but the State came from "
+                          f"{'a cpu' if on_cpu else 'an MJX'} env's reset or step: step each env's own States")
 
 
 def check_gym_pusht_obs(obs, obs_type: str) -> None:

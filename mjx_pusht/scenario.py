@@ -30,7 +30,7 @@ class Scenario:
     randomize: tuple = ()
 
     def __post_init__(self) -> None:
-        from mjx_pusht.model.params import check_params
+        from mjx_pusht.model.params import check_params, means_nothing
         from mjx_pusht.model.randomize import check as check_randomize
         from mjx_pusht.task.episode import Episode
         from mjx_pusht.task.reset import RESETS
@@ -40,6 +40,8 @@ class Scenario:
                 raise ConfigError(f"Scenario's {name} must be a {kind.__name__}, got {getattr(self, name)!r}")
         # the CLI's --param goes through the same check (model.params.parse_params)
         object.__setattr__(self, "params", check_params(self.params))
+        for name, _ in self.params:  # as --randomize refuses them: one rule for both flags
+            means_nothing(name, self.scene.variant, "--param (Scenario's params)")
         object.__setattr__(self, "randomize", check_randomize(self.randomize, self.scene))
         if self.params and self.randomize:
             raise ConfigError("a Scenario sweeps a parameter grid or randomises physics per episode, not both")

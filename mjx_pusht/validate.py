@@ -163,12 +163,13 @@ def seed_array(value, name: str = "seeds") -> np.ndarray:
 
 
 def mask(value, n: int, name: str = "reset_mask") -> np.ndarray:
-    """(n,) booleans (a 0/1 integer array is accepted; anything else is refused, never cast)."""
+    """(n,) booleans, as documented (integers, 0/1 too, and floats are refused, never cast: np.array([1, 0, 1]) was
+    taken as a mask while a float one was refused)."""
     try:
         a = np.asarray(value)
     except ValueError:  # a ragged list
         raise ConfigError(f"{name} must be ({n},) booleans, got {_show(value)}") from None
-    if a.shape != (n,) or not (a.dtype == bool or (a.dtype.kind in "iu" and np.isin(a, (0, 1)).all())):
+    if a.shape != (n,) or a.dtype != bool:
         raise ConfigError(f"{name} must be ({n},) booleans, got {a.dtype} of shape {a.shape}")
     return a.astype(bool)
 

@@ -20,6 +20,16 @@ def cli(*args, cwd=None, env=None) -> subprocess.CompletedProcess:
                           cwd=cwd, env=env or ENV)
 
 
+def pixels_refusal(env: dict) -> subprocess.CompletedProcess:
+    """A pixel env reset in a fresh process under `env` (a MUJOCO_GL set aside at import): prints REFUSED and the
+    PixelsError's message when the renderer refuses."""
+    code = ("import gymnasium as gym, mjx_pusht\n"
+            "from mjx_pusht.render.pixels import PixelsError\n"
+            "try:\n    gym.make('mjx_pusht/PushT-v0', obs_type='pixels').reset(seed=0)\n"
+            "except PixelsError as e:\n    print('REFUSED', e)\n")
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=os.getcwd())
+
+
 # The cheapest run of each command (the refusal tests' base: their refusals come before any simulation)
 RUNS = {
     "sweep": ("sweep", "--backend", "cpu", "--seeds", "2", "--steps", "5", "--no-rerun", "--no-progress"),

@@ -100,6 +100,7 @@ def test_each_episodes_first_state_is_gym_pushts_own_observation_of_that_seed(de
 
 
 def test_an_existing_dataset_is_kept_without_replace_and_bad_input_is_one_line(demos, capsys):
+    # other seeds than the dataset's (the same ones rerun: test_fifth_pass.py)
     before = {p: p.read_bytes() for p in demos.rglob("*.parquet")}
     assert main(["demos", "--seeds", "1", "--backend", "cpu", "--out", str(demos)]) == 1
     assert "holds a LeRobot dataset; pass --replace" in capsys.readouterr().err

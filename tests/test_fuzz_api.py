@@ -96,6 +96,7 @@ def _functional() -> PushTEnv:
        action=st.one_of(arrays_near((2, 2)), ODD))
 @example(seeds=[0, 1], state_kind="odd", state=None, action=np.zeros((2, 2)))  # step(None, a): AttributeError
 @example(seeds=None, state_kind="reset", state=None, action=None)  # found: reset(None) was a TypeError
+@example(seeds=np.zeros(0, int), state_kind="reset", state=None, action=np.zeros((0, 2)))  # a 0-world State
 def test_functional_env_reset_and_step(seeds, state_kind, state, action):
     env = _functional()
     started = holds(lambda: env.reset(seeds), check=lambda s: finite(s.obs))
@@ -167,6 +168,8 @@ def _vector(env_id: str):
 @example(env_id=IDS[0], name="success_threshold", value=0.9, options=None, action=np.zeros((2, 2)))  # traceback
 @example(env_id=IDS[0], name="success_threshold", value=[0.9, 0.9], options=None, action=np.zeros((2, 2)))
 @example(env_id=IDS[0], name="nonexistent", value=1, options=None, action=np.zeros((2, 2)))
+@example(env_id=IDS[0], name="bogus_attr", value=1, options={"reset_mask": np.array([1, 0])},  # both accepted
+         action=np.zeros((2, 2)))
 def test_vector_envs(env_id, name, value, options, action):
     envs = _vector(env_id)
     holds(lambda: envs.set_attr(name, value), check=lambda r: None)
@@ -193,6 +196,7 @@ VALID_STATE = np.array([256.0, 256.0, 300.0, 300.0, 0.5])
 @example(obs_type="state", obs=None)
 @example(obs_type="state", obs="abc")
 @example(obs_type="state", obs=np.zeros(8))  # a random goal's observation
+@example(obs_type="state", obs=np.ones(5, bool))  # bools as positions
 @example(obs_type="state", obs={"pixels": np.zeros((96, 96, 3), np.uint8), "agent_pos": np.zeros(2)})
 def test_a_gym_pusht_policys_observation(obs_type, obs):
     holds(lambda: boundary.check_gym_pusht_obs(obs, obs_type))

@@ -58,7 +58,7 @@ GOOD = {  # a valid value per flag, drawn half the time, so that tries get past 
     "--param": ["kv=10,20", "tee_mass=0.5"], "--randomize": ["kv=0.5:1.5", "tee_mass=0.8:1.2"],
     "--controller": ["expert", "zero", "random", *(f"ctl_fuzz:{n}" for n in (
         "nan", "inf_later", "neg_inf_one_row", "shape", "none", "text", "raises", "ints", "huge", "as_list",
-        "not_callable", "missing"))], "--action": ["velocity", "position", "target"],
+        "not_callable", "missing", "osexit", "cplx", "boolean"))], "--action": ["velocity", "position", "target"],
     "--task": ["chapter", "gym-pusht", "gym-pusht-easy"], "--reset": ["task", "easy", "chapter"],
     "--goal": ["fixed", "random"], "--success-threshold": ["0.9", "0.5"], "--max-steps": ["2", "4"],
     "--frame-skip": ["5", "10"], "--video-episodes": ["1", "2"], "--video-size": ["32", "48"], "--batch": ["1", "2"],
@@ -83,6 +83,10 @@ def raises(obs, t): raise ZeroDivisionError("boom")
 def ints(obs, t): return np.zeros(obs["state"].shape[:-1] + (2,), int)
 def huge(obs, t): return np.full(obs["state"].shape[:-1] + (2,), 1e300)
 def as_list(obs, t): return [[0.0, 0.0]] * len(obs["state"])
+def osexit(obs, t):
+    import os; os._exit(0)
+def cplx(obs, t): return np.zeros(obs["state"].shape[:-1] + (2,), complex)
+def boolean(obs, t): return np.ones(obs["state"].shape[:-1] + (2,), bool)
 not_callable = 3
 """
 
@@ -177,6 +181,9 @@ def _try(argv, world, owned: list[str], replaced: list[str]):
 @example(command="sweep", data=["--share-out", "--backend", "gym-pusht", "--out", "users"])  # found: left .run.json
 @example(command="sweep", data=["--share-out", "--out", "root"])  # found: wrote its table into / (as root)
 @example(command="demos", data=["--success-threshold", "\r0", "--out", "fresh"])  # found: a value's \r made 2 lines
+@example(command="eval", data=["--controller", "ctl_fuzz:osexit", "--out", "fresh"])  # a silent exit 0, no table
+@example(command="eval", data=["--controller", "ctl_fuzz:cplx", "--out", "fresh"])  # imaginary part dropped
+@example(command="eval", data=["--controller", "ctl_fuzz:as_list", "--out", "fresh"])  # refused as "shape None"
 def test_every_command_keeps_the_property(command, data, worlds):
     world = _world(worlds / f"w{next(_count)}")
     os.chdir(world)  # an --out of "" would write here

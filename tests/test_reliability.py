@@ -71,20 +71,13 @@ def _without_osmesa():
 def test_a_mujoco_gl_whose_library_is_missing_breaks_only_pixels(tmp_path):
     # finding 6: MUJOCO_GL=osmesa without OSMesa broke `import mujoco`, so every command died at import
     _without_osmesa()
-    import os
-    import subprocess
-    import sys
-
     from helpers import ENV as RUN_ENV
+    from helpers import pixels_refusal
 
     env = {**RUN_ENV, "MUJOCO_GL": "osmesa"}
     r = cli("tree", env=env)
     assert r.returncode == 0 and "kinematic tree" in r.stdout, r.stderr[-500:]
-    code = ("import gymnasium as gym, mjx_pusht\n"
-            "from mjx_pusht.render.pixels import PixelsError\n"
-            "try:\n    gym.make('mjx_pusht/PushT-v0', obs_type='pixels').reset(seed=0)\n"
-            "except PixelsError as e:\n    print('REFUSED', e)\n")
-    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=os.getcwd())
+    p = pixels_refusal(env)
     assert "REFUSED MUJOCO_GL=osmesa but OSMesa" in p.stdout, p.stderr[-500:]
 
 

@@ -10,7 +10,9 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
     """Turn on JAX's persistent compilation cache so a second process does not compile again."""
     import jax
 
-    cache = Path(path or os.environ.get("MJX_PUSHT_JAX_CACHE") or Path.home() / ".cache" / "mjx_pusht" / "jax")
+    from mjx_pusht.boundary import jax_cache
+
+    cache = jax_cache(path)
     cache.mkdir(parents=True, exist_ok=True)
     jax.config.update("jax_compilation_cache_dir", str(cache))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)

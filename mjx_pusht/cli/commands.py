@@ -44,11 +44,14 @@ def kept(args) -> str:
     out = getattr(args, "out", None)
     if args.command == "train" and not (Path(out) / "checkpoints" / "resume.msgpack").is_file():
         return "no checkpoint was written yet (the first comes with the first judgement): rerun without --resume to start"
+    if args.command in ("sweep", "eval") and not (Path(out) / ".parts").is_dir():  # --resume would find nothing
+        return f"no chunk was finished yet in {out}: rerun without --resume to start"
     return {"sweep": f"the finished chunks are kept in {out}/.parts: rerun with --resume to finish",
             "eval": f"the finished chunks are kept in {out}/.parts: rerun with --resume to finish",
             "train": f"the checkpoints written so far are kept in {out}/checkpoints: rerun with --resume to go on",
-            "demos": f"an earlier dataset in {out} is kept as it was (the new one was not finished): rerun to write "
-                     "it"}.get(args.command, f"nothing finished in {out} was removed: rerun to write it")
+            "demos": (f"an earlier dataset in {out} is kept as it was (the new one was not finished): rerun to write it"
+                      if (Path(out) / "meta" / "info.json").exists() else
+                      f"no dataset was finished in {out}: rerun to write it")}.get(args.command, f"nothing finished in {out} was removed: rerun to write it")
 
 
 def end_interrupted(code: int) -> None:
@@ -156,6 +159,10 @@ def _main(argv, signals: Signals) -> int:
         args = build_parser().parse_args(argv)
         if args.verbose:
             os.environ["MJX_PUSHT_VERBOSE"] = "1"
+        if getattr(args, "backend", "cpu") not in ("cpu", "gym-pusht"):  # one that may compile: its cache, at the door
+            from mjx_pusht.boundary import jax_cache
+
+            jax_cache()
         with held_folders():  # the --out folder is locked while the command runs
             code = COMMANDS[args.command](args)
         if code == 130 and signals.got:  # a command that caught the interrupt and said what it kept

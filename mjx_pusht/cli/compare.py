@@ -17,6 +17,7 @@ def cmd_compare(args) -> int:
 
     if args.evals:
         return _compare_evals(args)
+    args.seeds = args.seeds or "64"  # the default, as the fingerprint of an earlier run holds it
     seeds = parse_seeds(args.seeds)
     from mjx_pusht.task.tasks import get as get_task
 
@@ -65,6 +66,8 @@ def _compare_evals(args) -> int:
 
     if args.controller:
         raise UsageError("--evals pairs two finished evals; their controller is theirs, so --controller is not taken")
+    if args.seeds is not None:
+        raise UsageError("--evals pairs two finished evals; their seeds are theirs, so --seeds is not taken")
     from mjx_pusht.study.closed_loop import evals_report, write_report
 
     report = evals_report(*args.evals)  # a refused pairing leaves no --out folder behind

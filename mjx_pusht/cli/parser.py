@@ -210,7 +210,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("scene", help="the chapter's run: one seed, settle, push, weld check, recording")
     s.add_argument("--seed", type=_seed, default=0, help="seeds the block's start pose, like a PushT reset")
-    s.add_argument("--steps", type=_steps, default=120, help="nudge length in steps (default 120)")
+    s.add_argument("--steps", type=_steps, default=None, help="nudge length in steps (default 120; not with --smoke)")
     s.add_argument("--smoke", action="store_true", help="fixed 120-step run; two runs match byte for byte")
     s.add_argument("--out", type=_folder, default=Path("outputs/scene"), help="the run's folder (default outputs/scene)")
     s.add_argument("--replace", action="store_true", help=REPLACE_HELP)
@@ -248,8 +248,10 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--frame-skip", type=_frame_skip, default=10, help="physics steps per control step (default 10)")
     e.add_argument("--video", type=Path, default=None, metavar="FILE.gif|FILE.mp4",
                    help="the first --video-episodes episodes as a grid of tiles, coverage on each (rendered on the CPU)")
-    e.add_argument("--video-episodes", type=_positive, default=16, help="tiles in --video (default 16)")
-    e.add_argument("--video-size", type=_int_at_least(32, 2048), default=128, help="pixels per tile side (default 128)")
+    # None by default, so that one given without --video is seen (and refused, not ignored)
+    e.add_argument("--video-episodes", type=_positive, default=None, help="tiles in --video (default 16)")
+    e.add_argument("--video-size", type=_int_at_least(32, 2048), default=None,
+                   help="pixels per tile side in --video (default 128)")
 
     t = sub.add_parser("train", help="train a policy (DAgger from the expert, or Brax PPO): policy.msgpack, curve, summary")
     t.add_argument("--algo", choices=("dagger", "ppo"), default="dagger",
@@ -343,7 +345,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--no-progress", dest="progress", action="store_false")
 
     c = sub.add_parser("compare", help="CPU vs MJX fidelity report: compare.json, compare.md, compare.png")
-    c.add_argument("--seeds", default="64", help="N, A:B or a,b,c (default 64)")
+    c.add_argument("--seeds", default=None, help="N, A:B or a,b,c (default 64; not with --evals: theirs)")
     c.add_argument("--backend", default="mjx-jax", help="mjx-jax or mjx-warp (default mjx-jax); gym-pusht: gym-pusht "
                                                          "0.1.8 itself, for --task gym-pusht --controller C")
     c.add_argument("--out", type=_folder, default=Path("outputs/compare"),

@@ -18,7 +18,9 @@ def cmd_scene(args) -> int:
     from mjx_pusht.scenario import Scenario
     from mjx_pusht.task.schedule import SMOKE_NUDGE_STEPS, Schedule
 
-    schedule = Schedule(nudge_steps=SMOKE_NUDGE_STEPS if args.smoke else args.steps)
+    if args.smoke and args.steps is not None:
+        raise UsageError(f"--smoke is the fixed {SMOKE_NUDGE_STEPS}-step run: leave --steps out, or drop --smoke")
+    schedule = Schedule(nudge_steps=SMOKE_NUDGE_STEPS if args.smoke else args.steps or 120)
     if args.compare_welded and args.break_it == "none":
         raise UsageError("--compare-welded compares a broken scene with the welded one: give --break split-tee or free-tee")
     # one seed's look: a rerun with another seed may overwrite the last; another command's results may not
@@ -67,7 +69,7 @@ def cmd_tree(args) -> int:
 
         from mjx_pusht.model.colliders import collider_table, describe
 
-        rows = collider_table(args.break_it)
+        rows = collider_table(args.break_it, pusher=args.pusher)
         print(json.dumps([dataclasses.asdict(r) for r in rows], indent=2) if args.json else describe(rows))
         return 0
     tree = read_tree(build_model(SceneSpec(args.break_it, args.pusher)))

@@ -210,7 +210,7 @@ class PushTEnv(Resets, Observes):
 
     def _step_cpu(self, state: State, action) -> State:
         """The batch's control step on MuJoCo C: the same episode.py functions on NumPy arrays."""
-        boundary.env_state(state, State)
+        boundary.env_state(state, State, self.backend)
         return self._step_checked(state, validate.actions(action, (len(state.step), 2), -np.inf, np.inf))
 
     def _step_checked(self, state: State, action: np.ndarray) -> State:
@@ -254,7 +254,7 @@ class PushTEnv(Resets, Observes):
         import jax
         import jax.numpy as jnp
 
-        boundary.env_state(state, State)
+        boundary.env_state(state, State, self.backend)
         action = jnp.asarray(action)
         validate.actions_shape_on_device(action, len(state.step))  # (n, 2), never reshaped; traced too
         if not isinstance(action, jax.core.Tracer):

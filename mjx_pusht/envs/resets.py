@@ -24,6 +24,8 @@ class Resets:
     def reset(self, seeds) -> State:
         """A fresh episode per seed, from the reset distribution's start pose for that seed."""
         seeds = validate.seed_array(seeds)
+        if not seeds.size:  # a batch of no worlds (the CLI refuses an empty seed list too)
+            raise ConfigError("reset takes one seed per world: got none")
         return self.reset_to(start_poses(seeds, reset=self.reset_kind), seeds, drawn=True)
 
     def reset_to(self, starts, seeds=None, drawn: bool = False) -> State:
@@ -51,7 +53,18 @@ class Resets:
     def _starts(self, starts) -> np.ndarray:
         """(N, 5) tee x, y, yaw, pusher x, y (or (N, 3) tee only), finite, the positions inside the walls
         (the validation layer's rule; the gym-pusht variant's walls are its own frame's)."""
-        a = np.atleast_2d(np.asarray(starts, np.float64))
+        try:
+            a = np.asarray(starts)
+        except ValueError:  # ragged
+            raise ConfigError(f"starts must be (N, 5) tee x, y, yaw, pusher x, y, got {starts!r:.60}") from None
+        if a.dtype.kind not in "fiu" and a.dtype != object:  # complex lost its imaginary part, bools became 0/1
+            raise ConfigError(f"starts must be real numbers, got {a.dtype}")
+        try:
+            a = np.atleast_2d(a.astype(np.float64))
+        except (TypeError, ValueError):
+            raise ConfigError(f"starts must be real numbers, got {starts!r:.60}") from None
+        if a.ndim == 2 and not len(a):
+            raise ConfigError("starts: got no rows; reset_to takes one start per world")
         if a.ndim != 2 or a.shape[1] not in (3, 5):
             raise ConfigError(f"starts must be (N, 5) tee x, y, yaw, pusher x, y (or (N, 3) tee only), got {a.shape}")
         if self.scene.variant != "chapter" or a.shape[1] == 3:  # the tee alone: finite only (its yaw is free)

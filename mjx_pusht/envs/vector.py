@@ -14,7 +14,7 @@ from gymnasium.vector.utils import batch_space
 
 from mjx_pusht.task import goals
 from mjx_pusht import validate
-from mjx_pusht.boundary import MAX_ENVS
+from mjx_pusht.boundary import BYTES_PER_CPU_ENV, MAX_ENVS, fits
 from mjx_pusht.envs import physics
 from mjx_pusht.envs.common import (
     Pictures,
@@ -83,6 +83,9 @@ class PushTVectorEnv(Pictures, VectorEnv):
         validate.image_size(render_size, "render_size")
         max_episode_steps = validate.episode_limit(max_episode_steps)  # -1 or None: no limit, as gymnasium says
         self.backend, _ = resolve(backend)
+        if self.backend == "cpu":  # its worlds live in this machine's memory (an MJX batch's on the device)
+            fits(f"num_envs={self.num_envs:,} on the cpu backend", self.num_envs, BYTES_PER_CPU_ENV,
+                 "make fewer envs, or several vector envs one after another")
         self.obs_type, self.action_type, self.render_mode = obs_type, action_type, render_mode
         # by enum, by value ("SameStep"), by name ("SAME_STEP") or in snake case ("same_step")
         names = {k: m for m in AutoresetMode for k in (m, m.value, m.name, m.name.lower())}
@@ -120,8 +123,20 @@ class PushTVectorEnv(Pictures, VectorEnv):
 
     @property
     def success_threshold(self) -> float:
-        """The coverage an episode succeeds (terminates) at (set at make: `success_threshold=`)."""
+        """The coverage an episode succeeds (terminates) at (`success_threshold=` at make, or set after, as the
+        single env's: every env of the batch from its next step on)."""
         return self._env.episode.success
+
+    @success_threshold.setter
+    def success_threshold(self, value: float) -> None:
+        import dataclasses
+
+        self._env.episode = dataclasses.replace(self._env.episode, success=value)  # checked: in (0, 1]
+        # the MJX steps compiled the old threshold in as a constant: compiled again with the new one at the next step
+        getattr(self._env, "_jitted", {}).clear()  # (none on cpu: its step reads the episode each call)
+        if self._ar is not None:
+            self._ar._jitted.clear()
+        self._view_jit = None
 
     _check_args = staticmethod(check_kwargs)  # noqa: E303
     _single_spaces = staticmethod(single_spaces)
@@ -156,6 +171,8 @@ class PushTVectorEnv(Pictures, VectorEnv):
     def reset(self, *, seed=None, options: dict | None = None):
         """Every env, or those in options["reset_mask"]; options["reset_to_state"] starts them from given states.
         Other options are ignored (as gym-pusht ignores them), seeds as SyncVectorEnv's (seed + i)."""
+        if self.closed:
+            raise ConfigError("the vector env is closed: make a new one to reset it")
         bad, self._bad = self._bad, []  # a device step's non-finite action not yet read is still an error
         validate.deferred_nonfinite(bad)
         seeds = validate.seed_list(seed, self.num_envs)
@@ -203,6 +220,8 @@ class PushTVectorEnv(Pictures, VectorEnv):
         return np.array(out, np.int64)
 
     def step(self, actions):
+        if self.closed:  # its renderers are gone; a step stepped on as if nothing happened
+            raise ConfigError("the vector env is closed: make a new one to step again")
         validate.started(self._state)
         actions = self._checked(actions)
         actions = self._actions_in(actions)
@@ -358,12 +377,10 @@ class PushTVectorEnv(Pictures, VectorEnv):
     def set_attr(self, name: str, values) -> None:
         from mjx_pusht import boundary
 
-        own = self.__dict__.setdefault("_users_attrs", set())
         values = values if isinstance(values, (list, tuple)) else [values] * self.num_envs
         if len(values) != self.num_envs or not all(_same(v, values[0]) for v in values[1:]):
             raise ConfigError(f"the {self.num_envs} environments are one batch: set_attr needs one value for all")
-        setattr(self, name, boundary.set_attr(self, name, values[0], own))
-        own.add(name)
+        setattr(self, name, boundary.set_attr(self, name, values[0]))
 
 
 def _same(a, b) -> bool:

@@ -137,9 +137,10 @@ def collision_pairs(model: mujoco.MjModel) -> list[tuple[str, str]]:
     return pairs
 
 
-def collider_table(break_it: str = "none", match_c_colliders: bool = True) -> list[PairColliders]:
-    """Every collidable geom pair of the scene and the function each side calls for it (MJX-Warp's table
-    is read from MuJoCo Warp itself, so warp-lang must be installed)."""
+def collider_table(break_it: str = "none", match_c_colliders: bool = True, pusher: str = "cylinder") -> list[PairColliders]:
+    """Every collidable geom pair of the scene with `pusher`'s shape and the function each side calls for it
+    (MJX-Warp's table is read from MuJoCo Warp itself, so warp-lang must be installed; MJX-JAX's column is always the
+    capsule it substitutes)."""
     from mjx_pusht.model.scene import SceneSpec, build_model
 
     try:
@@ -148,7 +149,7 @@ def collider_table(break_it: str = "none", match_c_colliders: bool = True) -> li
         raise MjxPushtError("the collider table reads MuJoCo Warp's own tables, which need warp-lang: "
                             "pip install 'mjx-pusht[warp]'") from None
 
-    model = build_model(SceneSpec(break_it))
+    model = build_model(SceneSpec(break_it, pusher))
     capsule = build_model(SceneSpec(break_it, "capsule"))
     flags = int(model.opt.disableflags) | (NATIVECCD if match_c_colliders else 0)
     out = []

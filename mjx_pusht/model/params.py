@@ -194,6 +194,25 @@ def apply(model: mujoco.MjModel, values: dict[str, float]) -> mujoco.MjModel:
     return m
 
 
+# The parameters that mean nothing on a task, and why: refused by --param (a grid) and --randomize (per episode)
+# alike, through `means_nothing`
+REFUSED = {
+    ("chapter", "kp"): "the chapter's pusher is on velocity servos, which have no position gain (kv is their gain)",
+    ("gym-pusht", "tee_mass"): "gym-pusht's agent is kinematic and its block keeps no velocity between steps, so "
+                               "the block's mass changes nothing there (as in pymunk)",
+    ("gym-pusht", "tee_damping"): "gym-pusht's block damping is pymunk's velocity reset (mass / dt), not a "
+                                  "table's drag: changing it changes gym-pusht's rule, not its physics",
+    ("gym-pusht", "tee_frictionloss"): "gym-pusht's block slides without friction (pymunk reads none): there is "
+                                       "no friction to scale",
+}
+
+
+def means_nothing(name: str, variant: str, where: str) -> None:
+    """Refuse `name` where it means nothing on the `variant` task (REFUSED says why)."""
+    if (variant, name) in REFUSED:
+        raise ParamError(f"{where}: {name} means nothing on the {variant} task: {REFUSED[variant, name]}")
+
+
 def check_scene(model: mujoco.MjModel, params) -> None:
     """Each parameter's values set on the scene's model once, so that one that means nothing on this scene (kp on
     velocity servos) is refused before a run claims its folder, not when its backend builds the model."""

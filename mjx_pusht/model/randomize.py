@@ -25,7 +25,7 @@ import math
 import mujoco
 import numpy as np
 
-from mjx_pusht.model.params import BOUNDS, CURRENT, PARAMS, ParamError, apply
+from mjx_pusht.model.params import BOUNDS, CURRENT, PARAMS, REFUSED, ParamError, apply, means_nothing
 
 MEANS = {
     "chapter": {
@@ -38,15 +38,6 @@ MEANS = {
         "kp": "the agent's PD position gain, gym-pusht's KP (100 x the agent's mass)",
         "kv": "the agent's PD velocity gain, gym-pusht's KV (20 x the agent's mass)",
     },
-}
-REFUSED = {
-    ("chapter", "kp"): "the chapter's pusher is on velocity servos, which have no position gain (randomise kv)",
-    ("gym-pusht", "tee_mass"): "gym-pusht's agent is kinematic and its block keeps no velocity between steps, so "
-                               "the block's mass changes nothing there (as in pymunk)",
-    ("gym-pusht", "tee_damping"): "gym-pusht's block damping is pymunk's velocity reset (mass / dt), not a "
-                                  "table's drag: changing it changes gym-pusht's rule, not its physics",
-    ("gym-pusht", "tee_frictionloss"): "gym-pusht's block slides without friction (pymunk reads none): there is "
-                                       "no friction to scale",
 }
 # Fields mj_setConst changes that nothing MJX steps reads: cam_poscom0 only cameras that track a centre of mass
 # (every camera here is fixed: checked in WorldFields), dof_M0 nothing in MJX or MuJoCo Warp
@@ -72,8 +63,7 @@ def check(randomize, scene, where: str = "randomize") -> tuple[tuple[str, tuple[
 
     variant, model, out = scene.variant, build_model(scene), {}
     for name, r in pairs:
-        if (variant, name) in REFUSED:
-            raise ParamError(f"{where}: {name} means nothing on the {variant} task: {REFUSED[variant, name]}")
+        means_nothing(name, variant, where)
         if name not in MEANS.get(variant, {}):
             raise ParamError(f"{where}: unknown parameter {name!r}; on the {variant} task choose from "
                              f"{', '.join(MEANS.get(variant, {}))}")

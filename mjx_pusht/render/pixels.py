@@ -139,6 +139,10 @@ class CpuRenderer:
                    "osmesa": "OSMesa (apt-get install libosmesa6)"}[missing]
             raise PixelsError(f"MUJOCO_GL={missing} but {lib} is not installed: install it, or set MUJOCO_GL "
                               "to a GL this machine has (pixels only; everything else runs without GL)")
+        invalid = os.environ.get("MJX_PUSHT_GL_INVALID")
+        if invalid is not None:  # set aside at import: MuJoCo would not have imported with it
+            raise PixelsError(f"MUJOCO_GL={invalid!r} is not a GL MuJoCo knows: set MUJOCO_GL to egl, osmesa or glfw "
+                              "(pixels only; everything else runs without GL)")
         if _EGL_FROM_PARENT:
             raise PixelsError("EGL was initialised in this process's parent before it forked, and a forked child "
                               "cannot render with it (it hangs): start workers with 'forkserver' or 'spawn', e.g. "

@@ -39,9 +39,19 @@ def start_batch(command: str, out, seeds, name: str, why: str, config: dict, sce
     from mjx_pusht.backends.cpu import default_threads
     from mjx_pusht.io.banner import Banner
     from mjx_pusht.io.outputs import claim_out_dir, prepare_out_dir
-    from mjx_pusht.study.sweep import check_resumable, fingerprint, rows_for
+    from mjx_pusht.study.sweep import PARTS, ResumeError, check_resumable, fingerprint, rows_for
 
-    row_seeds, combos = rows_for(seeds, len(scenario.grid()))
+    n_combos = len(scenario.grid())
+    if n_combos > 1:  # a row per seed and parameter combination (--seeds alone was checked by parse_seeds)
+        from mjx_pusht.boundary import BYTES_PER_SEED, fits
+
+        fits(f"--seeds x --param ({len(seeds):,} seeds x {n_combos:,} combinations)", len(seeds) * n_combos,
+             BYTES_PER_SEED, "fewer seeds or combinations a run")
+    row_seeds, combos = rows_for(seeds, n_combos)
+    if resume and check and not (Path(out) / PARTS).is_dir() and not (Path(out) / "summary.json").is_file():
+        # as train's --resume without a checkpoint: a fresh run under --resume was silently a fresh run
+        raise ResumeError(f"--resume: {out} holds no unfinished {command} (no .parts) and no finished one; "
+                          "nothing to resume (run without --resume to start)")
     out = prepare_out_dir(out)
     if check:  # with several processes, process 0 checks, locks (and clears) the folder for all
         claim_out_dir(out, command, fingerprint(row_seeds, config), replace=replace, reads=reads, share=share)

@@ -100,10 +100,15 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
     if break_it == "none" and summary["n_rigid"] + summary["n_mujoco_warnings"] != len(r):
         print(f"WARNING: the welded T came apart in {len(r) - summary['n_rigid'] - summary['n_mujoco_warnings']} episodes")
     print(f"table: {out / 'per_episode.parquet'}\nsummary: {out / 'summary.json'}")
-    record_rows(out / "eval.rrd", "episodes", backend, r, combos, lambda: np.arange(min(record, len(r))),
-                record_episodes, summary, clock, rerun=rerun, n=record)
-    if video is not None:
-        _video(video, video_episodes, video_size, out, backend, r, combos, episode, summary, clock)
+    try:
+        record_rows(out / "eval.rrd", "episodes", backend, r, combos, lambda: np.arange(min(record, len(r))),
+                    record_episodes, summary, clock, rerun=rerun, n=record)
+        if video is not None:
+            _video(video, video_episodes, video_size, out, backend, r, combos, episode, summary, clock)
+    except KeyboardInterrupt:  # the caller's exit status says 130; this line says what is kept (it said nothing)
+        print(f"\ninterrupted: the table and summary in {out} are whole; the recording or video was not finished "
+              "(each is written whole or not at all): rerun to draw it", file=sys.stderr)
+        raise
     banner.done()
     return summary
 

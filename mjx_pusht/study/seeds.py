@@ -58,3 +58,7 @@ def _check_count(n: int, spec: str) -> None:
     if n > MAX_SEEDS:
         raise SeedSpecError(f"--seeds {spec!r} asks for {n:,} seeds; one run takes at most 2**30 "
                             f"({MAX_SEEDS:,}): split the study into A:B ranges")
+    from mjx_pusht.boundary import BYTES_PER_SEED, fits
+
+    fits(f"--seeds {spec!r} ({n:,} seeds)", n, BYTES_PER_SEED, "split the study into A:B ranges, one run each",
+         error=SeedSpecError)

@@ -13,9 +13,12 @@ A user's controller is a plain function `policy(obs, t) -> action` named as
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import importlib
 import math
+import os
+import threading
 from collections.abc import Callable
 from typing import ClassVar
 
@@ -256,6 +259,30 @@ class Expert(Controller):
         return xp.clip(world, -CTRL_LIMIT, CTRL_LIMIT), xp.astype(carry, xp.int32)
 
 
+class _HardExit(SystemExit):
+    """os._exit(code) called by a user's controller, turned into a SystemExit while the controller runs."""
+
+
+@contextlib.contextmanager
+def _no_hard_exit():
+    """While a user's controller runs, `os._exit` on this thread raises (SystemExit, said in one line) instead of
+    ending the process: os._exit runs no handler, so a run ended silently with exit 0 and no table. Only the
+    controller's own thread: another (the SIGTERM watcher) still ends the process. A controller holding its own
+    reference (`from os import _exit`, taken at import) is out of reach: documented (docs/troubleshooting.md)."""
+    real, me = os._exit, threading.get_ident()
+
+    def hard_exit(code=0):
+        if threading.get_ident() != me:
+            real(code)
+        raise _HardExit(code)
+
+    os._exit = hard_exit
+    try:
+        yield
+    finally:
+        os._exit = real
+
+
 @dataclasses.dataclass(frozen=True)
 class FromFunction(Controller):
     """A user's `policy(obs, t) -> action`, stateless; `action_type` says what the action means."""
@@ -264,19 +291,32 @@ class FromFunction(Controller):
 
     def act(self, carry, obs, t, key):
         try:
-            action = self.fn(obs, t)
+            with _no_hard_exit():
+                action = self.fn(obs, t)
         except ControllerError:
             raise
         except SystemExit as e:  # exit() inside a policy would end the run with its code and no word of why
-            raise ControllerError(f"controller {self.name} called exit({e.code}): a controller returns actions; "
+            how = "os._exit" if isinstance(e, _HardExit) else "exit"
+            raise ControllerError(f"controller {self.name} called {how}({e.code}): a controller returns actions; "
                                   "the run stopped here") from None
         except Exception as e:  # noqa: BLE001 - a user's bug, said in one line with what it was
             raise ControllerError(f"controller {self.name} raised {type(e).__name__}: {e}".splitlines()[0]) from None
-        shape = getattr(action, "shape", None)
         want = obs["state"].shape[:-1] + (2,)
+        if isinstance(action, (list, tuple)):  # a list of [x, y] pairs of the right shape is an array of them
+            try:
+                action = np.asarray(action)
+            except (ValueError, TypeError):  # ragged
+                raise ControllerError(f"controller {self.name} returned a ragged list; expected an array of shape "
+                                      f"{want}") from None
+        shape = getattr(action, "shape", None)
         if shape is None or tuple(shape) != tuple(want):
-            raise ControllerError(f"controller {self.name} returned an action of shape {shape}; expected {want} "
+            got = f"shape {tuple(shape)}" if shape is not None else f"a {type(action).__name__}"
+            raise ControllerError(f"controller {self.name} returned an action of {got}; expected shape {want} "
                                   f"(the batch's leading shape, then 2)")
+        kind = getattr(getattr(action, "dtype", None), "kind", "f")
+        if kind not in "fiu":  # complex lost its imaginary part with a warning; bools became 0/1 velocities
+            raise ControllerError(f"controller {self.name} returned actions of dtype {action.dtype}; actions are "
+                                  "real numbers (velocities in m/s, or positions in m)")
         return action, carry
 
 

@@ -110,6 +110,20 @@ class Task:
             return action
         return lead_target(obs["state"][..., 0:2], action)
 
+    def check_policy(self, ctrl, spec) -> None:
+        """A trained policy (a controller with its checkpoint's `meta`) acts on the scene it was trained on: one of
+        the chapter's pushed gym-pusht's (or back) would command the other scene's servos, without a word. Shared by
+        every entry that takes a policy (eval, demos, GymPushtPolicy)."""
+        meta = getattr(ctrl, "meta", None)
+        if not isinstance(meta, dict):
+            return
+        trained = (meta.get("config") or {}).get("task") or "chapter"
+        if trained not in TASKS or TASKS[trained].variant != self.variant:
+            from mjx_pusht.task.controller_base import ControllerError
+
+            raise ControllerError(f"{spec} was trained on the {trained} task, not {self.name}'s scene "
+                                  f"(train --task {self.name}, or run it with --task {trained})")
+
     def controller(self, spec: str, *, action: str | None = None, frame_skip: int = 10, goal: str = "fixed") -> Controller:
         """The controller `spec` names (`expert`: this task's expert), commanding what this task's scene takes; for
         random goals, seeing the scene from each episode's goal (task/goals.GoalFrame) unless it reads obs["goal"]
@@ -118,6 +132,7 @@ class Task:
         from mjx_pusht.task.goals import check, in_goal_frame
 
         ctrl = load(self.expert if spec == "expert" else spec, action_type=action, frame_skip=frame_skip)
+        self.check_policy(ctrl, spec)
         ctrl = as_targets(ctrl) if self.action_type == "target" and ctrl.action_type != "target" else ctrl
         if check(goal) != "random" or ctrl.reads_goal:
             return ctrl

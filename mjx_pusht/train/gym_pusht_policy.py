@@ -40,9 +40,8 @@ class GymPushtPolicy:
 
         self.controller = load_policy(f"policy:{path}")
         meta = self.controller.meta
-        task = (meta.get("config") or {}).get("task") or "chapter"
-        if task not in TASKS or TASKS[task].variant != "gym-pusht":  # gym-pusht's task, or its easy variant
-            raise ControllerError(f"policy {path} was trained on the {task} task, not gym-pusht's (train --task gym-pusht)")
+        TASKS["gym-pusht"].check_policy(self.controller, f"policy {path}")  # as eval and demos check it
+        task = (meta.get("config") or {}).get("task")
         if self.controller.reads_goal:
             raise ControllerError(f"policy {path} reads a goal per episode (train --goal random); gym-pusht's is fixed")
         self.obs_type = "pixels_agent_pos" if self.controller.pixels else "state"
