@@ -61,19 +61,35 @@ def push_divergence(seeds=range(4), steps: int = 40) -> list[dict]:
     return out
 
 
-def picture(path: str) -> None:
-    import gymnasium as gym
-    import numpy as np
-    from PIL import Image
+# The picture's rows: which env drew each, as its panels' labels say
+PICTURE_ROWS = (("gym_pusht/PushT-v0", "gym-pusht 0.1.8"), ("mjx_pusht/PushT-gym-pusht-v0", "mjx_pusht drop-in"))
+SCALE, BAND = 3, 22  # the 96 x 96 images drawn 3x, nearest; the label band above each panel (pixels)
+# gym-pusht's reset_to_state (agent x, y, block x, y, angle; pixels), one a column
+PICTURE_STATES = ((300, 380, 200, 150, 0.4), (100, 100, 350, 300, -2.0), (400, 200, 224.18, 242.82, 0.7853981633974483),
+                  (150, 420, 300, 380, 2.6))
 
-    states = [[300, 380, 200, 150, 0.4], [100, 100, 350, 300, -2.0], [400, 200, 224.18, 242.82, np.pi / 4],
-              [150, 420, 300, 380, 2.6]]
-    rows = []
-    for env_id in ("gym_pusht/PushT-v0", "mjx_pusht/PushT-gym-pusht-v0"):
+
+def picture(path: str) -> None:
+    """gym-pusht's and the drop-in's 96 x 96 `pixels` of the same four `reset_to_state`s, one row each, every panel
+    labelled in the image with the env that drew it and the state's number (a picture copied out of the docs keeps
+    saying which row is which)."""
+    import gymnasium as gym
+    from PIL import Image, ImageDraw, ImageFont
+
+    states = [list(s) for s in PICTURE_STATES]
+    side = 96 * SCALE
+    img = Image.new("RGB", (side * len(states), (side + BAND) * len(PICTURE_ROWS)), (255, 255, 255))
+    draw = ImageDraw.Draw(img)
+    font = ImageFont.load_default(size=BAND - 6)
+    for r, (env_id, name) in enumerate(PICTURE_ROWS):
         env = gym.make(env_id, obs_type="pixels")
-        rows.append(np.concatenate([env.reset(options={"reset_to_state": s})[0] for s in states], axis=1))
-    img = Image.fromarray(np.concatenate(rows, axis=0))
-    img.resize((img.width * 3, img.height * 3), Image.NEAREST).save(path)
+        for c, s in enumerate(states):
+            frame = Image.fromarray(env.reset(options={"reset_to_state": s})[0])
+            top = r * (side + BAND)
+            img.paste(frame.resize((side, side), Image.NEAREST), (c * side, top + BAND))
+            draw.text((c * side + 4, top + 2), f"{name}, state {c + 1}", fill=(20, 20, 20), font=font)
+        env.close()
+    img.save(path)
 
 
 def main(argv=None) -> int:
@@ -81,7 +97,8 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=300)
     p.add_argument("--json", default=None)
     p.add_argument("--picture", default=None, help="write gym-pusht's and the drop-in's 96 x 96 images of the "
-                   "same four states side by side (top row gym-pusht, bottom row the drop-in), and stop")
+                   "same four states side by side (top row gym-pusht, bottom row the drop-in, each panel labelled), "
+                   "and stop")
     args = p.parse_args(argv)
     import gym_pusht  # noqa: F401
 
