@@ -49,7 +49,7 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
     if video is not None:
         from mjx_pusht.io.video import check_grid, check_path
 
-        check_path(video, replace)  # a bad name, a missing encoder or a size too large fails now, not after the episodes
+        check_path(video, replace, out)  # a bad name, a missing encoder or a size too large fails now, not after the episodes
         check_grid(video_size, min(video_episodes, len(seeds)), max_steps)
     name, why = resolve(backend)
     config = {"command": "eval", "backend": name, "controller": spec, "action": controller.action_type,
@@ -126,7 +126,7 @@ def policy_sha256(spec: str) -> str | None:
 def _video(path: Path, n: int, size: int, out: Path, backend, r, combos, episode, summary: dict, clock) -> None:
     """The first `n` episodes rerun with a trace and drawn as a grid of `size`-pixel tiles (video.py)."""
     from mjx_pusht.io.outputs import atomic_write_json
-    from mjx_pusht.io.video import episode_grid, write
+    from mjx_pusht.io.video import episode_grid, stamp, write
     from mjx_pusht.model.layout import QposLayout
 
     shown = np.arange(min(n, len(r)))
@@ -145,5 +145,6 @@ def _video(path: Path, n: int, size: int, out: Path, backend, r, combos, episode
     fps = 1 / (episode.frame_skip * traced.trace.dt)
     write(path, frames, fps)
     summary["timing"]["video"] = round(clock.lap("video"), 3)
+    summary["video"] = stamp(path)  # what a later --replace may overwrite: this very file, and no other
     atomic_write_json(Path(out) / "summary.json", summary)
     print(f"video: {path} ({len(shown)} episodes, {len(frames)} frames at {fps:g} per second)")
