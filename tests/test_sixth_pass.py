@@ -3,10 +3,17 @@ docs/notebook/boundary.md, "After the sixth pass")."""
 
 from __future__ import annotations
 
+import json
 import os
+import signal
+import subprocess
+import sys
+import time
 
+import numpy as np
+import pytest
 from fuzzing import snapshot
-from helpers import RUNS, one_line
+from helpers import ENV, RUNS, one_line
 
 from mjx_pusht.cli import main
 
@@ -48,3 +55,72 @@ def test_eval_video_into_another_runs_folder_is_refused(tmp_path, capsys):
         assert main([*VIDEO, "--video", str(tmp_path / "a" / "v.gif"), "--out", str(tmp_path / "b"), *extra]) == 1
         one_line(capsys, "inside another run's folder")
     assert snapshot(tmp_path / "a") == before and not (tmp_path / "b").exists()
+
+
+# LOST 2: a refused run re-stamped the folder's run file, so the same refused command then went through. Each
+# command: a first run, a refused second (other settings) that leaves the run file byte for byte, the same refused
+# command again still refused, and the first run's results untouched.
+REFUSED = {
+    "demos": (RUNS["demos"], ["--seeds", "3"]),
+    "sweep": (RUNS["sweep"], ["--seeds", "3"]),
+    "eval": (RUNS["eval"], ["--seeds", "3"]),
+    "scene": (RUNS["scene"], ["--steps", "6"]),  # SILENT 12: other settings overwrote without --replace
+}
+
+
+@pytest.mark.parametrize("command", sorted(REFUSED))
+def test_a_refused_rerun_leaves_the_run_file_and_is_refused_again(command, tmp_path, capsys):
+    base, other = REFUSED[command]
+    out = str(tmp_path / "o")
+    assert main([*base, "--out", out]) == 0, capsys.readouterr().err
+    capsys.readouterr()
+    before = snapshot(tmp_path)
+    for _ in range(2):
+        assert main([*base, *other, "--out", out]) == 1
+        one_line(capsys, "--replace")
+        assert snapshot(tmp_path) == before
+    assert main([*base, "--out", out]) == 0, capsys.readouterr().err  # the first run's own settings: its rerun
+
+
+def test_scene_other_break_into_its_folder_needs_replace(tmp_path, capsys):
+    """SILENT 12: `--break split-tee` into a welded scene's folder overwrote its metrics without --replace."""
+    out = str(tmp_path / "o")
+    assert main([*RUNS["scene"], "--steps", "5", "--out", out]) == 0
+    metrics = (tmp_path / "o" / "metrics.json").read_bytes()
+    assert main([*RUNS["scene"], "--steps", "5", "--break", "split-tee", "--out", out]) == 1
+    one_line(capsys, "other seeds' or settings'", "--replace")
+    assert (tmp_path / "o" / "metrics.json").read_bytes() == metrics
+    assert main([*RUNS["scene"], "--steps", "5", "--seed", "3", "--out", out]) == 0  # another seed: documented
+    assert main([*RUNS["scene"], "--steps", "5", "--break", "split-tee", "--replace", "--out", out]) == 0
+    assert json.loads((tmp_path / "o" / "metrics.json").read_text())["tee_stayed_rigid"] is False
+
+
+def test_replace_on_an_unfinished_same_settings_sweep_starts_it_again(tmp_path, capsys):
+    """REFUSED 18: `sweep --replace` on its own unfinished chunks said "pass --resume"; the docs say --replace
+    removes them. The rerun's table equals an uninterrupted run's."""
+    from mjx_pusht.io.outputs import read_table
+
+    args = [*RUNS["sweep"], "--seeds", "4", "--chunk", "2", "--out", str(tmp_path / "o")]
+    assert main(args) == 0
+    table = read_table(tmp_path / "o" / "per_seed.parquet")
+    (tmp_path / "o" / "per_seed.parquet").unlink()
+    (tmp_path / "o" / "summary.json").unlink()
+    parts = tmp_path / "o" / ".parts"
+    parts.mkdir()
+    (parts / "manifest.json").write_text("{}")  # seeds and settings no matter: --replace drops them
+    (parts / "seeds-000000000000-000000000002.parquet").write_bytes(b"a cut chunk")
+    capsys.readouterr()
+    assert main(args) == 1
+    one_line(capsys, "pass --resume")
+    assert main([*args, "--replace"]) == 0, capsys.readouterr().err
+    again = read_table(tmp_path / "o" / "per_seed.parquet")
+    assert not parts.exists() and all(np.array_equal(again[k], table[k], equal_nan=True) for k in table
+                                      if k not in ("wall_seconds",))
+
+
+def test_train_resume_with_replace_is_refused(tmp_path, capsys):
+    """SILENT 11: `train --resume --replace` resumed and ignored --replace."""
+    assert main([*RUNS["train"], "--resume", "--replace", "--out", str(tmp_path / "o")]) == 1
+    one_line(capsys, "--resume", "--replace", "give one")
+    assert not (tmp_path / "o").exists()
+

@@ -139,8 +139,8 @@ def cmd_train(args) -> int:
                              devices=devices, until=args.until)
 
             return _follow(follow, devices, processes, args)
-    out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)  # the run's settings: checked on --resume
-    _restart(out, args)
+    out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out,  # the run's settings:
+                        check=lambda path, same: _restart(path, args))  # checked on --resume
     _check_rerun(args)
     banner = Banner("train")
     print(f"backend: {name} ({why}); DAgger from {cfg.obs_type} on the {task.name} task: {cfg.envs} {cfg.reset} "
@@ -177,6 +177,8 @@ def _follow(train, devices: list, processes, args) -> int:
 
 def _restart(out: Path, args) -> None:
     """A folder holding a training run is continued (--resume) or started over (--replace), never mixed."""
+    if args.resume and args.replace:  # --replace was ignored: the run resumed
+        raise TrainError("--resume continues the training run in --out and --replace starts it over: give one")
     started = (out / "checkpoints" / "resume.msgpack").exists()
     if started and args.replace and not args.resume:
         remove_own(out / "checkpoints")
@@ -220,8 +222,8 @@ def _cmd_ppo(args, name: str, why: str, devices: list, processes) -> int:
         processes.agree({**config_dict(cfg), "backend": name, "devices": len(devices), "out": str(args.out.resolve())})
         if not processes.leader:  # Brax's loop on its devices; process 0 alone judges and writes (Brax calls back there)
             return _follow(lambda out: train_ppo(cfg, name, out, progress=False, **run)[1], devices, processes, args)
-    out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)
-    _restart(out, args)
+    out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out,
+                        check=lambda path, same: _restart(path, args))  # before the run file: a refusal changes nothing
     _check_rerun(args)
     banner = Banner("train")
     print(f"backend: {name} ({why}); Brax PPO from {cfg.obs_type} on the {cfg.the_task.name} task: {cfg.envs} envs, "
