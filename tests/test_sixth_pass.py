@@ -124,3 +124,38 @@ def test_train_resume_with_replace_is_refused(tmp_path, capsys):
     one_line(capsys, "--resume", "--replace", "give one")
     assert not (tmp_path / "o").exists()
 
+
+SLOW = '''import time
+import numpy as np
+
+
+def slow(obs, t):
+    time.sleep(200)  # a user's controller busy for minutes
+    return np.zeros(obs["state"].shape[:-1] + (2,))
+'''
+
+
+@pytest.mark.slow  # two processes started, 4 s and more each on this CPU
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_ends_an_eval_whose_controller_is_busy_within_seconds(sig, tmp_path):
+    """HANG 3: SIGINT or SIGTERM to a CPU eval whose controller sleeps: no exit in 120 s (shutting its worker
+    processes down waited for the controller). Now one line and 130 / 143 within seconds."""
+    (tmp_path / "myctl.py").write_text(SLOW)
+    env = {**ENV, "PYTHONPATH": os.pathsep.join([str(tmp_path), ENV.get("PYTHONPATH", "")])}
+    p = subprocess.Popen([sys.executable, "-m", "mjx_pusht", "eval", "--backend", "cpu", "--no-rerun", "--seeds", "64", "--max-steps", "20",
+                          "--no-progress", "--controller", "myctl:slow", "--out", str(tmp_path / "o")],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
+                         preexec_fn=lambda: (signal.signal(signal.SIGINT, signal.SIG_DFL),
+                                             signal.signal(signal.SIGTERM, signal.SIG_DFL)))
+    time.sleep(6)  # the workers are in the controller's sleep by now
+    assert p.poll() is None, p.communicate()
+    t0 = time.monotonic()
+    p.send_signal(sig)  # to the process only, as `kill -INT PID` sends it
+    try:
+        _, stderr = p.communicate(timeout=20)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        raise AssertionError("no exit in 20 s after the signal") from None
+    assert time.monotonic() - t0 < 5, time.monotonic() - t0
+    assert p.returncode == 128 + sig, (p.returncode, stderr[-2000:])
+    assert "Traceback" not in stderr and ("interrupted" in stderr or "terminated" in stderr), stderr[-2000:]

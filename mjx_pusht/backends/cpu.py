@@ -220,16 +220,27 @@ class FeedbackPool:
         combos = np.zeros(len(seeds), np.int64) if combos is None else np.asarray(combos, np.int64)
         poses = start_poses(seeds, reset=scenario.reset) if poses is None else poses
         parts = np.array_split(np.arange(len(seeds)), min(len(seeds), 4 * self.workers))
-        jobs = [self.pool.submit(run_cpu, scenario, seeds[i], nthread=1, combos=combos[i], poses=poses[i])
-                for i in parts if len(i)]
+        self.jobs = jobs = [self.pool.submit(run_cpu, scenario, seeds[i], nthread=1, combos=combos[i], poses=poses[i])
+                            for i in parts if len(i)]
         bad = [j.exception() for j in jobs if isinstance(j.exception(), actions.NonFiniteActionError)]
         if bad:  # as one process would: the earliest control step of any slice, then the first slice
             raise actions.earliest(bad)
         return Rollouts.concat([j.result() for j in jobs])
 
+    jobs: list = []
+
     def close(self) -> None:
+        """Shut the pool down. Episodes still running (the run was interrupted, or a slice failed) are not wanted:
+        their workers are ended first, as shutdown waits for them, and a user's controller may be busy for minutes
+        (a sleeping one held a ^C'd eval for over 120 s)."""
         FeedbackPool.live.discard(self)
+        if not all(j.done() for j in self.jobs):
+            self.end_workers()
         self.pool.shutdown(cancel_futures=True)
+
+    def end_workers(self) -> None:
+        for proc in list((getattr(self.pool, "_processes", None) or {}).values()):
+            proc.terminate()
 
 
 def _die_with_parent(parent: int) -> None:
