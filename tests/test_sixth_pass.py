@@ -5,17 +5,22 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
 import time
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from fuzzing import snapshot
 from helpers import ENV, RUNS, one_line
 
+import mjx_pusht
+from mjx_pusht import Scenario, make_backend
 from mjx_pusht.cli import main
+from mjx_pusht.errors import ConfigError
 
 VIDEO = [*RUNS["eval"], "--video-size", "32", "--video-episodes", "2"]
 
@@ -159,3 +164,105 @@ def test_a_signal_ends_an_eval_whose_controller_is_busy_within_seconds(sig, tmp_
     assert time.monotonic() - t0 < 5, time.monotonic() - t0
     assert p.returncode == 128 + sig, (p.returncode, stderr[-2000:])
     assert "Traceback" not in stderr and ("interrupted" in stderr or "terminated" in stderr), stderr[-2000:]
+
+
+@pytest.mark.parametrize("make", [
+    lambda: __import__("mjx_pusht.envs.functional", fromlist=["PushTEnv"]).PushTEnv.for_task("gym-pusht", bogus=1),
+    lambda: gym.make("mjx_pusht/PushT-v0", bogus=1),
+    lambda: gym.make("mjx_pusht/PushT-gym-pusht-v0", bogus=1),
+    lambda: gym.make_vec("mjx_pusht/PushT-v0", num_envs=2, bogus=1),
+    lambda: gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", num_envs=2, vectorization_mode="vector_entry_point", bogus=1),
+])
+def test_an_unknown_keyword_is_one_line_naming_the_known_ones(make):
+    """TRACEBACK 6: a raw TypeError named only the stranger. Still a TypeError (as Python's own), and one line."""
+    with pytest.raises(TypeError, match=r"takes no 'bogus'; it takes .*obs_type|takes no 'bogus'; it takes backend") \
+            as e:
+        make()
+    assert isinstance(e.value, ConfigError) and "\n" not in str(e.value)
+
+
+@pytest.fixture(scope="module")
+def nudge():
+    from mjx_pusht.task.schedule import Schedule
+
+    return make_backend("cpu", Scenario(schedule=Schedule(nudge_steps=3)))
+
+
+@pytest.mark.parametrize("options,words", [
+    ({"combos": 5}, "combos must have shape (2,)"),
+    ({"combos": [0, 3]}, "combos must index the scenario's 1 parameter combinations"),
+    ({"poses": np.zeros((5, 5))}, "poses must have shape (2, 3)"),  # a NumPy broadcast error
+    ({"poses": np.zeros((2, 5))}, "poses must have shape (2, 3)"),  # the chapter's starts: the tee's (x, y, yaw)
+    ({"poses": np.full((2, 3), np.nan)}, "poses must be finite"),  # was stepped into MuJoCo
+    ({"batch": "x"}, "batch must be an integer"),
+    ({"batch": 0}, "batch must be an integer"),
+    ({"batch": -1}, "batch must be an integer"),
+])
+def test_backend_run_options_are_checked_before_mujoco_runs(nudge, options, words, tmp_path, monkeypatch):
+    """TRACEBACK 7 and SILENT 13: IndexError, NumPy broadcast errors, or runs with the option misread; a NaN start
+    wrote MUJOCO_LOG.TXT into the caller's folder."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ConfigError, match=re.escape(words)):
+        nudge.run(np.arange(2), **options)
+    assert os.listdir(tmp_path) == []
+
+
+def test_backend_run_options_that_are_right_give_the_rows_of_the_default(nudge):
+    """The check takes what was right: poses given as the seeds' own starts equal the run without them."""
+    from mjx_pusht.task.reset import start_poses
+
+    seeds = np.arange(3)
+    a = nudge.run(seeds)
+    b = nudge.run(seeds, combos=np.zeros(3, np.int64), batch=2, poses=start_poses(seeds, reset=nudge.scenario.reset))
+    assert np.array_equal(a.final, b.final)
+
+
+def test_functional_env_and_autoreset_refuse_none():
+    """TRACEBACK 8: AttributeError tracebacks (`AutoReset(None)` only at its first reset)."""
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.envs.wrappers import AutoReset
+
+    with pytest.raises(ConfigError, match="state must be a State"):
+        PushTEnv().check(None)
+    with pytest.raises(ConfigError, match="AutoReset's env must be a functional PushTEnv"):
+        AutoReset(None)
+
+
+@pytest.mark.parametrize("call,words", [
+    (lambda: mjx_pusht.start_pose(-1), "seed must be an integer from 0 to 2**63-1"),
+    (lambda: mjx_pusht.start_pose("x"), "seed must be an integer"),
+    (lambda: mjx_pusht.start_pose(1.5), "seed must be an integer"),
+    (lambda: mjx_pusht.start_pose(np.nan), "seed must be an integer"),
+    (lambda: mjx_pusht.start_pose(None), "got None"),  # SILENT 15: fresh OS entropy, another pose each call
+    (lambda: mjx_pusht.start_pose(2**64), "seed must be an integer"),  # SILENT 15
+    (lambda: mjx_pusht.start_poses("ab"), "seeds must be integers"),
+    (lambda: mjx_pusht.start_poses(None), "seeds must be integers"),
+    (lambda: mjx_pusht.start_poses([[0, 1]]), "seeds must be integers"),  # SILENT 15: 2-D
+    (lambda: mjx_pusht.start_poses([0.5]), "seeds must be integers"),  # SILENT 15: fractional
+    (lambda: mjx_pusht.build_model(None), "spec must be a SceneSpec"),
+    (lambda: mjx_pusht.build_model("split-tee"), "spec must be a SceneSpec"),
+    (lambda: mjx_pusht.scene_xml("x"), "spec must be a SceneSpec"),
+    (lambda: mjx_pusht.check_tree(mjx_pusht.build_model(mjx_pusht.SceneSpec()), "bogus"), "unknown break_it"),
+    (lambda: mjx_pusht.check_tree(None, "none"), "model must be a compiled mujoco.MjModel"),
+    (lambda: mjx_pusht.read_tree(None), "model must be a compiled mujoco.MjModel"),
+    (lambda: mjx_pusht.weld_gap(np.zeros(2), np.zeros(3)), "positions of one shape"),
+    (lambda: mjx_pusht.gap_deviation(np.zeros((2, 3)), np.zeros((3, 3))), "positions of one shape"),
+    (lambda: mjx_pusht.weld_gap("a", "b"), "must be real numbers"),
+    (lambda: mjx_pusht.stayed_rigid("x"), "must be real numbers"),
+])
+def test_the_exported_helpers_check_their_arguments(call, words):
+    """TRACEBACK 9: NumPy's, MuJoCo's or a dict's tracebacks from the helpers `import mjx_pusht` exports."""
+    with pytest.raises(ConfigError, match=re.escape(words)):
+        call()
+
+
+def test_the_exported_helpers_still_compute_what_they_did():
+    """Against an independent computation: the pose NumPy's generator draws for the seed, the distance by hand."""
+    from mjx_pusht.task.reset import TEE_X_RANGE, TEE_Y_RANGE, TEE_YAW_RANGE
+
+    rng = np.random.default_rng(7)
+    assert mjx_pusht.start_pose(np.int64(7)) == tuple(float(rng.uniform(*r)) for r in (TEE_X_RANGE, TEE_Y_RANGE,
+                                                                                         TEE_YAW_RANGE))
+    assert mjx_pusht.weld_gap([0.0, 0.0, 0.0], [0.0, 3.0, 4.0]) == 5.0
+    assert mjx_pusht.stayed_rigid(np.array([0.0, np.nan])).tolist() == [True, False]  # NaN: never rigid (documented)
+    assert mjx_pusht.check_tree(mjx_pusht.build_model(mjx_pusht.SceneSpec()), "none") is not None

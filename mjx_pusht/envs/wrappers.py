@@ -125,6 +125,8 @@ class AutoReset:
     def __init__(self, env, mode: str = "same_step", depth: int = 8, final_pixels: bool = False,
                  donate: bool = False, image_pool: bool = True):
         boundary.OneOf(tuple(MODES))("autoreset mode", mode)  # an array is refused, not compared
+        if not isinstance(env, AutoReset):  # None was taken, and failed at the first reset
+            boundary.Instance("mjx_pusht.envs.functional:PushTEnv", "a functional PushTEnv")("AutoReset's env", env)
         # the pool's depth, checked at construction (StartPool checked it only at the first reset: depth=0 was taken)
         self.env, self.mode, self.depth = env, mode, boundary.Int(1, 1 << 20)("AutoReset's depth", depth)
         self.final_pixels = final_pixels
