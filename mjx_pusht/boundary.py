@@ -218,7 +218,7 @@ def _size(n: float) -> str:
     return f"{n / 2**30:,.1f} GiB" if n >= 2**30 else f"{n / 2**20:,.0f} MiB"
 
 
-def fits(what: str, count: int, per: int, hint: str, error=ConfigError) -> None:
+def fits(what: str, count: int, per: int, hint: str, error=ConfigError, measured: bool = True) -> None:
     """Refuse, before any work or file, `count` items of about `per` bytes each (`what`: the input that asks for
     them) where they would not fit in the memory this machine has available now: such a run grew until the
     kernel killed it (19 GB in 26 s, then the whole machine's OOM killer), where a line and an exit were due."""
@@ -226,7 +226,8 @@ def fits(what: str, count: int, per: int, hint: str, error=ConfigError) -> None:
     have = available_memory()
     if have is not None and need > have:
         raise error(f"{what} needs about {_size(need)} of memory ({_size(per) if per >= 2**20 else f'{per:,} bytes'}"
-                    f" each, measured), more than the {_size(have)} this machine has available: {hint}")
+                    f" each, {'measured' if measured else 'from the sizes'}), more than the {_size(have)} this machine "
+                    f"has available: {hint}")
 
 
 def jax_cache(path=None):

@@ -19,6 +19,7 @@ from helpers import ENV, RUNS, one_line
 
 import mjx_pusht
 from mjx_pusht import Scenario, make_backend
+from mjx_pusht.boundary import BYTES_PER_CPU_ENV, available_memory
 from mjx_pusht.cli import main
 from mjx_pusht.errors import ConfigError
 
@@ -266,3 +267,31 @@ def test_the_exported_helpers_still_compute_what_they_did():
     assert mjx_pusht.weld_gap([0.0, 0.0, 0.0], [0.0, 3.0, 4.0]) == 5.0
     assert mjx_pusht.stayed_rigid(np.array([0.0, np.nan])).tolist() == [True, False]  # NaN: never rigid (documented)
     assert mjx_pusht.check_tree(mjx_pusht.build_model(mjx_pusht.SceneSpec()), "none") is not None
+
+
+TRAIN = ["train", "--algo", "dagger", "--backend", "cpu", "--iterations", "1", "--eval-envs", "4", "--max-steps", "5",
+         "--minutes", "0.5", "--no-progress", "--no-rerun"]
+
+
+@pytest.mark.parametrize("flags,per", [
+    (["--envs", "4194304", "--hidden", "8"], BYTES_PER_CPU_ENV * 4194304),  # the documented maxima, each
+    (["--envs", "4", "--fit-steps", "5", "--batch", "16", "--hidden", "65536,65536,65536"], 16 * 2 * 65536**2),
+    (["--envs", "4", "--hidden", "8", "--max-samples", "1073741824"], 4 * 17 * 2**30),
+])
+def test_train_maxima_past_this_machines_memory_are_refused_before_anything_is_written(flags, per, tmp_path, capsys):
+    """TRACEBACK 4: MuJoCo's 'Could not allocate memory' or XLA's RESOURCE_EXHAUSTED traceback (under a ulimit; past
+    it, the kernel's OOM killer). The estimate (`per`: bytes from the sizes, a lower bound) is past this machine's."""
+    if per <= available_memory():
+        pytest.skip("this machine has the memory: nothing to refuse")
+    assert main([*TRAIN, *flags, "--out", str(tmp_path / "o")]) == 1
+    one_line(capsys, "of memory", "available")
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_functional_reset_past_this_machines_memory_is_refused():
+    """TRACEBACK 5: `PushTEnv().reset(np.arange(10**6))` was MuJoCo's FatalError (the vector env refused in one line)."""
+    from mjx_pusht.envs.functional import PushTEnv
+
+    n = 2 * available_memory() // BYTES_PER_CPU_ENV + 1
+    with pytest.raises(ConfigError, match="worlds on the cpu backend needs about"):
+        PushTEnv().reset(np.arange(n))

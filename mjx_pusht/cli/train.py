@@ -125,6 +125,7 @@ def cmd_train(args) -> int:
                        max_steps=args.max_steps, task=None if task.name == "chapter" else task.name,
                        success_threshold=args.success_threshold, goal=None if args.goal == "fixed" else args.goal,
                        randomize=args.randomize)
+    _fits_memory(cfg, name)
     check_divides(devices, envs=cfg.envs, eval_envs=cfg.eval_envs, batch=cfg.batch,
                   **({"image_batch": cfg.image_batch} if cfg.image else {}))  # each device's share of each
     if processes.many:  # one run: every process must have been given the same one
@@ -279,3 +280,22 @@ def _judge(args, backend: str, out: Path, summary: dict) -> dict:
     return {k: s[k] for k in ("n_episodes", "n_success", "success_rate", "success_rate_ci95", "median_steps_to_success",
                               "n_non_finite", "n_rigid")} | {"backend": s["backend"], "seeds": seeds,
                                                              "table": "eval/per_episode.parquet"}
+
+
+def _fits_memory(cfg, backend: str) -> None:
+    """The run's largest allocations against this machine's memory, before anything is written (the documented
+    maxima were MuJoCo's or XLA's out-of-memory tracebacks): the CPU worlds (boundary's measured bytes a world), and
+    where JAX runs on this machine's CPU, the dataset's ring (float32 rows of the sample's width and a 3-wide label,
+    as the learner allocates it) and the student's layers (weights, gradients, Adam's two moments: 4 float32s each)."""
+    import jax
+
+    from mjx_pusht.boundary import BYTES_PER_CPU_ENV, fits
+
+    if backend == "cpu":
+        fits(f"--envs {cfg.envs:,} on the cpu backend", cfg.envs, BYTES_PER_CPU_ENV, "fewer --envs", TrainError)
+    if jax.default_backend() == "cpu":
+        fits(f"--max-samples {cfg.max_samples:,}", cfg.max_samples, 4 * (cfg.sample_width + 3), "a smaller "
+             "--max-samples", TrainError, measured=False)
+        widths = [cfg.sample_width, *cfg.hidden, 2]
+        fits(f"--hidden {','.join(map(str, cfg.hidden))}", sum(a * b + b for a, b in zip(widths, widths[1:])), 16,
+             "narrower --hidden layers", TrainError, measured=False)
