@@ -299,9 +299,10 @@ FUNCTIONAL_ENV = {"backend": OneOf(("cpu", "mjx-jax", "mjx-warp")), "action_type
 CONTROLLER = Maybe(Instance("mjx_pusht.task.controller_base:Controller",
                             "a Controller (task.controllers.load('expert') makes one from its name)"))
 # The reset options this package reads, and which entries honour each: an entry given one it cannot honour refuses
-# it (a mask on one env was ignored); options no entry here reads are left to others (LeRobot's own), as gym-pusht
-# leaves them.
+# it (a mask on one env was ignored).
 RESET_OPTIONS = {"reset_to_state": "every env", "reset_mask": "a vector env"}
+# Options others pass and no env here reads: ignored. Any other key is refused (a typo was silently ignored).
+FOREIGN_RESET_OPTIONS = {"lerobot_new_rollout": "LeRobot's eval, on every rollout"}
 
 
 def reset_options(options, honoured: tuple, where: str) -> None:

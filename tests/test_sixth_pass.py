@@ -295,3 +295,66 @@ def test_a_functional_reset_past_this_machines_memory_is_refused():
     n = 2 * available_memory() // BYTES_PER_CPU_ENV + 1
     with pytest.raises(ConfigError, match="worlds on the cpu backend needs about"):
         PushTEnv().reset(np.arange(n))
+
+
+@pytest.mark.parametrize("make", [
+    lambda: gym.make("mjx_pusht/PushT-v0"),
+    lambda: gym.make("mjx_pusht/PushT-gym-pusht-v0"),
+    lambda: gym.make_vec("mjx_pusht/PushT-v0", num_envs=2, backend="cpu"),
+    lambda: gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", num_envs=2, backend="cpu",
+                         vectorization_mode="vector_entry_point"),
+])
+def test_an_unknown_reset_option_is_refused_and_lerobots_is_ignored(make):
+    """SILENT 14: `reset(options={'bogus': 1})` (a misspelt reset_to_state) was ignored; LeRobot's own option, which
+    its eval passes on every rollout, still is (tests/test_validate.py: the same episode with it as without)."""
+    env = make()
+    with pytest.raises(ConfigError, match="takes no option 'bogus'"):
+        env.reset(seed=0, options={"bogus": 1})
+    env.reset(seed=0, options={"lerobot_new_rollout": True})
+    env.close()
+
+
+def test_a_fractional_start_queue_depth_is_refused():
+    """SILENT 16: `make_vec(..., depth=2.5)` was taken."""
+    with pytest.raises(ConfigError, match="depth"):
+        gym.make_vec("mjx_pusht/PushT-v0", num_envs=2, backend="cpu", depth=2.5)
+
+
+SWEEP = ["sweep", "--backend", "cpu", "--no-progress", "--seeds", "2", "--steps", "5"]
+
+
+@pytest.mark.parametrize("argv,words", [
+    ([*SWEEP, "--no-rerun", "--record", "3"], "--no-rerun skips"),
+    ([*RUNS["eval"], "--record", "2"], "--no-rerun skips"),
+    ([*RUNS["train"][:-4], "--record", "2", "--no-rerun"], "--no-rerun skips"),
+    ([*SWEEP, "--no-rerun", "--audit", "0.5"], "a cpu sweep is that reference"),
+    ([*SWEEP, "--no-rerun", "--peer-timeout", "5"], "one process waits for none"),
+    ([*RUNS["train"], "--image-batch", "32"], "a state student has none"),
+])
+def test_a_flag_the_command_would_not_read_is_refused(argv, words, tmp_path, capsys):
+    """SILENT 11: each was accepted and ignored (cli.md: a flag the command would not read is refused)."""
+    assert main([*argv, "--out", str(tmp_path / "o")]) in (1, 2)
+    one_line(capsys, words)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("extra", [["--max-steps", "5"], ["--task", "gym-pusht"], ["--tolerance", "1e-6"]])
+def test_compare_evals_refuses_the_settings_of_a_run(extra, tmp_path, capsys):
+    """SILENT 11: with --evals, only --seeds and --controller were refused; these were ignored."""
+    for name in ("a", "b"):
+        assert main([*RUNS["eval"], "--out", str(tmp_path / name)]) == 0
+    capsys.readouterr()
+    assert main(["compare", "--evals", str(tmp_path / "a"), str(tmp_path / "b"), *extra,
+                 "--out", str(tmp_path / "c")]) == 2
+    one_line(capsys, "runs nothing", extra[0])
+    assert not (tmp_path / "c").exists()
+
+
+def test_a_bad_mujoco_gl_is_refused_before_eval_video_runs(tmp_path):
+    """SILENT 10: `MUJOCO_GL=bogus eval --video` ran and wrote its results into a fresh --out, then refused."""
+    r = subprocess.run([sys.executable, "-m", "mjx_pusht", *RUNS["eval"], "--video", str(tmp_path / "v.gif"),
+                        "--video-size", "32", "--out", str(tmp_path / "o")], capture_output=True, text=True,
+                       env={**ENV, "MUJOCO_GL": "bogus"}, timeout=120)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 1 and len(lines) == 1 and "MUJOCO_GL='bogus'" in lines[0], r.stderr[-2000:]
+    assert os.listdir(tmp_path) == []

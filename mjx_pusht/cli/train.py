@@ -125,6 +125,8 @@ def cmd_train(args) -> int:
                        max_steps=args.max_steps, task=None if task.name == "chapter" else task.name,
                        success_threshold=args.success_threshold, goal=None if args.goal == "fixed" else args.goal,
                        randomize=args.randomize)
+    if args.image_batch is not None and not cfg.image:  # as --image-steps: a state student has no image reader
+        raise TrainError(f"--image-batch sizes a pixel student's image batches; a {cfg.obs_type} student has none")
     _fits_memory(cfg, name)
     check_divides(devices, envs=cfg.envs, eval_envs=cfg.eval_envs, batch=cfg.batch,
                   **({"image_batch": cfg.image_batch} if cfg.image else {}))  # each device's share of each

@@ -52,6 +52,11 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
         check_path(video, replace, out)  # a bad name, a missing encoder or a size too large fails now, not after the episodes
         check_grid(video_size, min(video_episodes, len(seeds)), max_steps)
     name, why = resolve(backend)
+    if video is not None:  # a GL that cannot draw the video: refused now, not once the results are written
+        from mjx_pusht.model.scene import build_model
+        from mjx_pusht.render.pixels import probe_gl
+
+        probe_gl(build_model(the_task.scene(break_it)))
     config = {"command": "eval", "backend": name, "controller": spec, "action": controller.action_type,
               "task": task, "reset": reset, "success_threshold": episode.success, "goal": goal, "break_it": break_it, "max_steps": max_steps,
               "frame_skip": frame_skip, "params": [[n, list(v)] for n, v in params],
