@@ -82,12 +82,14 @@ def keywords(function):
 
     takes = [n for n, p in inspect.signature(function).parameters.items() if p.kind in (p.POSITIONAL_OR_KEYWORD,
                                                                                         p.KEYWORD_ONLY)][1:]
-    where = function.__qualname__.removesuffix(".__init__")
+    where = f"{function.__qualname__}()"  # Python's own words: PushTGymEnv.__init__() got an unexpected ...
 
     @functools.wraps(function)
     def checked(*args, **kwargs):
         if unknown := sorted(set(kwargs) - set(takes)):
-            raise KeywordError(f"{where} takes no {', '.join(map(repr, unknown))}; it takes {', '.join(takes)}")
+            # as Python words it (torchrl's GymEnv retries without frameskip on them), then the keywords taken
+            raise KeywordError(f"{where} got an unexpected keyword argument {', '.join(map(repr, unknown))}; it "
+                               f"takes {', '.join(takes)}")
         return function(*args, **kwargs)
     return checked
 
