@@ -358,3 +358,14 @@ def test_a_bad_mujoco_gl_is_refused_before_eval_video_runs(tmp_path):
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 1 and len(lines) == 1 and "MUJOCO_GL='bogus'" in lines[0], r.stderr[-2000:]
     assert os.listdir(tmp_path) == []
+
+
+def test_backend_run_of_more_seeds_than_fit_is_refused_at_once(nudge):
+    """SILENT 13: `run(np.arange(10**8))` made no memory check (150 GB at the measured 1,500 bytes a seed) and was
+    still running when killed at 100 s."""
+    from mjx_pusht.boundary import BYTES_PER_SEED
+
+    t = time.perf_counter()
+    with pytest.raises(ConfigError, match="seeds needs about"):
+        nudge.run(np.arange(2 * available_memory() // BYTES_PER_SEED + 1))
+    assert time.perf_counter() - t < 5
