@@ -226,15 +226,12 @@ class FeedbackPool:
             raise actions.earliest(bad)
         return Rollouts.concat([j.result() for j in jobs])
 
-    def close(self) -> None:  # unfinished episodes (^C) are unwanted: shutdown waited for a busy user controller
-        FeedbackPool.live.discard(self)
-        if not all(j.done() for j in self.jobs):
-            self.end_workers()
-        self.pool.shutdown(cancel_futures=True)
-
-    def end_workers(self) -> None:
-        for proc in list((getattr(self.pool, "_processes", None) or {}).values()):
+    def close(self, end: bool = False) -> None:  # unfinished episodes (^C) are unwanted: `end` their workers, as
+        FeedbackPool.live.discard(self)  # shutdown would wait for them, and a user's controller may be busy for minutes
+        for proc in list((getattr(self.pool, "_processes", None) or {}).values()) if end or not all(
+                j.done() for j in self.jobs) else ():
             proc.terminate()
+        self.pool.shutdown(cancel_futures=True)
 
 
 def _die_with_parent(parent: int) -> None:

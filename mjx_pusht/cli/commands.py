@@ -62,8 +62,7 @@ def end_interrupted(code: int) -> None:
     checkpoint being written was waited for (`main`); CPU worker processes are ended here."""
     if "mjx_pusht.backends.cpu" in sys.modules:  # its episodes are not wanted; closed, its semaphores are released
         for pool in list(sys.modules["mjx_pusht.backends.cpu"].FeedbackPool.live):  # (else: "leaked semaphore")
-            pool.end_workers()
-            pool.close()
+            pool.close(end=True)
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)
