@@ -67,17 +67,12 @@ _os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 from mjx_pusht.backends.base import resolve
 from mjx_pusht.backends.factory import make_backend
 from mjx_pusht.backends.results import Rollouts
-from mjx_pusht.model.scene import SceneSpec, build_model, scene_xml
-from mjx_pusht.model.tree import (
-    EXPECTED_TREES,
-    Tree,
-    TreeMismatch,
-    check_tree,
-    read_tree,
-)
+from mjx_pusht.model.scene import SceneSpec
+from mjx_pusht.model.tree import EXPECTED_TREES, Tree, TreeMismatch
 from mjx_pusht.scenario import Scenario
-from mjx_pusht.task.invariants import gap_deviation, stayed_rigid, weld_gap
-from mjx_pusht.task.reset import start_pose, start_poses
+# the helpers, each argument checked at the door (api.py); the package's own code calls them unchecked
+from mjx_pusht.api import (build_model, check_tree, gap_deviation, read_tree, scene_xml, start_pose, start_poses,
+                           stayed_rigid, weld_gap)
 from mjx_pusht.task.schedule import Schedule
 from mjx_pusht.train.controller import register_policy as _register_policy
 

@@ -218,7 +218,7 @@ def _size(n: float) -> str:
     return f"{n / 2**30:,.1f} GiB" if n >= 2**30 else f"{n / 2**20:,.0f} MiB"
 
 
-def fits(what: str, count: int, per: int, hint: str, error=ConfigError) -> None:
+def fits(what: str, count: int, per: int, hint: str, error=ConfigError, measured: bool = True) -> None:
     """Refuse, before any work or file, `count` items of about `per` bytes each (`what`: the input that asks for
     them) where they would not fit in the memory this machine has available now: such a run grew until the
     kernel killed it (19 GB in 26 s, then the whole machine's OOM killer), where a line and an exit were due."""
@@ -226,7 +226,8 @@ def fits(what: str, count: int, per: int, hint: str, error=ConfigError) -> None:
     have = available_memory()
     if have is not None and need > have:
         raise error(f"{what} needs about {_size(need)} of memory ({_size(per) if per >= 2**20 else f'{per:,} bytes'}"
-                    f" each, measured), more than the {_size(have)} this machine has available: {hint}")
+                    f" each, {'measured' if measured else 'from the sizes'}), more than the {_size(have)} this machine "
+                    f"has available: {hint}")
 
 
 def jax_cache(path=None):
@@ -298,9 +299,10 @@ FUNCTIONAL_ENV = {"backend": OneOf(("cpu", "mjx-jax", "mjx-warp")), "action_type
 CONTROLLER = Maybe(Instance("mjx_pusht.task.controller_base:Controller",
                             "a Controller (task.controllers.load('expert') makes one from its name)"))
 # The reset options this package reads, and which entries honour each: an entry given one it cannot honour refuses
-# it (a mask on one env was ignored); options no entry here reads are left to others (LeRobot's own), as gym-pusht
-# leaves them.
+# it (a mask on one env was ignored).
 RESET_OPTIONS = {"reset_to_state": "every env", "reset_mask": "a vector env"}
+# Options others pass and no env here reads: ignored. Any other key is refused (a typo was silently ignored).
+FOREIGN_RESET_OPTIONS = {"lerobot_new_rollout": "LeRobot's eval, on every rollout"}
 
 
 def reset_options(options, honoured: tuple, where: str) -> None:

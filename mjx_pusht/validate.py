@@ -175,8 +175,9 @@ def mask(value, n: int, name: str = "reset_mask") -> np.ndarray:
 
 
 def reset_options(options, known: tuple, where: str) -> dict:
-    """The reset options this env uses; any other key is ignored (logged at debug level), as gym-pusht
-    ignores what it does not read: LeRobot's rollout passes {"lerobot_new_rollout": True}."""
+    """The reset options this env uses. The options others are known to pass and this env does not read
+    (boundary.FOREIGN_RESET_OPTIONS: LeRobot's rollout passes {"lerobot_new_rollout": True}) are ignored, logged at
+    debug level; any other key is refused (a misspelt "reset_to_sate" was ignored: the episode started elsewhere)."""
     if options is None:
         return {}
     if not isinstance(options, dict):
@@ -184,6 +185,12 @@ def reset_options(options, known: tuple, where: str) -> dict:
     from mjx_pusht.boundary import reset_options as honoured
 
     honoured(options, known, where)  # this package's options that `where` cannot honour are refused, not ignored
+    from mjx_pusht.boundary import FOREIGN_RESET_OPTIONS, RESET_OPTIONS
+
+    unknown = sorted(map(repr, set(options) - set(known) - set(FOREIGN_RESET_OPTIONS) - set(RESET_OPTIONS)))
+    if unknown:
+        raise ConfigError(f"{where}.reset takes no option {', '.join(unknown)}; it reads {', '.join(known)} (and "
+                          f"ignores {', '.join(FOREIGN_RESET_OPTIONS)}, which LeRobot passes)")
     unused = sorted(map(str, set(options) - set(known)))
     if unused:
         log.debug("%s.reset ignores option(s) it does not use: %s", where, ", ".join(unused))

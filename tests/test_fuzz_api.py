@@ -124,13 +124,15 @@ OPTIONS = st.dictionaries(st.sampled_from(["reset_to_state", "reset_mask", "lero
          action=np.zeros(2))  # complex: its real part, a ComplexWarning only
 @example(env_id=IDS[0], seed=0, options={"reset_mask": [True]}, action=np.zeros(2))  # ignored without a word
 @example(env_id=IDS[1], seed=0, options={"reset_mask": [True]}, action=np.zeros(2))
+@example(env_id=IDS[0], seed=0, options={"other": 1}, action=np.zeros(2))  # an unknown key: ignored without a word
+@example(env_id=IDS[1], seed=0, options={"lerobot_new_rollout": True, "other": 1}, action=np.zeros(2))
 def test_gym_ids_reset_and_step(env_id, seed, options, action):
     env = _single(env_id)
     if holds(lambda: env.reset(seed=seed, options=options)) is not None:
         holds(lambda: env.step(action))
 
 
-# Each id's own keywords (an unknown one is Python's TypeError, as gym-pusht's; a render_mode that is not a string
+# Each id's own keywords (an unknown one is a KeywordError, a TypeError as gym-pusht's, naming the known ones; a render_mode that is not a string
 # fails in gymnasium's make before the env is built: AttributeError 'endswith', gymnasium 1.4)
 # (max_episode_steps is gymnasium's own TimeLimit's, checked by gymnasium with a ValueError of its own)
 MAKE = {IDS[0]: ("obs_type", "action_type", "observation_size", "render_size", "reset_kind", "frame_skip", "success_threshold", "goal", "randomize"),

@@ -173,7 +173,7 @@ def _try(argv, world, owned: list[str], replaced: list[str]):
 @example(command="sweep", data=["--out", "loop"])  # RuntimeError: Symlink loop
 @example(command="eval", data=["--replace", "--out", "train/eval"])  # overwrote the train's own judgement
 @example(command="eval", data=["--video", "users/picture.gif", "--out", "fresh"])  # overwrote a user's picture
-@example(command="eval", data=["--replace", "--video", "users/picture.gif", "--out", "fresh"])  # documented: it may
+@example(command="eval", data=["--replace", "--video", "users/picture.gif", "--out", "fresh"])  # overwrote it too
 @example(command="sweep", data=["--coordinator", "127.0.0.1:12345", "--out", "fresh"])  # ran alone, or hung
 @example(command="sweep", data=["--coordinator", "127.0.0.1:99999", "--out", "fresh"])  # OverflowError
 @example(command="eval", data=["--controller", "ctl_fuzz:raises", "--out", "fresh"])  # a user's controller failing
@@ -212,10 +212,9 @@ def test_every_command_keeps_the_property(command, data, worlds):
             owned += [os.path.relpath(fresh, world), "runs"] if fresh else []
             if "--share-out" in flags and a not in ("", "/"):  # documented: its files beside the folder's own
                 owned.append(os.path.relpath(os.path.realpath(a), world))
-        elif i in kinds:  # --video: a new file is the run's; an existing one is, under --replace (documented)
-            existed = os.path.lexists(world / a)
-            if not existed or "--replace" in flags:
-                (replaced if existed else owned).append(os.path.relpath(os.path.realpath(world / a), world))
+        elif i in kinds:  # --video: a new file is the run's; an existing one no run of this --out wrote is never
+            if not os.path.lexists(world / a):  # changed, --replace or not (the fuzz world's files are no video's)
+                owned.append(os.path.relpath(os.path.realpath(world / a), world))
             a = str(world / a)
         argv.append(a)
     _try(argv, world, owned, replaced)

@@ -46,7 +46,9 @@ def test_vector_env_inputs_are_checked_up_front():
         envs.reset(options={"reset_to_state": np.zeros((5, 5))})
     with pytest.raises(ValueError, match="finite"):
         envs.reset(options={"reset_to_state": [np.nan, 0, 0, 0, 0]})
-    envs.reset(options={"reset_mask_typo": True})  # an option this env does not use is ignored, as gym-pusht does
+    with pytest.raises(ValueError, match="takes no option 'reset_mask_typo'"):  # a typo was ignored: refused
+        envs.reset(options={"reset_mask_typo": True})
+    envs.reset(options={"lerobot_new_rollout": True})  # LeRobot's own option: still ignored
     with pytest.raises(ValueError, match="seed must be an integer"):
         envs.reset(seed=2**64)
     with pytest.raises(ValueError, match="num_envs must be an integer from 1"):
@@ -56,7 +58,8 @@ def test_vector_env_inputs_are_checked_up_front():
     env = gym.make(ENV)
     with pytest.raises(ValueError, match="seed must be an integer"):
         env.reset(seed=2**64)
-    env.reset(options={"reset_to": [0, 0, 0, 0, 0]})  # ignored (LeRobot passes options of its own)
+    with pytest.raises(ValueError, match="takes no option 'reset_to'"):  # a misspelt reset_to_state: was ignored
+        env.reset(options={"reset_to": [0, 0, 0, 0, 0]})
     with pytest.raises(ValueError, match="finite"):
         env.reset(options={"reset_to_state": [0, 0, np.inf, 0, 0]})
 

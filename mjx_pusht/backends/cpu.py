@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
-from mjx_pusht import validate
+from mjx_pusht.api import run_options
 from mjx_pusht.backends import actions
 from mjx_pusht.backends.base import Backend, drawn_params
 from mjx_pusht.backends.results import Rollouts, Trace, from_carry
@@ -188,14 +188,13 @@ def _thread_pool(threads: int):
 
 
 class FeedbackPool:
-    """Feedback episodes over several processes: MuJoCo C steps one seed's MjData at a time while
-    holding Python's lock, so a batch on one process uses one core. Each worker runs `run_cpu` on
-    a slice of the seeds; the rows are the same bits as one process (every seed is its own MjData).
+    """Feedback episodes over several processes: MuJoCo C steps one seed's MjData at a time while holding
+    Python's lock, so a batch on one process uses one core. Each worker runs `run_cpu` on a slice of the seeds;
+    the rows are the same bits as one process (every seed is its own MjData).
 
-    Workers are spawned, so they re-import the caller's main module: a script that makes one at
-    its top level, outside `if __name__ == "__main__":`, would start itself again in every worker,
-    and is refused in one line instead. Workers exit when their parent does, whatever killed it.
-    """
+    Workers are spawned, so they re-import the caller's main module: a script that makes one at its top level,
+    outside `if __name__ == "__main__":`, would start itself again in every worker, and is refused in one line
+    instead. Workers exit when their parent does, whatever killed it."""
 
     def __init__(self, workers: int):
         import multiprocessing
@@ -208,7 +207,7 @@ class FeedbackPool:
         # compare with a 1024-wide policy did not finish in 400 s, notebook change 12). A user's setting wins.
         for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ.setdefault(var, "1")
-        self.workers = workers
+        self.workers, self.jobs = workers, []
         self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                         initializer=_die_with_parent, initargs=(os.getpid(),))
         FeedbackPool.live.add(self)
@@ -220,15 +219,18 @@ class FeedbackPool:
         combos = np.zeros(len(seeds), np.int64) if combos is None else np.asarray(combos, np.int64)
         poses = start_poses(seeds, reset=scenario.reset) if poses is None else poses
         parts = np.array_split(np.arange(len(seeds)), min(len(seeds), 4 * self.workers))
-        jobs = [self.pool.submit(run_cpu, scenario, seeds[i], nthread=1, combos=combos[i], poses=poses[i])
-                for i in parts if len(i)]
+        self.jobs = jobs = [self.pool.submit(run_cpu, scenario, seeds[i], nthread=1, combos=combos[i], poses=poses[i])
+                            for i in parts if len(i)]
         bad = [j.exception() for j in jobs if isinstance(j.exception(), actions.NonFiniteActionError)]
         if bad:  # as one process would: the earliest control step of any slice, then the first slice
             raise actions.earliest(bad)
         return Rollouts.concat([j.result() for j in jobs])
 
-    def close(self) -> None:
-        FeedbackPool.live.discard(self)
+    def close(self, end: bool = False) -> None:  # unfinished episodes (^C) are unwanted: `end` their workers, as
+        FeedbackPool.live.discard(self)  # shutdown would wait for them, and a user's controller may be busy for minutes
+        for proc in list((getattr(self.pool, "_processes", None) or {}).values()) if end or not all(
+                j.done() for j in self.jobs) else ():
+            proc.terminate()
         self.pool.shutdown(cancel_futures=True)
 
 
@@ -379,7 +381,7 @@ class CpuBackend(Backend):
         return f"cpu ({self.nthread} threads)"
 
     def run(self, seeds, *, trace: bool = False, batch: int | None = None, combos=None, poses=None) -> Rollouts:
-        seeds = validate.seed_array(seeds)  # the API's seeds get the CLI's check: [0.5, 1.7] is not seeds 0 and 1
+        seeds, combos, poses = run_options(self.scenario, seeds, batch, combos, poses)  # the API's: the CLI's checks
         controller, episode = self.scenario.driver()
         feedback = controller.open_loop(episode.max_steps, episode.frame_skip) is None
         if feedback and self.workers > 1 and not trace and len(seeds) >= 2 * self.workers:

@@ -21,6 +21,7 @@ import os
 
 import numpy as np
 
+from mjx_pusht.api import run_options
 from mjx_pusht.backends.base import Backend, BackendError
 from mjx_pusht.backends.results import Rollouts, Trace
 from mjx_pusht.model import gym_pusht as frame
@@ -65,7 +66,7 @@ class GymPushtBackend(Backend):
         return "gym-pusht (pymunk circle)"
 
     def run(self, seeds, *, trace: bool = False, batch: int | None = None, combos=None, poses=None) -> Rollouts:
-        seeds = np.asarray(seeds, np.int64).reshape(-1)
+        seeds, combos, poses = run_options(self.scenario, seeds, batch, combos, poses)  # the API's: checked
         idx = [i for i in np.array_split(np.arange(len(seeds)), min(self.workers, max(len(seeds), 1))) if len(i)]
         args = [(self.scenario, seeds[i], trace, None if poses is None else np.asarray(poses)[i]) for i in idx]
         if len(args) <= 1:

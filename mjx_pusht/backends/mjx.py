@@ -19,7 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from mjx_pusht import validate
+from mjx_pusht.api import run_options
 from mjx_pusht.backends import actions, launch as launching
 from mjx_pusht.backends.base import Backend, BackendError, drawn_params
 from mjx_pusht.backends.grid import ModelGrid
@@ -182,7 +182,8 @@ class MjxRunner:
         A sweep submits chunk k + 1 before it collects chunk k, so the host's work hides behind the device's."""
         import jax.numpy as jnp
 
-        seeds = validate.seed_array(seeds)  # the API's seeds get the CLI's check: [0.5, 1.7] is not seeds 0 and 1
+        # the API's arguments get the CLI's checks: [0.5, 1.7] is not seeds 0 and 1, a NaN start no start
+        seeds, combos, poses = run_options(self.scenario, seeds, batch, combos, poses)
         n = len(seeds)
         batch = batch or n
         if n > batch:

@@ -14,7 +14,7 @@ from pathlib import Path
 from mjx_pusht.cli.compare import cmd_compare
 from mjx_pusht.cli.demos import cmd_demos
 from mjx_pusht.cli.eval import cmd_eval
-from mjx_pusht.cli.parser import UsageError, build_parser
+from mjx_pusht.cli.parser import UsageError, build_parser, unread_flags
 from mjx_pusht.cli.scene import cmd_scene, cmd_tree
 from mjx_pusht.cli.sweep import cmd_sweep
 from mjx_pusht.errors import MjxPushtError, missing_extra, needs, one_line
@@ -62,9 +62,7 @@ def end_interrupted(code: int) -> None:
     checkpoint being written was waited for (`main`); CPU worker processes are ended here."""
     if "mjx_pusht.backends.cpu" in sys.modules:  # its episodes are not wanted; closed, its semaphores are released
         for pool in list(sys.modules["mjx_pusht.backends.cpu"].FeedbackPool.live):  # (else: "leaked semaphore")
-            for proc in list((getattr(pool.pool, "_processes", None) or {}).values()):
-                proc.terminate()
-            pool.close()
+            pool.close(end=True)
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)
@@ -157,6 +155,7 @@ def _main(argv, signals: Signals) -> int:
     args = None
     try:
         args = build_parser().parse_args(argv)
+        unread_flags(args)
         if args.verbose:
             os.environ["MJX_PUSHT_VERBOSE"] = "1"
         if getattr(args, "backend", "cpu") not in ("cpu", "gym-pusht"):  # one that may compile: its cache, at the door

@@ -17,6 +17,7 @@ def cmd_compare(args) -> int:
 
     if args.evals:
         return _compare_evals(args)
+    args.max_steps = args.max_steps or 300
     args.seeds = args.seeds or "64"  # the default, as the fingerprint of an earlier run holds it
     seeds = parse_seeds(args.seeds)
     from mjx_pusht.task.tasks import get as get_task
@@ -68,6 +69,10 @@ def _compare_evals(args) -> int:
         raise UsageError("--evals pairs two finished evals; their controller is theirs, so --controller is not taken")
     if args.seeds is not None:
         raise UsageError("--evals pairs two finished evals; their seeds are theirs, so --seeds is not taken")
+    given = [f for f, v in (("--max-steps", args.max_steps), ("--tolerance", args.tolerance),
+                            ("--iterations", args.iterations), ("--task", args.task != "chapter" or None)) if v]
+    if given:  # the evals' own settings made their rows; nothing here runs
+        raise UsageError(f"--evals pairs two finished evals and runs nothing, so {', '.join(given)} is not taken")
     from mjx_pusht.study.closed_loop import evals_report, write_report
 
     report = evals_report(*args.evals)  # a refused pairing leaves no --out folder behind

@@ -151,7 +151,8 @@ def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str)
     p.add_argument("--resume", action="store_true", help=f"finish an interrupted {name} in --out")
     p.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     p.add_argument("--share-out", action="store_true", help=SHARE_HELP)
-    p.add_argument("--record", type=_nonneg, default=4, help=f"{rows} to show side by side in {name}.rrd (default 4)")
+    p.add_argument("--record", type=_nonneg, default=None,  # None: unset, so that one --no-rerun skips is refused
+                   help=f"{rows} to show side by side in {name}.rrd (default 4)")
     p.add_argument("--no-rerun", dest="rerun", action="store_false", help=f"skip {name}.rrd")
     p.add_argument("--no-progress", dest="progress", action="store_false")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
@@ -198,7 +199,7 @@ def _process_args(p: argparse.ArgumentParser, what: str, writes: str) -> None:
                    help=f"processes sharing this {what} through jax.distributed, one a host or GPU (default 1)")
     p.add_argument("--process-id", type=_nonneg, default=0, help=f"this process's index, 0 .. N-1 (0 writes {writes})")
     p.add_argument("--coordinator", default=None, metavar="HOST:PORT", help="where process 0 listens")
-    p.add_argument("--peer-timeout", type=_positive_float, default=300.0, metavar="SECONDS",
+    p.add_argument("--peer-timeout", type=_positive_float, default=None, metavar="SECONDS",
                    help="how long to wait for every process to join before giving up (default 300)")
 
 
@@ -231,7 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
     w = sub.add_parser("sweep", help="many seeds at once on a backend; per_seed.parquet + summary.json")
     _batch_args(w, "sweep", "seeds", seeds="4096")
     w.add_argument("--steps", type=_steps, default=120, help="nudge length in steps (default 120)")
-    w.add_argument("--audit", type=_fraction, default=0.01, metavar="FRACTION",
+    w.add_argument("--audit", type=_fraction, default=None, metavar="FRACTION",
                    help="MJX backends: re-run this fraction of the rows (at least 64, at most 16,384) plus every "
                         "flagged row on the CPU reference and record whether they agree (default 0.01; 0 skips)")
     _process_args(w, "sweep", "the table")
@@ -340,7 +341,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "eval --seeds, for a rate the stop did not pick)")
     t.add_argument("--seed", type=_train_seed, default=0, help="initialisation and sampling seed (default 0)")
     t.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
-    t.add_argument("--record", type=_nonneg, default=4, help="held-out episodes in eval/eval.rrd (default 4)")
+    t.add_argument("--record", type=_nonneg, default=None, help="held-out episodes in eval/eval.rrd (default 4)")
     t.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip train.rrd and eval/eval.rrd")
     t.add_argument("--no-progress", dest="progress", action="store_false")
 
@@ -361,7 +362,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="compare closed-loop episodes of this controller instead (e.g. expert): success rates, "
                         "per-seed agreement, final poses")
     _task_args(c, "closed loop: start distribution of the chapter task (default task)")
-    c.add_argument("--max-steps", type=_steps, default=300, help="closed loop: control steps per episode")
+    c.add_argument("--max-steps", type=_steps, default=None, help="closed loop: control steps per episode (default 300)")
     c.add_argument("--evals", nargs=2, type=Path, metavar=("EVAL_DIR", "EVAL_DIR"), default=None,
                    help="pair two finished eval folders of the same controller and seeds, one run on the cpu backend "
                         "and one on MJX or gym-pusht (e.g. on two machines), into the closed-loop report; runs nothing")
@@ -371,3 +372,16 @@ def build_parser() -> argparse.ArgumentParser:
     add_demos(sub, positive=_positive, folder=_folder, replace_help=REPLACE_HELP, share_help=SHARE_HELP,
               success=success_arg)
     return p
+
+
+def unread_flags(args) -> None:
+    """Refuse a flag the command would not read (cli.md: refused, not ignored), then fill the defaults those flags
+    leave None so that a given one is seen: --record with --no-rerun, --peer-timeout with one process."""
+    if getattr(args, "rerun", True) is False and getattr(args, "record", None):  # (--record 0 asks for nothing)
+        raise UsageError(f"--record {args.record} picks what the recording shows, which --no-rerun skips: give one")
+    if getattr(args, "peer_timeout", None) is not None and getattr(args, "num_processes", 1) == 1:
+        raise UsageError("--peer-timeout waits for the other processes; one process waits for none: give "
+                         "--num-processes N with it, or leave it out")
+    for name, default in (("record", 4), ("peer_timeout", 300.0)):
+        if hasattr(args, name) and getattr(args, name) is None:
+            setattr(args, name, default)

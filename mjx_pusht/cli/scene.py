@@ -23,8 +23,11 @@ def cmd_scene(args) -> int:
     schedule = Schedule(nudge_steps=SMOKE_NUDGE_STEPS if args.smoke else args.steps or 120)
     if args.compare_welded and args.break_it == "none":
         raise UsageError("--compare-welded compares a broken scene with the welded one: give --break split-tee or free-tee")
-    # one seed's look: a rerun with another seed may overwrite the last; another command's results may not
-    out = claim_out_dir(args.out, "scene", {}, replace=args.replace, share=args.share_out)
+    # one seed's look: a rerun with another seed may overwrite the last; other settings need --replace, and another
+    # command's results are never overwritten
+    out = claim_out_dir(args.out, "scene", {"steps": schedule.nudge_steps, "break": args.break_it,
+                                            "compare_welded": args.compare_welded},
+                        replace=args.replace, share=args.share_out)
     banner = Banner("scene")
     scenario = Scenario(SceneSpec(args.break_it), schedule)
     backend = CpuBackend(scenario, nthread=1)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 def cmd_sweep(args) -> int:
     from mjx_pusht.backends.base import resolve
+    from mjx_pusht.cli.parser import UsageError
     from mjx_pusht.io.outputs import atomic_write_json
     from mjx_pusht.model.params import parse_params
     from mjx_pusht.model.scene import SceneSpec
@@ -25,6 +26,10 @@ def cmd_sweep(args) -> int:
     processes = Processes(args.process_id, args.num_processes, args.coordinator, args.peer_timeout)
     processes.initialize()  # before anything asks JAX for its devices
     name, why = resolve(args.backend)
+    if args.audit is not None and name == "cpu":  # the audit checks an MJX run against the CPU reference
+        raise UsageError(f"--audit re-runs an MJX sweep's rows on the CPU reference; a {name} sweep is that reference: "
+                         "leave --audit out")
+    args.audit = 0.01 if args.audit is None else args.audit
     schedule = Schedule(nudge_steps=args.steps)
     config = {"backend": name, "break_it": args.break_it, "steps": args.steps, "params": [[n, list(v)] for n, v in params]}
     scenario = Scenario(SceneSpec(args.break_it), schedule, params, randomize=args.randomize)

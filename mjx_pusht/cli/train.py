@@ -125,6 +125,9 @@ def cmd_train(args) -> int:
                        max_steps=args.max_steps, task=None if task.name == "chapter" else task.name,
                        success_threshold=args.success_threshold, goal=None if args.goal == "fixed" else args.goal,
                        randomize=args.randomize)
+    if args.image_batch is not None and not cfg.image:  # as --image-steps: a state student has no image reader
+        raise TrainError(f"--image-batch sizes a pixel student's image batches; a {cfg.obs_type} student has none")
+    _fits_memory(cfg, name)
     check_divides(devices, envs=cfg.envs, eval_envs=cfg.eval_envs, batch=cfg.batch,
                   **({"image_batch": cfg.image_batch} if cfg.image else {}))  # each device's share of each
     if processes.many:  # one run: every process must have been given the same one
@@ -139,8 +142,8 @@ def cmd_train(args) -> int:
                              devices=devices, until=args.until)
 
             return _follow(follow, devices, processes, args)
-    out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)  # the run's settings: checked on --resume
-    _restart(out, args)
+    out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out,  # the run's settings:
+                        check=lambda path, same: _restart(path, args))  # checked on --resume
     _check_rerun(args)
     banner = Banner("train")
     print(f"backend: {name} ({why}); DAgger from {cfg.obs_type} on the {task.name} task: {cfg.envs} {cfg.reset} "
@@ -177,6 +180,8 @@ def _follow(train, devices: list, processes, args) -> int:
 
 def _restart(out: Path, args) -> None:
     """A folder holding a training run is continued (--resume) or started over (--replace), never mixed."""
+    if args.resume and args.replace:  # --replace was ignored: the run resumed
+        raise TrainError("--resume continues the training run in --out and --replace starts it over: give one")
     started = (out / "checkpoints" / "resume.msgpack").exists()
     if started and args.replace and not args.resume:
         remove_own(out / "checkpoints")
@@ -220,8 +225,8 @@ def _cmd_ppo(args, name: str, why: str, devices: list, processes) -> int:
         processes.agree({**config_dict(cfg), "backend": name, "devices": len(devices), "out": str(args.out.resolve())})
         if not processes.leader:  # Brax's loop on its devices; process 0 alone judges and writes (Brax calls back there)
             return _follow(lambda out: train_ppo(cfg, name, out, progress=False, **run)[1], devices, processes, args)
-    out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out)
-    _restart(out, args)
+    out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out,
+                        check=lambda path, same: _restart(path, args))  # before the run file: a refusal changes nothing
     _check_rerun(args)
     banner = Banner("train")
     print(f"backend: {name} ({why}); Brax PPO from {cfg.obs_type} on the {cfg.the_task.name} task: {cfg.envs} envs, "
@@ -277,3 +282,22 @@ def _judge(args, backend: str, out: Path, summary: dict) -> dict:
     return {k: s[k] for k in ("n_episodes", "n_success", "success_rate", "success_rate_ci95", "median_steps_to_success",
                               "n_non_finite", "n_rigid")} | {"backend": s["backend"], "seeds": seeds,
                                                              "table": "eval/per_episode.parquet"}
+
+
+def _fits_memory(cfg, backend: str) -> None:
+    """The run's largest allocations against this machine's memory, before anything is written (the documented
+    maxima were MuJoCo's or XLA's out-of-memory tracebacks): the CPU worlds (boundary's measured bytes a world), and
+    where JAX runs on this machine's CPU, the dataset's ring (float32 rows of the sample's width and a 3-wide label,
+    as the learner allocates it) and the student's layers (weights, gradients, Adam's two moments: 4 float32s each)."""
+    import jax
+
+    from mjx_pusht.boundary import BYTES_PER_CPU_ENV, fits
+
+    if backend == "cpu":
+        fits(f"--envs {cfg.envs:,} on the cpu backend", cfg.envs, BYTES_PER_CPU_ENV, "fewer --envs", TrainError)
+    if jax.default_backend() == "cpu":
+        fits(f"--max-samples {cfg.max_samples:,}", cfg.max_samples, 4 * (cfg.sample_width + 3), "a smaller "
+             "--max-samples", TrainError, measured=False)
+        widths = [cfg.sample_width, *cfg.hidden, 2]
+        fits(f"--hidden {','.join(map(str, cfg.hidden))}", sum(a * b + b for a, b in zip(widths, widths[1:])), 16,
+             "narrower --hidden layers", TrainError, measured=False)

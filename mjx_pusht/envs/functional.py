@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from mjx_pusht import boundary, validate
+from mjx_pusht.api import keywords
 from mjx_pusht.envs import physics as per_episode
 from mjx_pusht.envs.observation import Observes
 from mjx_pusht.envs.resets import Resets
@@ -264,6 +265,7 @@ class PushTEnv(Resets, Observes):
     def check(self, state: State) -> State:
         """Raise `BufferOverflow` if any world of `state` dropped a contact or a constraint row in its episode
         (MJX-Warp); call it after a jitted scan of `step_one`. Returns the state, so it chains."""
+        boundary.Instance(State, "a State (what reset and step return)")("state", state)  # None: an AttributeError
         if state.dropped is not None:
             from mjx_pusht.backends.warp import dropped
 
@@ -271,3 +273,7 @@ class PushTEnv(Resets, Observes):
             if dropped(bits).any():
                 self.runner.buffers.check(bits)
         return state
+
+
+# an unknown keyword (`PushTEnv.for_task('gym-pusht', bogus=1)`): one line naming the known ones
+PushTEnv.__init__ = keywords(PushTEnv.__init__)

@@ -47,6 +47,7 @@ with requires("the gymnasium environments", "gym"):  # the extra is optional: sa
     import gymnasium as gym
 
 from mjx_pusht import validate
+from mjx_pusht.api import keywords
 from mjx_pusht.envs import physics
 from mjx_pusht.envs.common import (
     OneWorld,
@@ -88,6 +89,7 @@ class PushTGymEnv(OneWorld, Pictures, gym.Env):
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
+    @keywords  # an unknown keyword: one line naming the known ones
     def __init__(self, obs_type: str = "state", action_type: str = "velocity", render_mode: str | None = None,
                  observation_size: int = IMAGE_SIZE, render_size: int = 512, reset_kind: str = "task",
                  max_episode_steps: int | None = None, frame_skip: int = 10,

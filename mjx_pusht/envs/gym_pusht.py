@@ -30,6 +30,7 @@ import numpy as np
 
 from mjx_pusht.task import goals
 from mjx_pusht import validate
+from mjx_pusht.api import keywords
 from mjx_pusht.envs import gym as base  # first: says which extra brings gymnasium if it is missing
 from mjx_pusht.envs import physics
 from mjx_pusht.envs.common import OneWorld, Pictures, functional, warn_broken
@@ -241,6 +242,7 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
+    @keywords  # an unknown keyword: one line naming the known ones
     def __init__(self, obs_type: str = "state", render_mode: str | None = "rgb_array", block_cog=None, damping=None,
                  observation_width: int = 96, observation_height: int = 96, visualization_width: int = 680,
                  visualization_height: int = 680, success_threshold: float | None = None, reset_kind: str = "gym-pusht",
@@ -340,6 +342,7 @@ class GymPushTVectorEnv(PushTVectorEnv):
     """The batch (`gym.PushTVectorEnv`: any backend, device autoreset, the vector API) with gym-pusht's
     kwargs, spaces, units and infos; NumPy out by default, as a gym-pusht loop expects."""
 
+    @keywords  # an unknown keyword: one line naming the known ones
     def __init__(self, num_envs: int = 1, obs_type: str = "state", render_mode: str | None = "rgb_array",
                  block_cog=None, damping=None, observation_width: int = 96, observation_height: int = 96,
                  visualization_width: int = 680, visualization_height: int = 680, max_episode_steps: int = 300,

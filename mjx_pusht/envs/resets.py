@@ -26,6 +26,11 @@ class Resets:
         seeds = validate.seed_array(seeds)
         if not seeds.size:  # a batch of no worlds (the CLI refuses an empty seed list too)
             raise ConfigError("reset takes one seed per world: got none")
+        if self.backend == "cpu":  # its worlds' MjData in this machine's memory, as the vector env's
+            from mjx_pusht.boundary import BYTES_PER_CPU_ENV, fits
+
+            fits(f"reset of {len(seeds):,} worlds on the cpu backend", len(seeds), BYTES_PER_CPU_ENV,
+                 "reset fewer worlds at once")
         return self.reset_to(start_poses(seeds, reset=self.reset_kind), seeds, drawn=True)
 
     def reset_to(self, starts, seeds=None, drawn: bool = False) -> State:

@@ -14,6 +14,7 @@ from gymnasium.vector.utils import batch_space
 
 from mjx_pusht.task import goals
 from mjx_pusht import validate
+from mjx_pusht.api import keywords
 from mjx_pusht.boundary import BYTES_PER_CPU_ENV, MAX_ENVS, fits
 from mjx_pusht.envs import physics
 from mjx_pusht.envs.common import (
@@ -66,6 +67,7 @@ class PushTVectorEnv(Pictures, VectorEnv):
 
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
+    @keywords  # an unknown keyword: one line naming the known ones
     def __init__(self, num_envs: int = 1, backend: str = "auto", obs_type: str = "state",
                  action_type: str = "velocity", render_mode: str | None = None, observation_size: int = IMAGE_SIZE,
                  render_size: int = 512, reset_kind: str = "task", max_episode_steps: int = 300,

@@ -40,7 +40,6 @@ import numpy as np
 from mjx_pusht import boundary
 from mjx_pusht import validate
 from mjx_pusht.envs import physics as per_episode
-from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.controllers import seed_key
 from mjx_pusht.task.goals import draw
 from mjx_pusht.task.reset import SEED_MAX, start_poses
@@ -53,9 +52,8 @@ class StartPool:
     """Each row's next `depth` episode seeds, their start qpos and keys: host bookkeeping for AutoReset."""
 
     def __init__(self, env, n: int, depth: int):
-        if int(depth) < 1:
-            raise ConfigError(f"the start pool's depth must be a positive number of episodes, got {depth}")
-        self.env, self.n, self.depth = env, int(n), int(depth)
+        depth = boundary.Int(1, 1 << 20)("the start pool's depth", depth)  # 2.5 was truncated to 2, silently
+        self.env, self.n, self.depth = env, int(n), depth
         self.rngs = [np.random.default_rng() for _ in range(self.n)]
         self.seeds = np.zeros((self.depth, self.n), np.int64)  # slot (seq % depth, row)
         self.qpos = np.zeros((self.depth, self.n, env.model.nq), np.float64)
@@ -125,6 +123,8 @@ class AutoReset:
     def __init__(self, env, mode: str = "same_step", depth: int = 8, final_pixels: bool = False,
                  donate: bool = False, image_pool: bool = True):
         boundary.OneOf(tuple(MODES))("autoreset mode", mode)  # an array is refused, not compared
+        if not isinstance(env, AutoReset):  # None was taken, and failed at the first reset
+            boundary.Instance("mjx_pusht.envs.functional:PushTEnv", "a functional PushTEnv")("AutoReset's env", env)
         # the pool's depth, checked at construction (StartPool checked it only at the first reset: depth=0 was taken)
         self.env, self.mode, self.depth = env, mode, boundary.Int(1, 1 << 20)("AutoReset's depth", depth)
         self.final_pixels = final_pixels

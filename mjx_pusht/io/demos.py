@@ -105,18 +105,6 @@ def rollout_batch(env, ctrl, seeds: np.ndarray, max_steps: int, encoder, writer:
     return episodes, kept
 
 
-def _run_file(out: Path) -> dict | None:
-    """The folder's run file (the command and fingerprint of the run that wrote it), or None."""
-    import json
-
-    from mjx_pusht.io.outputs import RUN_FILE
-
-    try:
-        return json.loads((out / RUN_FILE).read_text())
-    except (OSError, ValueError):
-        return None
-
-
 def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str = "auto", batch: int | None = None,
                 max_steps: int = 300, action: str | None = None, replace: bool = False, progress: bool = True,
                 successful_only: bool = False, share: bool = False, success_threshold: float | None = None,
@@ -143,19 +131,19 @@ def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str =
         raise ControllerError(f"controller {controller!r} looks at the chapter scene's camera; the demos run "
                               "gym-pusht's scene: give a controller that reads the state")
     name, _ = resolve(backend)
-    prior = _run_file(Path(out))  # the run that wrote the folder's dataset, if one did
+    def refuse_a_dataset(path: Path, same: bool) -> None:
+        # the same command, seeds and settings rerun into their own folder (reliability.md): the dataset is written
+        # again and replaces the old one whole once complete; a dataset this command did not write is a user's
+        if (path / "meta" / "info.json").exists() and not (replace or same):
+            raise OutputError(f"--out {path} holds a LeRobot dataset; pass --replace to overwrite it, or choose "
+                              "another --out")
+
     out = claim_out_dir(out, "demos", {"controller": controller, "seeds": seeds.tolist(), "backend": name,
                                        "max_steps": max_steps, "action": action,
                                        **({"successful_only": True} if successful_only else {}),
                                        **({"task": task.name} if task.name != "gym-pusht" else {}),
                                        **({"success_threshold": success_threshold} if success_threshold is not None else {})},
-                         replace=replace,
-                         share=share)
-    # the same command, seeds and settings rerun into their own folder (reliability.md): the dataset is written again
-    # and replaces the old one whole once complete; a dataset this command did not write is a user's: --replace
-    ours = prior is not None and prior == _run_file(out)  # this command with these seeds and settings wrote it
-    if (out / "meta" / "info.json").exists() and not (replace or ours):
-        raise OutputError(f"--out {out} holds a LeRobot dataset; pass --replace to overwrite it, or choose another --out")
+                         replace=replace, share=share, check=refuse_a_dataset)
     batch = min(len(seeds), batch or (64 if name == "cpu" else 1024))
     env = gym.make_vec("mjx_pusht/PushT-gym-pusht-v0", num_envs=batch, vectorization_mode="vector_entry_point",
                        backend=name, obs_type="pixels_agent_pos", observation_width=IMAGE_SIZE,

@@ -165,7 +165,7 @@ _CLAIMS: dict[Path, str] = {}  # folders whose run file this process wrote where
 
 
 def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool = False, reads=(),
-                  share: bool = False) -> Path:
+                  share: bool = False, check=None) -> Path:
     """Make `path` this run's folder: writable, locked against a second run, and holding no results of another
     command, nor of this command with other seeds or settings unless `replace` says to drop those, nor files
     no run of this command wrote unless `share` says to write beside them.
@@ -174,7 +174,10 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
     whatever the flags: `--replace` removes only this command's own files (`OWN`, `INSIDE`), and never a file the
     run reads (`reads`: the policy it evaluates, the evals it compares). A rerun of the same command with the same
     seeds and settings may overwrite its own results. A name this command writes (demos' data/, sweep's .parts)
-    that holds a file it did not write is refused whatever the flags: writing there would mix or remove it."""
+    that holds a file it did not write is refused whatever the flags: writing there would mix or remove it.
+
+    `check(path, same)`: the command's own refusals (`same`: the folder's run file is this command's, with these
+    seeds and settings), run after these and before the run file is written: a refused run changes nothing."""
     import hashlib
 
     path = prepare_out_dir(path)
@@ -211,6 +214,8 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
             remove_own(path / name)
         print(f"--replace: removed the earlier {command} results in {path} ({', '.join(held)})")
     _refuse_to_remove_inputs(path, command, reads)  # this run writes over its own files: none may be an input
+    if check is not None:  # before the run file: a refused run that re-stamped it let the next one through
+        check(path, who == command and owner.get("fingerprint") == mine["fingerprint"])
     if not (path / RUN_FILE).exists():
         _CLAIMS[path.resolve()] = command
     atomic_write_json(path / RUN_FILE, mine)

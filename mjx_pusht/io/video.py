@@ -23,9 +23,12 @@ class VideoError(MjxPushtError, RuntimeError):
     """A video that cannot be written (format, missing encoder, unwritable path): one line."""
 
 
-def check_path(path: Path, replace: bool = False) -> Path:
-    """Fail before any work if the video could not be written, or would overwrite a file (a user's, an earlier
-    run's) without `replace` saying to."""
+def check_path(path: Path, replace: bool = False, out: Path | None = None) -> Path:
+    """Fail before any work if the video could not be written, or would overwrite a file without `replace`
+    saying to. `replace` overwrites only the video this command's earlier run into `out` wrote (its summary names
+    the file and its bytes' hash): a file no run wrote is a user's and refused, as `--out` refuses them. A new
+    name inside another run's folder (one holding a run file) is refused: only that run writes there. (Without `out`,
+    as the writer checks again once the frames are drawn, neither of those.)"""
     path = Path(path)
     if path.suffix.lower() not in FORMATS:
         raise VideoError(f"--video must end in .gif or .mp4, got {path.name!r}")
@@ -38,6 +41,14 @@ def check_path(path: Path, replace: bool = False) -> Path:
         raise VideoError(f"--video {path} is a folder; give a file name such as {path / 'episodes'}{path.suffix}")
     if os.path.lexists(path) and not replace:
         raise VideoError(f"--video {path} already exists; pass --replace to overwrite it, or give another name")
+    if out is not None and os.path.lexists(path) and not wrote(out, path):
+        raise VideoError(f"--video {path} already exists and no earlier eval into {out} wrote it; a file no run "
+                         "wrote is never overwritten, whatever the flags: give another name")
+    from mjx_pusht.io.outputs import RUN_FILE
+
+    if out is not None and (parent / RUN_FILE).exists() and parent.resolve() != Path(out).resolve():
+        raise VideoError(f"--video {path} is inside another run's folder ({parent} holds its {RUN_FILE}); a run "
+                         "never writes into another run's folder, whatever the flags: give another name")
     try:  # the folder must take a new file now, not after the episodes have run
         import tempfile
 
@@ -46,6 +57,25 @@ def check_path(path: Path, replace: bool = False) -> Path:
     except OSError as e:
         raise VideoError(f"cannot write the video into {parent}: {e.strerror or e}") from None
     return path
+
+
+def stamp(path: Path) -> dict:
+    """What a summary records of the video it wrote: its path and its bytes' hash (`wrote` checks both)."""
+    import hashlib
+
+    return {"path": str(Path(path).resolve()), "sha256": hashlib.sha256(Path(path).read_bytes()).hexdigest()}
+
+
+def wrote(out: Path, path: Path) -> bool:
+    """Whether the eval whose summary is in `out` wrote the very file at `path` (not a symlink, unchanged since)."""
+    import json
+
+    try:
+        video = json.loads((Path(out) / "summary.json").read_text())["video"]
+        return (not os.path.islink(path) and video["path"] == str(Path(path).resolve())
+                and stamp(path)["sha256"] == video["sha256"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
 
 
 MAX_FRAME_BYTES = 4 << 30  # every frame is held in memory before it is encoded

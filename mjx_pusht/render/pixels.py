@@ -118,6 +118,16 @@ if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_after_fork_in_child)
 
 
+def probe_gl(model) -> None:
+    """Open (and free) a renderer of `model` now: a GL that cannot render (MUJOCO_GL a typo, a library missing, glfw
+    without a display) is refused in one line before the work whose pictures it would draw, not after it."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # glfw's GLFWError warnings without a display: the one line says it
+        CpuRenderer(model, 8)._finalizer()
+
+
 class CpuRenderer:
     """(N, nq) positions -> (N, size, size, 3) uint8 images, through MuJoCo C's OpenGL renderer.
 

@@ -38,7 +38,7 @@ def start_batch(command: str, out, seeds, name: str, why: str, config: dict, sce
     from mjx_pusht.backends.factory import make_backend
     from mjx_pusht.backends.cpu import default_threads
     from mjx_pusht.io.banner import Banner
-    from mjx_pusht.io.outputs import claim_out_dir, prepare_out_dir
+    from mjx_pusht.io.outputs import claim_out_dir, prepare_out_dir, remove_own
     from mjx_pusht.study.sweep import PARTS, ResumeError, check_resumable, fingerprint, rows_for
 
     n_combos = len(scenario.grid())
@@ -53,9 +53,15 @@ def start_batch(command: str, out, seeds, name: str, why: str, config: dict, sce
         raise ResumeError(f"--resume: {out} holds no unfinished {command} (no .parts) and no finished one; "
                           "nothing to resume (run without --resume to start)")
     out = prepare_out_dir(out)
+    def resumable(path: Path, same: bool) -> None:
+        if replace and not resume and (path / PARTS).is_dir():  # --replace: its own unfinished chunks go
+            remove_own(path / PARTS)
+            print(f"--replace: removed the unfinished {command}'s chunks in {path}")
+        check_resumable(path, row_seeds, config, resume)
+
     if check:  # with several processes, process 0 checks, locks (and clears) the folder for all
-        claim_out_dir(out, command, fingerprint(row_seeds, config), replace=replace, reads=reads, share=share)
-        check_resumable(out, row_seeds, config, resume)
+        claim_out_dir(out, command, fingerprint(row_seeds, config), replace=replace, reads=reads, share=share,
+                      check=resumable)
     banner = Banner(command)
     print(f"backend: {name} ({why})")
     clock = Clock()

@@ -49,9 +49,14 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
     if video is not None:
         from mjx_pusht.io.video import check_grid, check_path
 
-        check_path(video, replace)  # a bad name, a missing encoder or a size too large fails now, not after the episodes
+        check_path(video, replace, out)  # a bad name, a missing encoder or a size too large fails now, not after the episodes
         check_grid(video_size, min(video_episodes, len(seeds)), max_steps)
     name, why = resolve(backend)
+    if video is not None:  # a GL that cannot draw the video: refused now, not once the results are written
+        from mjx_pusht.model.scene import build_model
+        from mjx_pusht.render.pixels import probe_gl
+
+        probe_gl(build_model(the_task.scene(break_it)))
     config = {"command": "eval", "backend": name, "controller": spec, "action": controller.action_type,
               "task": task, "reset": reset, "success_threshold": episode.success, "goal": goal, "break_it": break_it, "max_steps": max_steps,
               "frame_skip": frame_skip, "params": [[n, list(v)] for n, v in params],
@@ -126,7 +131,7 @@ def policy_sha256(spec: str) -> str | None:
 def _video(path: Path, n: int, size: int, out: Path, backend, r, combos, episode, summary: dict, clock) -> None:
     """The first `n` episodes rerun with a trace and drawn as a grid of `size`-pixel tiles (video.py)."""
     from mjx_pusht.io.outputs import atomic_write_json
-    from mjx_pusht.io.video import episode_grid, write
+    from mjx_pusht.io.video import episode_grid, stamp, write
     from mjx_pusht.model.layout import QposLayout
 
     shown = np.arange(min(n, len(r)))
@@ -145,5 +150,6 @@ def _video(path: Path, n: int, size: int, out: Path, backend, r, combos, episode
     fps = 1 / (episode.frame_skip * traced.trace.dt)
     write(path, frames, fps)
     summary["timing"]["video"] = round(clock.lap("video"), 3)
+    summary["video"] = stamp(path)  # what a later --replace may overwrite: this very file, and no other
     atomic_write_json(Path(out) / "summary.json", summary)
     print(f"video: {path} ({len(shown)} episodes, {len(frames)} frames at {fps:g} per second)")
