@@ -23,6 +23,7 @@ LAYERS = (
     # point checks its inputs through
     ("model",),
     ("task", "scenario"),  # the scenario is what to simulate: a scene, a reset, a controller, an episode
+    ("api",),  # the model's and the task's helpers the package exports, their arguments checked at the door
     ("render",),
     ("backends",),
     ("envs", "study", "io"),
