@@ -29,10 +29,15 @@ def test_two_processes_on_localhost_write_the_one_process_table(tmp_path):
     port = _free_port()
     env = {**os.environ, "JAX_PLATFORMS": "cpu"}
     common = _sweep_args(tmp_path / "two", "--num-processes", "2", "--coordinator", f"127.0.0.1:{port}")
+    # each log to a file, not a pipe: a pipe read one process after the other can fill and stall the unread
+    # process while the other waits for it at JAX's shutdown barrier (both abort when it times out)
+    files = [open(tmp_path / f"log-{i}.txt", "w+") for i in (1, 0)]
     procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *common, "--process-id", str(i)], env=env,
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for i in (1, 0)]
-    logs = [p.communicate(timeout=600)[0] for p in procs]
-    assert [p.returncode for p in procs] == [0, 0], logs
+                              stdout=f, stderr=subprocess.STDOUT, text=True) for i, f in zip((1, 0), files)]
+    for p in procs:
+        p.wait(timeout=600)
+    logs = [(f.seek(0), f.read())[1] for f in files]
+    assert [p.returncode for p in procs] == [0, 0], [log[-3000:] for log in logs]  # the tail names an abort's cause
     assert "process 1: rows 20..39 written" in logs[0]
     assert main(_sweep_args(tmp_path / "one")) == 0
     two, one = read_table(tmp_path / "two" / "per_seed.parquet"), read_table(tmp_path / "one" / "per_seed.parquet")
