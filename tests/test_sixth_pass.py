@@ -126,7 +126,7 @@ def test_replace_on_an_unfinished_same_settings_sweep_starts_it_again(tmp_path, 
 
 def test_train_resume_with_replace_is_refused(tmp_path, capsys):
     """SILENT 11: `train --resume --replace` resumed and ignored --replace."""
-    assert main([*RUNS["train"], "--resume", "--replace", "--out", str(tmp_path / "o")]) == 1
+    assert main([*RUNS["train"], "--resume", "--replace", "--out", str(tmp_path / "o")]) == 2  # a usage error
     one_line(capsys, "--resume", "--replace", "give one")
     assert not (tmp_path / "o").exists()
 

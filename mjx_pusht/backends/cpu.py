@@ -226,11 +226,13 @@ class FeedbackPool:
             raise actions.earliest(bad)
         return Rollouts.concat([j.result() for j in jobs])
 
-    def close(self, end: bool = False) -> None:  # unfinished episodes (^C) are unwanted: `end` their workers, as
-        FeedbackPool.live.discard(self)  # shutdown would wait for them, and a user's controller may be busy for minutes
-        for proc in list((getattr(self.pool, "_processes", None) or {}).values()) if end or not all(
-                j.done() for j in self.jobs) else ():
-            proc.terminate()
+    def close(self, end: bool = False) -> None:
+        """Shut the workers down. Unfinished episodes (^C, or `end`) are unwanted: their workers are ended, as
+        shutdown would wait for them, and a user's controller may be busy for minutes."""
+        FeedbackPool.live.discard(self)
+        if end or not all(j.done() for j in self.jobs):
+            for proc in list((getattr(self.pool, "_processes", None) or {}).values()):
+                proc.terminate()
         self.pool.shutdown(cancel_futures=True)
 
 

@@ -379,6 +379,9 @@ def unread_flags(args) -> None:
     leave None so that a given one is seen: --record with --no-rerun, --peer-timeout with one process."""
     if getattr(args, "rerun", True) is False and getattr(args, "record", None):  # (--record 0 asks for nothing)
         raise UsageError(f"--record {args.record} picks what the recording shows, which --no-rerun skips: give one")
+    if getattr(args, "resume", False) and getattr(args, "replace", False):  # each undoes the other (an eval's
+        # --replace removed the finished results, then ran afresh under --resume)
+        raise UsageError("--resume continues the run in --out and --replace starts it over: give one")
     if getattr(args, "peer_timeout", None) is not None and getattr(args, "num_processes", 1) == 1:
         raise UsageError("--peer-timeout waits for the other processes; one process waits for none: give "
                          "--num-processes N with it, or leave it out")

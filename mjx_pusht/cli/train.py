@@ -180,8 +180,6 @@ def _follow(train, devices: list, processes, args) -> int:
 
 def _restart(out: Path, args) -> None:
     """A folder holding a training run is continued (--resume) or started over (--replace), never mixed."""
-    if args.resume and args.replace:  # --replace was ignored: the run resumed
-        raise TrainError("--resume continues the training run in --out and --replace starts it over: give one")
     started = (out / "checkpoints" / "resume.msgpack").exists()
     if started and args.replace and not args.resume:
         remove_own(out / "checkpoints")

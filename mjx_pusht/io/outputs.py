@@ -205,17 +205,17 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
     if strays and not share:
         raise OutputError(f"--out {path} holds files {command} did not write ({_listed(strays)}); {command} never "
                           "removes them: pass --share-out to write its files beside them, or choose another --out")
-    if held and owner.get("fingerprint", mine["fingerprint"]) != mine["fingerprint"]:
-        if not replace:
-            raise OutputError(f"--out {path} holds other seeds' or settings' finished results ({command}: "
-                              f"{', '.join(held)}); pass --replace to overwrite them, or choose another --out")
-        _refuse_to_remove_inputs(path, command, reads)
+    other = held and owner.get("fingerprint", mine["fingerprint"]) != mine["fingerprint"]
+    if other and not replace:
+        raise OutputError(f"--out {path} holds other seeds' or settings' finished results ({command}: "
+                          f"{', '.join(held)}); pass --replace to overwrite them, or choose another --out")
+    _refuse_to_remove_inputs(path, command, reads)  # this run writes over its own files: none may be an input
+    if check is not None:  # before --replace removes anything and before the run file: a refused run changes nothing
+        check(path, who == command and owner.get("fingerprint") == mine["fingerprint"])
+    if other:
         for name in OWN[command]:
             remove_own(path / name)
         print(f"--replace: removed the earlier {command} results in {path} ({', '.join(held)})")
-    _refuse_to_remove_inputs(path, command, reads)  # this run writes over its own files: none may be an input
-    if check is not None:  # before the run file: a refused run that re-stamped it let the next one through
-        check(path, who == command and owner.get("fingerprint") == mine["fingerprint"])
     if not (path / RUN_FILE).exists():
         _CLAIMS[path.resolve()] = command
     atomic_write_json(path / RUN_FILE, mine)
