@@ -129,7 +129,12 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command. Bad input (an `MjxPushtError`) is one line and a non-zero exit; anything else is a bug
     and keeps its traceback."""
     with Signals() as signals:
-        return _main(argv, signals)
+        code = _main(argv, signals)
+    if argv is None:  # the process's own command: joined to others, it leaves them together
+        from mjx_pusht.study.distributed import leave_peers
+
+        leave_peers(code)
+    return code
 
 
 def _interrupted(args, signals: Signals, argv) -> int:

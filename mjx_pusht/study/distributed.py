@@ -167,3 +167,26 @@ def every_process(name: str, value: str, timeout_ms: int = BARRIER_TIMEOUT_MS) -
     client.key_value_set(f"mjx_pusht:{name}:{jax.process_index()}", value)
     return [client.blocking_key_value_get(f"mjx_pusht:{name}:{i}", timeout_ms)
             for i in range(jax.process_count())]
+
+
+def leave_peers(code: int) -> None:
+    """End a process joined to others through jax.distributed, once its command has ended: it waits for the others
+    at JAX's shutdown barrier and then exits at once, with `code`. Left to Python's exit, JAX tore its client down
+    before that barrier, and a process still leaving when process 0's coordination service went away was aborted by
+    the service client's own thread (SIGABRT in both processes of a two-process sweep in CI, after each had written
+    its rows; marin-community/marin#8392 reports the same teardown race). Alone, a process returns from here."""
+    if "jax" not in sys.modules:
+        return
+    from jax._src import distributed
+
+    if distributed.global_state.client is None:
+        return
+    import jax
+
+    from mjx_pusht.io.outputs import finish_background_writes
+
+    finish_background_writes()
+    jax.distributed.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
