@@ -41,3 +41,47 @@ def test_a_commands_own_refusal_under_replace_removes_nothing(tmp_path):
     with pytest.raises(OutputError, match="own check"), held_folders():
         claim_out_dir(out, "eval", {"seeds": 4}, replace=True, check=refuse)
     assert snapshot(out) == before
+
+
+def test_a_signal_while_the_command_sets_up_its_handlers_is_one_line(monkeypatch, capsys):
+    """TRACEBACK (seventh pass): SIGINT 0.3 s into `sweep` on a loaded machine was a KeyboardInterrupt traceback
+    through `Thread.start`: the handler that raises was set before the SIGTERM watcher thread started, outside the
+    command's try. A signal there now waits for the try, and is its one line."""
+    import os
+    import signal
+    import threading
+
+    started = threading.Thread.start
+
+    def start_then_signal(self):
+        if self.name == "sigterm-watch":
+            os.kill(os.getpid(), signal.SIGTERM)  # handled by the command's handler, which is set by now
+        started(self)
+
+    monkeypatch.setattr(threading.Thread, "start", start_then_signal)
+    assert main(["tree"]) == 128 + signal.SIGTERM
+    one_line(capsys, "terminated", "before the command started")
+
+
+@pytest.mark.parametrize("stop_after", [0, 2])
+def test_an_interrupted_sweep_says_how_many_rows_it_kept(tmp_path, monkeypatch, capsys, stop_after):
+    """Seen with the seventh pass: a sweep interrupted before its first chunk said "finished chunks are kept ...:
+    rerun with --resume"; none was. Its line counts the rows the chunk files on disk hold."""
+    import mjx_pusht.study.sweep as sweep_module
+
+    real = sweep_module.run_sweep
+
+    def cut(backend, seeds, out, **kw):  # the real sweep over the first chunks, then the interrupt
+        if stop_after:
+            real(backend, seeds[: 4 * stop_after], out, **{**kw, "chunk": 4})
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sweep_module, "run_sweep", cut)
+    out = tmp_path / "o"
+    assert main([*RUNS["sweep"], "--seeds", "12", "--out", str(out)]) == 130
+    chunks = sorted((out / ".parts").glob("seeds-*.parquet"))
+    assert len(chunks) == stop_after
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0
+    assert (f"({4 * stop_after:,} rows) are kept" in err and "--resume" in err) if stop_after else (
+        "no chunk was finished yet" in err and "without --resume" in err), err

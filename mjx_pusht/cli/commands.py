@@ -44,11 +44,11 @@ def kept(args) -> str:
     out = getattr(args, "out", None)
     if args.command == "train" and not (Path(out) / "checkpoints" / "resume.msgpack").is_file():
         return "no checkpoint was written yet (the first comes with the first judgement): rerun without --resume to start"
-    if args.command in ("sweep", "eval") and not (Path(out) / ".parts").is_dir():  # --resume would find nothing
-        return f"no chunk was finished yet in {out}: rerun without --resume to start"
-    return {"sweep": f"the finished chunks are kept in {out}/.parts: rerun with --resume to finish",
-            "eval": f"the finished chunks are kept in {out}/.parts: rerun with --resume to finish",
-            "train": f"the checkpoints written so far are kept in {out}/checkpoints: rerun with --resume to go on",
+    if args.command in ("sweep", "eval"):
+        from mjx_pusht.study.sweep import kept_chunks
+
+        return kept_chunks(out)
+    return {"train": f"the checkpoints written so far are kept in {out}/checkpoints: rerun with --resume to go on",
             "demos": (f"an earlier dataset in {out} is kept as it was (the new one was not finished): rerun to write it"
                       if (Path(out) / "meta" / "info.json").exists() else
                       f"no dataset was finished in {out}: rerun to write it")}.get(args.command, f"nothing finished in {out} was removed: rerun to write it")
@@ -83,7 +83,7 @@ class Signals:
     TERM_GRACE = 5.0
 
     def __init__(self):
-        self.got, self.old, self.wake = None, {}, None
+        self.got, self.old, self.wake, self.armed = None, {}, None, False
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
@@ -110,11 +110,21 @@ class Signals:
 
     def _interrupt(self, signum, frame):
         self.got = signum
-        raise KeyboardInterrupt
+        if self.armed:
+            raise KeyboardInterrupt
+        # outside `_main`'s try (this handler is set before the watcher thread starts, and is still set while
+        # `with` returns): raised there by `arm`, where it is one line; a SIGINT while the watcher started was a
+        # KeyboardInterrupt traceback. After the command, the process is ending with the command's own status.
+
+    def arm(self) -> None:
+        """Inside the command's try: a signal from now on is a KeyboardInterrupt there (one that came before, too)."""
+        self.armed = True
+        if self.got:
+            raise KeyboardInterrupt
 
     def __exit__(self, *exc):
-        for sig, handler in self.old.items():
-            signal.signal(sig, handler)
+        for sig, handler in self.old.items():  # (not the import's "before the command started" line: it has run)
+            signal.signal(sig, signal.SIG_DFL if getattr(handler, "__name__", "") == "_end_early" else handler)
         if self.wake is not None:
             r, w, old = self.wake
             self.wake = None
@@ -129,7 +139,10 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command. Bad input (an `MjxPushtError`) is one line and a non-zero exit; anything else is a bug
     and keeps its traceback."""
     with Signals() as signals:
-        code = _main(argv, signals)
+        try:
+            code = _main(argv, signals)
+        finally:
+            signals.armed = False  # the command has answered: a signal now lets the process end with its status
     if argv is None:  # the process's own command: joined to others, it leaves them together
         from mjx_pusht.study.distributed import leave_peers
 
@@ -159,6 +172,7 @@ def _main(argv, signals: Signals) -> int:
 
     args = None
     try:
+        signals.arm()
         args = build_parser().parse_args(argv)
         unread_flags(args)
         if args.verbose:

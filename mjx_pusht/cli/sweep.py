@@ -18,7 +18,7 @@ def cmd_sweep(args) -> int:
     from mjx_pusht.study.distributed import Processes
     from mjx_pusht.study.batch import record, start_batch, warn_mujoco
     from mjx_pusht.study.seeds import parse_seeds
-    from mjx_pusht.study.sweep import finish, run_sweep, summarize
+    from mjx_pusht.study.sweep import finish, kept_chunks, run_sweep, summarize
     from mjx_pusht.task.schedule import Schedule
 
     seeds = parse_seeds(args.seeds)
@@ -64,7 +64,7 @@ def cmd_sweep(args) -> int:
                         progress=args.progress, combos=combos, on_start=auditor.start if auditor else None,
                         processes=processes)
     except KeyboardInterrupt:
-        print(f"\ninterrupted: finished chunks are kept in {out}; rerun with --resume to finish", file=sys.stderr)
+        print(f"\ninterrupted: {kept_chunks(out)}", file=sys.stderr)
         return 130
     if processes.many:
         run = _join_processes(processes, run, out, row_seeds)

@@ -36,7 +36,7 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
     from mjx_pusht.study.batch import start_batch, warn_mujoco
     from mjx_pusht.study.seeds import parse_seeds
     from mjx_pusht.study.stats import steps_text, summarize_episodes
-    from mjx_pusht.study.sweep import finish, run_sweep
+    from mjx_pusht.study.sweep import finish, kept_chunks, run_sweep
     from mjx_pusht.task.controllers import describe
     from mjx_pusht.task.tasks import get as get_task
 
@@ -78,7 +78,7 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
         run = run_sweep(backend, row_seeds, out, config=config, chunk=chunk, resume=resume,
                         progress=progress, combos=combos, episodes=True)
     except KeyboardInterrupt:
-        print(f"\ninterrupted: finished chunks are kept in {out}; rerun with --resume to finish", file=sys.stderr)
+        print(f"\ninterrupted: {kept_chunks(out)}", file=sys.stderr)
         raise
     finally:
         backend.close()

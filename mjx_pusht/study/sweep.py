@@ -49,6 +49,15 @@ def fingerprint(seeds: np.ndarray, config: dict) -> dict:
     return {"config": config, "n_seeds": int(len(seeds)), "seeds_sha256": hashlib.sha256(seeds.tobytes()).hexdigest()}
 
 
+def kept_chunks(out) -> str:
+    """What an interrupted sweep or eval leaves in `out`, and how to go on: its finished chunks, or none yet."""
+    done = _done_ranges(Path(out) / PARTS)
+    if not done:  # --resume would find nothing to finish
+        return f"no chunk was finished yet in {out}: rerun without --resume to start"
+    return (f"the finished chunks ({sum(hi - lo for lo, hi in done):,} rows) are kept in {out}/{PARTS}: rerun with "
+            "--resume to finish")
+
+
 def _done_ranges(parts: Path) -> list[tuple[int, int]]:
     out = []
     for p in parts.glob("seeds-*.parquet"):
