@@ -73,7 +73,14 @@ from mjx_pusht.scenario import Scenario
 # the helpers, each argument checked at the door (api.py); the package's own code calls them unchecked
 from mjx_pusht.api import (build_model, check_tree, gap_deviation, read_tree, scene_xml, start_pose, start_poses,
                            stayed_rigid, weld_gap)
+from mjx_pusht.api import keywords as _keywords
 from mjx_pusht.task.schedule import Schedule
+
+# The exported constructors and functions bind their arguments at the door: a keyword they do not take, a missing
+# argument or one given twice is one line naming what they take (api.keywords), not Python's TypeError traceback.
+for _cls in (Scenario, SceneSpec, Schedule):
+    _cls.__init__ = _keywords(_cls.__init__)
+resolve, make_backend = _keywords(resolve), _keywords(make_backend)
 from mjx_pusht.train.controller import register_policy as _register_policy
 
 # `--controller policy:PATH` (and `task.controllers.load("policy:PATH")`) without importing the training layer:

@@ -41,10 +41,25 @@ def _positions(*names):
     return rule
 
 
+def _bind(function, args, kwargs, where: str | None = None):
+    """Python's own check of a call's arguments (a missing one, one given twice, a keyword not taken), as one
+    `KeywordError` line naming the arguments `function` takes; returns the arguments as positional and keyword."""
+    import inspect
+
+    signature = inspect.signature(function)
+    try:
+        bound = signature.bind(*args, **kwargs)
+    except TypeError as e:
+        takes = [n for n, p in signature.parameters.items() if n != "self" and p.kind != p.VAR_KEYWORD]
+        raise KeywordError(f"{where or function.__qualname__ + '()'}: {e}; it takes {', '.join(takes)}") from None
+    return bound.args, bound.kwargs
+
+
 def _checked(function, *rules):
-    """`function` with its positional arguments through `rules` (one per argument, in order)."""
+    """`function` with its arguments bound (`_bind`) and the first ones through `rules` (one each, in order)."""
     @functools.wraps(function)
     def call(*args, **kwargs):
+        args, kwargs = _bind(function, args, kwargs)
         return function(*(rule(v) for rule, v in zip(rules, args)), *args[len(rules):], **kwargs)
     return call
 
@@ -61,8 +76,9 @@ stayed_rigid = _checked(_inv.stayed_rigid, lambda v: boundary.Array((-1,) * np.n
 
 def _pair(function):
     @functools.wraps(function)
-    def call(bar_pos, stem_pos):
-        return function(*_positions("bar_pos", "stem_pos")((bar_pos, stem_pos)))
+    def call(*args, **kwargs):
+        args, _ = _bind(function, args, kwargs)  # both are positional-or-keyword: bound, they are positional
+        return function(*_positions("bar_pos", "stem_pos")(args))
     return call
 
 
@@ -75,21 +91,24 @@ class KeywordError(ConfigError, TypeError):
 
 
 def keywords(function):
-    """A constructor refusing a keyword it does not take in one line naming those it takes (Python's TypeError
-    named only the stranger, with a traceback: `gym.make(ID, bogus=1)`)."""
+    """A constructor or function refusing a keyword it does not take, a missing argument or one given twice, in one
+    line naming those it takes (Python's TypeError named only the stranger, with a traceback: `gym.make(ID,
+    bogus=1)`)."""
     import functools
     import inspect
 
     takes = [n for n, p in inspect.signature(function).parameters.items() if p.kind in (p.POSITIONAL_OR_KEYWORD,
-                                                                                        p.KEYWORD_ONLY)][1:]
+                                                                                        p.KEYWORD_ONLY) and n != "self"]
     where = f"{function.__qualname__}()"  # Python's own words: PushTGymEnv.__init__() got an unexpected ...
+    open_ended = any(p.kind == p.VAR_KEYWORD for p in inspect.signature(function).parameters.values())  # its own check
 
     @functools.wraps(function)
     def checked(*args, **kwargs):
-        if unknown := sorted(set(kwargs) - set(takes)):
+        if not open_ended and (unknown := sorted(set(kwargs) - set(takes))):
             # as Python words it (torchrl's GymEnv retries without frameskip on them), then the keywords taken
             raise KeywordError(f"{where} got an unexpected keyword argument {', '.join(map(repr, unknown))}; it "
                                f"takes {', '.join(takes)}")
+        _bind(function, args, kwargs)  # a missing argument, or one given twice: one line too
         return function(*args, **kwargs)
     return checked
 

@@ -85,3 +85,52 @@ def test_an_interrupted_sweep_says_how_many_rows_it_kept(tmp_path, monkeypatch, 
     assert err.count("\n") == 0
     assert (f"({4 * stop_after:,} rows) are kept" in err and "--resume" in err) if stop_after else (
         "no chunk was finished yet" in err and "without --resume" in err), err
+
+
+def _policy_path():
+    from pathlib import Path
+
+    return Path(__file__).parent.parent / "outputs/reports/train/ppo-state-gym-pusht-h200/seed-0/policy.msgpack"
+
+
+@pytest.mark.parametrize("call, needle", [
+    ("Scenario(bogus=1)", "it takes scene, schedule"),
+    ("SceneSpec(bogus=1)", "it takes break_it, pusher, variant"),
+    ("Schedule(bogus=1)", "it takes settle_steps"),
+    ("resolve()", "missing a required argument: 'name'"),
+    ("make_backend()", "missing a required argument: 'name'"),
+    ("start_poses([0, 1], kind='bogus')", "it takes seeds, reset"),
+    ("start_pose(0, bogus=1)", "it takes seed"),
+    ("scene_xml(SceneSpec(), bogus=1)", "it takes spec"),
+    ("weld_gap(None)", "missing a required argument: 'stem_pos'"),
+    ("AutoReset(PushTEnv(backend='cpu'), bogus=1)", "it takes env, mode"),
+    ("GymPushtPolicy(POLICY, bogus=1)", "it takes path, seed"),
+    ("PushTEnv.for_task('gym-pusht', reset_kind='task')", "takes reset_kind from the task"),
+])
+def test_a_public_call_given_the_wrong_arguments_is_one_line(call, needle):
+    """TRACEBACK (seventh pass): Python's own TypeError for an unknown keyword, a missing argument or one given
+    twice, on the exported constructors and helpers, the functional env's AutoReset and for_task, and
+    GymPushtPolicy. Each binds its arguments at the door: one line naming what it takes."""
+    import mjx_pusht
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.envs.wrappers import AutoReset
+    from mjx_pusht.errors import MjxPushtError
+    from mjx_pusht.train.gym_pusht_policy import GymPushtPolicy
+
+    names = {**{n: getattr(mjx_pusht, n) for n in mjx_pusht.__all__}, "PushTEnv": PushTEnv, "AutoReset": AutoReset,
+             "GymPushtPolicy": GymPushtPolicy, "POLICY": _policy_path()}
+    with pytest.raises(MjxPushtError) as e:
+        eval(call, names)
+    assert needle in str(e.value) and "\n" not in str(e.value)
+
+
+def test_the_checked_calls_still_take_what_they_took():
+    """The binding refuses only what Python would: keywords and defaults work as before."""
+    import numpy as np
+
+    import mjx_pusht
+    from mjx_pusht import Scenario, SceneSpec, make_backend
+
+    assert mjx_pusht.weld_gap(bar_pos=np.zeros(3), stem_pos=np.ones(3)) == pytest.approx(np.sqrt(3))
+    assert Scenario(scene=SceneSpec(pusher="capsule")).scene.pusher == "capsule"
+    make_backend("cpu", Scenario(), nthread=1).close()

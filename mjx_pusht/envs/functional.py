@@ -165,6 +165,9 @@ class PushTEnv(Resets, Observes):
         """A task's env (task/tasks.TASKS): its scene, starts, actions and episodes (success at `success_threshold`)."""
         from mjx_pusht.task.tasks import get
 
+        if given := sorted(set(kwargs) & {"reset_kind", "action_type", "episode", "scene"}):
+            raise ConfigError(f"PushTEnv.for_task({task!r}) takes {', '.join(given)} from the task: give the other "
+                              "settings here, or build PushTEnv(...) with your own")
         t = get(task)
         return cls(backend, t.reset, t.action_type, t.episode(max_steps, success_threshold=success_threshold),
                    t.scene(), **kwargs)

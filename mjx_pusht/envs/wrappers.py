@@ -39,6 +39,7 @@ import numpy as np
 
 from mjx_pusht import boundary
 from mjx_pusht import validate
+from mjx_pusht.api import keywords
 from mjx_pusht.envs import physics as per_episode
 from mjx_pusht.task.controllers import seed_key
 from mjx_pusht.task.goals import draw
@@ -120,6 +121,7 @@ class StartPool:
 class AutoReset:
     """Resets the episodes that ended, on the device, inside the step (see the module's docstring)."""
 
+    @keywords  # an unknown keyword: one line naming the known ones
     def __init__(self, env, mode: str = "same_step", depth: int = 8, final_pixels: bool = False,
                  donate: bool = False, image_pool: bool = True):
         boundary.OneOf(tuple(MODES))("autoreset mode", mode)  # an array is refused, not compared

@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from mjx_pusht import validate
+from mjx_pusht.api import keywords
 from mjx_pusht.boundary import check_gym_pusht_obs
 from mjx_pusht.task.controllers import ControllerError, seed_key
 from mjx_pusht.task.gym_pusht_obs import controller_obs, gym_pusht_action
@@ -35,6 +36,7 @@ from mjx_pusht.task.tasks import TASKS, as_targets
 class GymPushtPolicy:
     """A checkpoint of `mjx-pusht train --task gym-pusht` as a function of gym-pusht's observation."""
 
+    @keywords  # an unknown keyword: one line naming the known ones
     def __init__(self, path, seed: int = 0):
         from mjx_pusht.train.policy import load_policy
 
