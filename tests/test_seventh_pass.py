@@ -134,3 +134,13 @@ def test_the_checked_calls_still_take_what_they_took():
     assert mjx_pusht.weld_gap(bar_pos=np.zeros(3), stem_pos=np.ones(3)) == pytest.approx(np.sqrt(3))
     assert Scenario(scene=SceneSpec(pusher="capsule")).scene.pusher == "capsule"
     make_backend("cpu", Scenario(), nthread=1).close()
+
+
+def test_demos_refuse_a_pixel_policy_saying_why(tmp_path, capsys):
+    """Seventh pass: the committed pixel policy on gym-pusht's task was refused by `demos` as one that "looks at the
+    chapter scene's camera": it is gym-pusht's, and acts on images, where the demos hand their controller the state."""
+    pixels = _policy_path().parent.parent.parent / "dagger-pixels-gym-pusht-h200-16k/seed-0/policy.msgpack"
+    assert main(["demos", "--backend", "cpu", "--seeds", "2", "--max-steps", "3", "--no-progress",
+                 "--controller", f"policy:{pixels}", "--out", str(tmp_path / "d")]) == 1
+    one_line(capsys, "acts on images", "reads the state")
+    assert not (tmp_path / "d").exists()

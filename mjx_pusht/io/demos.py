@@ -128,8 +128,8 @@ def write_demos(controller: str, seeds: np.ndarray, out: Path, *, backend: str =
     task.episode(success_threshold=success_threshold)  # a threshold outside (0, 1]: one line, before anything is written
     ctrl = task.controller(controller, action=action)
     if ctrl.pixels:
-        raise ControllerError(f"controller {controller!r} looks at the chapter scene's camera; the demos run "
-                              "gym-pusht's scene: give a controller that reads the state")
+        raise ControllerError(f"controller {controller!r} acts on images; the demos hand their controller the "
+                              "state (the images are rendered for the dataset): give a controller that reads the state")
     name, _ = resolve(backend)
     def refuse_a_dataset(path: Path, same: bool) -> None:
         # the same command, seeds and settings rerun into their own folder (reliability.md): the dataset is written
