@@ -144,3 +144,48 @@ def test_demos_refuse_a_pixel_policy_saying_why(tmp_path, capsys):
                  "--controller", f"policy:{pixels}", "--out", str(tmp_path / "d")]) == 1
     one_line(capsys, "acts on images", "reads the state")
     assert not (tmp_path / "d").exists()
+
+
+CONTROLLERS = """
+import numpy as np
+def raises(obs, t): raise RuntimeError("boom")
+def nan3(obs, t): return np.full(obs["state"].shape[:-1] + (2,), np.nan if t >= 3 else 0.0)
+"""
+
+
+@pytest.mark.parametrize("name", ["raises", "nan3"])
+@pytest.mark.parametrize("backend", ["cpu", "gym-pusht"])
+def test_a_batch_whose_controller_fails_before_any_chunk_leaves_nothing(tmp_path, monkeypatch, capsys, name,
+                                                                         backend):
+    """SILENT (seventh pass, 12 tries): a controller that raised, or returned NaN, at the first chunk was one line,
+    but left .parts/manifest.json and .run.json: in a new --out a folder of bookkeeping, in a user's folder two
+    files of ours. With no chunk finished there is nothing to resume: none is left."""
+    (tmp_path / "ctl7.py").write_text(CONTROLLERS)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    user = tmp_path / "user"
+    user.mkdir()
+    (user / "notes.md").write_text("mine")
+    task = ["--task", "gym-pusht"] if backend == "gym-pusht" else []
+    for out, extra in ((tmp_path / "new" / "o", []), (user, ["--share-out"])):
+        assert main([*RUNS["eval"], "--max-steps", "6", "--backend", backend, *task, "--controller", f"ctl7:{name}",
+                     "--out", str(out), *extra]) == 1
+        one_line(capsys, f"ctl7:{name}")
+    assert not (tmp_path / "new").exists()
+    assert snapshot(user) == {"notes.md": b"mine"}
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["train", "--backend", "cpu", "--fit-steps", "99999999999"], "--fit-steps: must be an integer from 1 to 2,147,483,647"),
+    (["train", "--backend", "cpu", "--batch", "99999999999"], "--batch: must be an integer from 1 to 2,147,483,647"),
+    (["sweep", "--chunk", "99999999999"], "--chunk: must be an integer from 1 to 16,777,216"),
+    (["eval", "--chunk", "16777217"], "--chunk: must be an integer from 1 to 16,777,216"),
+    (["demos", "--batch", "99999999999"], "--batch: must be an integer from 1 to 16,777,216"),
+    (["demos", "--max-steps", "100001"], "--max-steps: must be an integer from 1 to 100,000"),
+])
+def test_counts_past_what_runs_are_refused_at_the_door(tmp_path, capsys, argv, words):
+    """TRACEBACK and SILENT (seventh pass): `train --fit-steps` or `--batch` past 2**31-1 was JAX's OverflowError
+    traceback after the banner; `--chunk` past a batch's bound was refused after .parts and .run.json were written;
+    `demos --batch` huge was taken, `demos --max-steps` had no bound where eval's is 100,000."""
+    assert main([*argv, "--out", str(tmp_path / "o")]) == 2
+    one_line(capsys, words)
+    assert not (tmp_path / "o").exists()

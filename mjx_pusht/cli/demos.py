@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 
-def add_parser(sub, *, positive, folder, replace_help: str, share_help: str, success) -> None:
+def add_parser(sub, *, rows, steps, folder, replace_help: str, share_help: str, success) -> None:
     d = sub.add_parser("demos", help="a controller's episodes on the gym-pusht drop-in as a LeRobot dataset "
                                      "(lerobot-train --dataset.root)")
     d.add_argument("--seeds", default="100", help="N (0..N-1), A:B, or a,b,c: one episode per seed, episode i from "
@@ -21,9 +21,9 @@ def add_parser(sub, *, positive, folder, replace_help: str, share_help: str, suc
     d.add_argument("--action", choices=("velocity", "position"), default=None,
                    help="what your controller's actions mean (default velocity; position: the target in metres)")
     d.add_argument("--backend", default="auto", help="auto, cpu or mjx-warp (default auto: the GPU batch if any)")
-    d.add_argument("--batch", type=positive, default=None, help="episodes rolled out at once (default 1024 on MJX, "
+    d.add_argument("--batch", type=rows, default=None, help="episodes rolled out at once (default 1024 on MJX, "
                                                                 "64 on cpu)")
-    d.add_argument("--max-steps", type=positive, default=300, help="control steps before truncation (default 300)")
+    d.add_argument("--max-steps", type=steps, default=300, help="control steps before truncation (default 300)")
     success(d)
     d.add_argument("--out", type=folder, default=Path("outputs/demos"), help="the dataset's root (default outputs/demos)")
     d.add_argument("--replace", action="store_true", help=replace_help)

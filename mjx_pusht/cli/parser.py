@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 
 from mjx_pusht import validate
+from mjx_pusht.boundary import MAX_ENVS
 from mjx_pusht.errors import MjxPushtError
 from mjx_pusht.model.scene import BREAK_MODES
 
@@ -38,7 +39,9 @@ def _int_at_least(low: int, high: int | None = None, why: str = ""):
     return parse
 
 
-_positive = _int_at_least(1)
+# counts a jitted program takes (fit steps, minibatches, iterations): past 2**31-1 JAX's int32 overflowed in a traceback
+_positive = _int_at_least(1, 2**31 - 1)
+_rows = _int_at_least(1, MAX_ENVS, " rows at once")  # a batch's rows (boundary.MAX_ENVS: one batch's first arrays)
 _nonneg = _int_at_least(0)
 # The API's bounds (validate.MAX_STEPS, MAX_FRAME_SKIP: why they are there), as flag types
 _steps = _int_at_least(1, validate.MAX_STEPS, " (1,000 s of simulated time at 100 Hz)")
@@ -147,7 +150,7 @@ def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str)
                    + ("; gym-pusht: gym-pusht 0.1.8 itself, for --task gym-pusht" if name == "eval" else ""))
     p.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
     p.add_argument("--out", type=_folder, default=Path(f"outputs/{name}"), help=f"the run's folder (default outputs/{name})")
-    p.add_argument("--chunk", type=_positive, default=None, help=f"{rows} per batch (default: by backend)")
+    p.add_argument("--chunk", type=_rows, default=None, help=f"{rows} per batch (default: by backend)")
     p.add_argument("--resume", action="store_true", help=f"finish an interrupted {name} in --out")
     p.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     p.add_argument("--share-out", action="store_true", help=SHARE_HELP)
@@ -274,7 +277,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--iterations", type=_positive, default=None,
                    help="DAgger iterations, or PPO's held-out judgements over the run (default 10; 300 in the pixel "
                         "recipe: DAgger from pixels_agent_pos on gym-pusht's task on MJX, docs/training.md)")
-    t.add_argument("--timesteps", type=_positive, default=None, help="PPO: env control steps in all (default 50M)")
+    t.add_argument("--timesteps", type=_int_at_least(1, 10**15), default=None, help="PPO: env control steps in all (default 50M)")
     t.add_argument("--fit-steps", type=_positive, default=None,
                    help="DAgger: gradient steps per iteration (default 2000; on cpu 1000; 10000 in the pixel recipe)")
     t.add_argument("--batch", type=_positive, default=None,
@@ -369,7 +372,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from mjx_pusht.cli.demos import add_parser as add_demos
 
-    add_demos(sub, positive=_positive, folder=_folder, replace_help=REPLACE_HELP, share_help=SHARE_HELP,
+    add_demos(sub, rows=_rows, steps=_steps, folder=_folder, replace_help=REPLACE_HELP, share_help=SHARE_HELP,
               success=success_arg)
     return p
 

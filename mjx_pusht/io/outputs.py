@@ -378,15 +378,16 @@ class held_folders:
     def __exit__(self, kind, exc, tb):
         for key in set(_HELD) - self.before:
             os.close(_HELD.pop(key))
-            command = _CLAIMS.pop(key, None)
-            if exc is not None and command and not any(os.path.lexists(key / n) for n in OWN[command]):
+            command, parts = _CLAIMS.pop(key, None), key / ".parts"
+            if exc is None:
+                continue
+            if parts.is_dir() and not parts.is_symlink() and not any(parts.glob("seeds-*")):
+                remove_own(parts)  # a failed batch's manifest with no chunk finished: nothing to resume, no trace
+            if command and not any(os.path.lexists(key / n) for n in OWN[command]):
                 (key / RUN_FILE).unlink(missing_ok=True)  # refused after its claim (a backend's check): no trace
-            if exc is not None and key in _CREATED and _only_claim(key):
+            if key in _CREATED and _only_claim(key):
                 for name in os.listdir(key):
-                    if (key / name).is_dir():
-                        (key / name).rmdir()
-                    else:
-                        (key / name).unlink()
+                    (key / name).rmdir() if (key / name).is_dir() else (key / name).unlink()
                 for folder in (key, *_CREATED[key]):
                     if os.listdir(folder):
                         break

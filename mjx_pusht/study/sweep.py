@@ -229,8 +229,9 @@ def run_sweep(
                 for f in written:
                     f.exception()
                 kept = len(list(parts.glob("seeds-*.parquet")))
-                raise NonFiniteActionError(*e.args[:4], f"; {kept} finished chunk files are kept in {parts}: "
-                                                        "fix the controller and rerun with --resume") from None
+                raise NonFiniteActionError(*e.args[:4], f"; {kept} finished chunk files are kept in {parts}: fix "
+                                           "the controller and rerun with --resume" if kept else "; no chunk was "
+                                           "finished: fix the controller and rerun") from None
             except Exception as e:  # noqa: BLE001 - only memory errors are retried
                 if not _is_out_of_memory(e) or chunk <= 1:
                     raise
