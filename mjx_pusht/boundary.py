@@ -275,6 +275,8 @@ COMBINATIONS = {
     "functional_env": (
         (lambda v: v["graph_mode"] is not None and v["backend"] != "mjx-warp",
          "graph_mode {graph_mode!r} is MJX-Warp's CUDA-graph mode; backend {backend} has none: leave it None"),
+        (lambda v: v.get("raster") and v["backend"] == "cpu",
+         "raster=True draws MJX's pixels in JAX; the cpu backend renders with MuJoCo's own renderer: leave it False"),
     ),
 }
 _MJX = {"x64": Flag(), "iterations": Maybe(Int(1, 10_000)), "ls_iterations": Maybe(Int(1, 10_000)),

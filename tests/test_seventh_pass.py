@@ -189,3 +189,118 @@ def test_counts_past_what_runs_are_refused_at_the_door(tmp_path, capsys, argv, w
     assert main([*argv, "--out", str(tmp_path / "o")]) == 2
     one_line(capsys, words)
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("env_id", ["mjx_pusht/PushT-v0", "mjx_pusht/PushT-gym-pusht-v0"])
+def test_success_threshold_set_on_the_env_is_checked_and_read(env_id):
+    """SILENT (seventh pass): `env.unwrapped.success_threshold = 2.0` (or NaN) on PushT-v0 made an attribute nothing
+    read; the drop-in's setter (gym-pusht's own attribute) is now both ids'. A value outside (0, 1] is one line; a
+    threshold under the start's coverage ends the next step as a success."""
+    import gymnasium as gym
+    import numpy as np
+
+    from mjx_pusht.errors import MjxPushtError
+
+    env = gym.make(env_id)
+    u = env.unwrapped
+    for bad in (2.0, float("nan"), 0.0):
+        with pytest.raises(MjxPushtError, match="success_threshold must be a number in"):
+            u.success_threshold = bad
+    seed = next(s for s in range(200) if 0.05 < env.reset(seed=s)[1]["coverage"] < 0.9)
+    env.reset(seed=seed)
+    still = np.zeros(2) if env_id.endswith("PushT-v0") else env.unwrapped._state.obs["state"][0, :2] * 0 + \
+        env.reset(seed=seed)[1]["pos_agent"]  # stand still: zero velocity, or the pusher's own position
+    assert not env.step(still)[2]  # at the task's 0.95: not a success
+    env.reset(seed=seed)
+    u.success_threshold = 0.01
+    assert u.success_threshold == 0.01 and env.step(still)[2]
+
+
+def test_first_fits_keep_the_minutes(tmp_path, capsys):
+    """HANG (seventh pass): `train --minutes 0.5 --first-fits 99999999999` ran past the budget (and would have for
+    days): every first fit ran whatever the clock said. Another first fit now starts only when the budget leaves
+    time for it and the judgement after it, as every later fit."""
+    import json
+    import time
+
+    t0 = time.monotonic()
+    out = tmp_path / "o"
+    assert main(["train", "--backend", "cpu", "--envs", "8", "--iterations", "1", "--fit-steps", "200", "--hidden",
+                 "16", "--eval-envs", "4", "--max-steps", "10", "--no-progress", "--no-rerun", "--minutes", "0.1",
+                 "--first-fits", "1000000", "--out", str(out)]) == 0, capsys.readouterr().err
+    fits = json.loads((out / "first_fits.json").read_text())
+    assert 1 <= len(fits["losses"]) < 1000000 and time.monotonic() - t0 < 60
+    assert f"first fit from {len(fits['losses'])} initialisations (of 1000000" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["train", "--backend", "cpu", "--action-eps", "1e308"], "--action-eps: must be a finite number > 0 and <= 1000"),
+    (["compare", "--seeds", "2", "--reset", "easy"], "--reset set a controller's episodes"),
+    (["compare", "--seeds", "2", "--max-steps", "5"], "--max-steps set a controller's episodes"),
+])
+def test_values_a_run_cannot_use_are_refused_at_the_door(tmp_path, capsys, argv, words):
+    """TRACEBACK (seventh pass): `--action-eps 1e308` overflowed when squared; SILENT: `compare --reset easy` without
+    --controller ran the open loop for 58 s and ignored --reset (as --max-steps)."""
+    assert main([*argv, "--out", str(tmp_path / "o")]) == 2
+    one_line(capsys, words)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("pusher", ["cylinder", "capsule"])
+def test_tree_json_reads_the_pusher_back(capsys, pusher):
+    """SILENT (seventh pass): `tree --pusher capsule --json` was byte for byte `tree --json`: the tree's bodies and
+    joints are the same for both pushers. The JSON now holds the pusher's geom type read from the compiled model."""
+    import json
+
+    assert main(["tree", "--pusher", pusher, "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["pusher"] == pusher
+
+
+def test_output_into_a_closed_pipe_is_no_traceback(tmp_path):
+    """Seen with the seventh pass: `mjx-pusht tree --json | head -2` was a BrokenPipeError traceback."""
+    import subprocess
+    import sys
+
+    from helpers import ENV
+
+    r = subprocess.run(f"{sys.executable} -m mjx_pusht tree --json | head -c 10", shell=True, capture_output=True,
+                       text=True, env=ENV, executable="/bin/bash")
+    assert r.stdout == '{\n  "bodie' and "Traceback" not in r.stderr and r.stderr == "", r.stderr
+
+
+def test_functional_env_options_it_cannot_use_are_refused():
+    """SILENT (seventh pass): PushTEnv(backend="cpu", raster=True) was accepted (MuJoCo's renderer draws there);
+    reset_to(..., drawn="yes") took the string as True."""
+    import numpy as np
+
+    from mjx_pusht.envs.functional import PushTEnv
+    from mjx_pusht.errors import MjxPushtError
+
+    with pytest.raises(MjxPushtError, match="raster=True draws MJX's pixels"):
+        PushTEnv(backend="cpu", raster=True)
+    env = PushTEnv(backend="cpu")
+    start = np.array([[0.1, 0.1, 0.0, -0.2, -0.2]] * 2)
+    with pytest.raises(MjxPushtError, match="drawn must be True or False"):
+        env.reset_to(start, drawn="yes")
+    np.testing.assert_allclose(env.reset_to(start, drawn=False).obs["state"][:, 2:4], start[:, :2])
+
+
+def test_an_interrupt_after_the_table_says_the_table_is_whole(tmp_path, monkeypatch, capsys):
+    """SILENT (seventh pass): SIGINT once `sweep` had written its table said "no chunk was finished yet ... rerun
+    without --resume": its chunks had been joined into the table, which was whole."""
+    import mjx_pusht.study.sweep as sweep_module
+
+    real = sweep_module.finish
+
+    def finish_then_interrupt(out, run):
+        real(out, run)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sweep_module, "finish", finish_then_interrupt)
+    out = tmp_path / "o"
+    assert main([*RUNS["sweep"], "--out", str(out)]) == 130
+    one_line(capsys, f"the table {out}/per_seed.parquet is whole", "rerun the same command")
+    capsys.readouterr()
+    monkeypatch.undo()
+    assert main([*RUNS["sweep"], "--out", str(out)]) == 0  # as it says: the same command writes the rest
+    assert (out / "summary.json").is_file()

@@ -50,6 +50,8 @@ class Backend:
         return str(self.devices[0])
 
     def run(self, seeds, *, trace: bool = False, batch: int | None = None, combos=None, poses=None) -> Rollouts:
+        """A row per entry of `seeds`, in order: a seed given twice is rolled out twice, and its rows are the same
+        bits (a determinism check; the CLI's tables are keyed by seed, so `--seeds` refuses a repeat)."""
         raise NotImplementedError
 
     def submit(self, seeds, *, batch: int | None = None, combos=None, poses=None):

@@ -196,6 +196,10 @@ def _main(argv, signals: Signals) -> int:
         return 1
     except KeyboardInterrupt:
         return _interrupted(args, signals, argv)
+    except BrokenPipeError:  # the reader went away (`mjx-pusht tree --json | head`): nothing more to say to it
+        if argv is None:  # Python's own flush of stdout at exit would fail again, with a line of its own
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 128 + signal.SIGPIPE
     except OSError as e:
         if args is None or e.errno not in DISK_ERRORS:
             raise  # not the disk or the path: a bug, with its traceback

@@ -17,6 +17,10 @@ def cmd_compare(args) -> int:
 
     if args.evals:
         return _compare_evals(args)
+    if not args.controller and (given := [f for f, v in (("--reset", args.reset), ("--max-steps", args.max_steps))
+                                          if v is not None]):  # the open loop's nudge has its own starts and steps
+        raise UsageError(f"{' and '.join(given)} set a controller's episodes: give --controller (expert: the task's "
+                         "expert), or leave them out for the open-loop comparison")
     args.max_steps = args.max_steps or 300
     args.seeds = args.seeds or "64"  # the default, as the fingerprint of an earlier run holds it
     seeds = parse_seeds(args.seeds)

@@ -49,14 +49,18 @@ _frame_skip = _int_at_least(1, validate.MAX_FRAME_SKIP, " physics steps a contro
 _worlds = _int_at_least(1, 1 << 22, " episodes at once")
 
 
-def _positive_or_off(text: str) -> float | str:
-    """An argparse type: a finite float > 0, or "off"."""
+def _positive_or_off(text: str, high: float = math.inf) -> float | str:
+    """An argparse type: a finite float in (0, high], or "off"."""
     if text == "off":
         return text
     try:
-        return _positive_float(text)
+        v = _positive_float(text)
     except argparse.ArgumentTypeError:
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0 or 'off', got {text}") from None
+        v = None
+    if v is None or v > high:
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0{f' and <= {high:g}' if high < math.inf else ''} "
+                                         f"or 'off', got {text}") from None
+    return v
 
 
 def _positive_float(text: str) -> float:
@@ -295,7 +299,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--first-fits", type=_positive, default=None,
                    help="DAgger: the first fit is made from this many initialisations and the one with the lowest "
                         "training loss kept (default 1; 4 in the pixel recipe): where a run starts, its loss holds through the run")
-    t.add_argument("--action-eps", type=_positive_or_off, default=None,
+    t.add_argument("--action-eps", type=lambda v: _positive_or_off(v, 1e3),  # squared in float32: 1e308 overflowed default=None,
                    help="DAgger: weigh each action's squared error by (0.1^2 + eps^2) / (|label|^2 + eps^2), eps in m/s "
                         "('off': plain squared error; default: the task's, gym-pusht 0.01, chapter off): a nudge of a "
                         "few mm is learned as precisely, relative to its size, as a 0.1 m/s move")

@@ -66,15 +66,29 @@ def cmd_tree(args) -> int:
     from mjx_pusht.model.scene import SceneSpec, build_model
     from mjx_pusht.model.tree import read_tree, tree_json
 
+    import json
+
     if args.colliders:
         import dataclasses
-        import json
 
         from mjx_pusht.model.colliders import collider_table, describe
 
         rows = collider_table(args.break_it, pusher=args.pusher)
         print(json.dumps([dataclasses.asdict(r) for r in rows], indent=2) if args.json else describe(rows))
         return 0
-    tree = read_tree(build_model(SceneSpec(args.break_it, args.pusher)))
-    print(tree_json(tree) if args.json else tree.describe() + f"\npusher shape: {args.pusher}")
+    model = build_model(SceneSpec(args.break_it, args.pusher))
+    tree, shape = read_tree(model), _pusher_shape(model)
+    print(json.dumps({**json.loads(tree_json(tree)), "pusher": shape}, indent=2, sort_keys=True) if args.json
+          else tree.describe() + f"\npusher shape: {shape}")
     return 0
+
+
+def _pusher_shape(model) -> str:
+    """The pusher's geom type as the compiled model holds it (`--pusher` read back, not echoed: the tree's bodies and
+    joints are the same for every pusher, and its JSON was the same for both)."""
+    import mujoco
+
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "pusher")
+    types = {mujoco.mjtGeom(int(t)).name.removeprefix("mjGEOM_").lower()
+             for t, b in zip(model.geom_type, model.geom_bodyid) if b == body}
+    return ", ".join(sorted(types))

@@ -6,6 +6,7 @@ can be made in a parent process and forked (gymnasium's AsyncVectorEnv under `fo
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -92,6 +93,17 @@ class OneWorld:
     bits) where it applies, else by the array path. `row_step = False` on an env takes the array path always."""
 
     row_step = True
+
+    @property
+    def success_threshold(self) -> float:
+        """The coverage an episode succeeds (terminates) at, and the drop-in's reward scale (gym-pusht's attribute)."""
+        return self._env.episode.success
+
+    @success_threshold.setter
+    def success_threshold(self, value: float) -> None:
+        # gym-pusht#24's workaround, `env.unwrapped.success_threshold = 0.9`, works on both ids, from the next step
+        # (on PushT-v0 it made an attribute nothing read); the episode's own check refuses a value outside (0, 1]
+        self._env.episode = dataclasses.replace(self._env.episode, success=value)
 
     def _step_world(self, x: float, y: float):
         """`self._state` stepped by the checked, clipped action (x, y) in the functional env's units."""

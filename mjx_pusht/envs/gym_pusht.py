@@ -266,16 +266,6 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         self._state, self._last_action, self._seed = None, None, -1
         self._open_window()
 
-    @property
-    def success_threshold(self) -> float:
-        """The coverage an episode succeeds (terminates) at, and the reward's scale (gym-pusht's attribute)."""
-        return self._env.episode.success
-
-    @success_threshold.setter
-    def success_threshold(self, value: float) -> None:
-        # gym-pusht#24's workaround, `env.unwrapped.success_threshold = 0.9`, works here too: from the next step on
-        self._env.episode = dataclasses.replace(self._env.episode, success=value)
-
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         seed = validate.seed(seed)
         options = validate.reset_options(options, ("reset_to_state",), type(self).__name__)

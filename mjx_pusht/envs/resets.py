@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mjx_pusht import validate
+from mjx_pusht import boundary, validate
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.envs import physics as per_episode
 from mjx_pusht.envs.starts import START_HI, START_LO, clear_of_tee
@@ -36,6 +36,8 @@ class Resets:
     def reset_to(self, starts, seeds=None, drawn: bool = False) -> State:
         """Episodes from given (N, 5) starts: tee x, y, yaw and pusher x, y (seeds key random controllers).
         A given start (not `drawn` by a reset distribution) must not put the pusher inside the T."""
+        if drawn is not True and drawn is not False:  # "yes" was taken as True
+            boundary.Flag()("drawn", drawn)
         starts = self._starts(starts) if drawn else self.given_starts(starts)
         seeds = np.zeros(len(starts), np.int64) if seeds is None else validate.seed_array(seeds)
         if len(seeds) != len(starts):

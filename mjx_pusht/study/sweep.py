@@ -52,6 +52,9 @@ def fingerprint(seeds: np.ndarray, config: dict) -> dict:
 def kept_chunks(out) -> str:
     """What an interrupted sweep or eval leaves in `out`, and how to go on: its finished chunks, or none yet."""
     done = _done_ranges(Path(out) / PARTS)
+    table = next((n for n in ("per_seed.parquet", "per_episode.parquet") if (Path(out) / n).is_file()), None)
+    if not done and table:  # interrupted after its chunks were joined: what follows the table may be missing
+        return f"the table {out}/{table} is whole; what is written after it may not be: rerun the same command"
     if not done:  # --resume would find nothing to finish
         return f"no chunk was finished yet in {out}: rerun without --resume to start"
     return (f"the finished chunks ({sum(hi - lo for lo, hi in done):,} rows) are kept in {out}/{PARTS}: rerun with "

@@ -120,18 +120,25 @@ class Learner:
             self.pose_error_mm = float(np.sqrt(pose_mse / 4) * POSE_SCALE * 1000)
         return float(loss)
 
-    def fit_first(self, candidates: int) -> tuple[list[float], int]:
+    def fit_first(self, candidates: int, go_on=None) -> tuple[list[float], int]:
         """The first fit (iteration 0) of `candidates` students, each from its own initialisation and minibatches,
         keeping the one whose fit ended at the lowest loss (DaggerConfig.first_fits); returns every candidate's
         loss, in order, and the kept one's number. Candidate 0 is the network and minibatches of a run without the
-        setting."""
+        setting. `go_on(seconds)`: whether another candidate, taking as long as the last, still fits the budget
+        (--minutes: `--first-fits` past it ran on, the budget ignored)."""
+        import time
+
         import jax
 
-        losses, best = [], None
+        losses, best, took = [], None, 0.0
         for c in range(candidates):
+            if c and go_on is not None and not go_on(took):
+                break
+            t0 = time.perf_counter()
             if c:
                 self.start(jax.random.fold_in(jax.random.key(self.cfg.seed), c))
-            losses.append(loss := self.fit(0, candidate=c))
+            losses.append(loss := float(self.fit(0, candidate=c)))
+            took = time.perf_counter() - t0
             if best is None or (np.isfinite(loss) and not loss >= losses[best[0]]):  # never a NaN over a number
                 best = (c, self.params, self.opt_state, self.loss_max, self.pose_error_mm)
         kept, self.params, self.opt_state, self.loss_max, self.pose_error_mm = best

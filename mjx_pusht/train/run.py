@@ -139,7 +139,8 @@ def train_dagger(cfg, backend: str, out: Path, *, resume: bool = False, minutes:
             if part and clock.spent(clock.fit + clock.judge):
                 break  # a late fit more would leave no time to judge it
             if i == 0 and cfg.first_fits:  # from several initialisations, the lowest loss kept
-                loss, seconds = _timed(_first_fit, learner, cfg.first_fits, out, bar)
+                loss, seconds = _timed(_first_fit, learner, cfg.first_fits, out, bar,
+                                       lambda took: not clock.spent(took + clock.judge))
             else:
                 loss, seconds = _timed(learner.fit, i, part)
             learn += seconds
@@ -279,14 +280,15 @@ def _unit(cfg):
     return np.zeros(w, np.float32), np.ones(w, np.float32)
 
 
-def _first_fit(learner, candidates: int, out: Path, bar) -> float:
-    """Iteration 0's fit from `candidates` initialisations (DaggerConfig.first_fits): every candidate's loss goes to
-    out/first_fits.json and the log, the kept one's is returned."""
+def _first_fit(learner, candidates: int, out: Path, bar, go_on) -> float:
+    """Iteration 0's fit from `candidates` initialisations (DaggerConfig.first_fits), as many as the budget leaves
+    time for (`go_on`): every candidate's loss goes to out/first_fits.json and the log, the kept one's is returned."""
     from mjx_pusht.io.outputs import atomic_write_json
 
-    losses, kept = learner.fit_first(candidates)
+    losses, kept = learner.fit_first(candidates, go_on)
     atomic_write_json(out / "first_fits.json", {"losses": losses, "kept": kept})
-    bar.write(f"first fit from {candidates} initialisations, losses {', '.join(f'{v:.4f}' for v in losses)}: "
+    short = f" (of {candidates}: the budget left time for no more)" if len(losses) < candidates else ""
+    bar.write(f"first fit from {len(losses)} initialisations{short}, losses {', '.join(f'{v:.4f}' for v in losses)}: "
               f"kept {kept}")
     return losses[kept]
 
