@@ -235,6 +235,7 @@ def test_first_fits_keep_the_minutes(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv, words", [
     (["train", "--backend", "cpu", "--action-eps", "1e308"], "--action-eps: must be a finite number > 0 and <= 1000"),
+    (["train", "--backend", "cpu", "--lr", "1e308"], "--lr: must be a learning rate > 0 and at most 1e38"),
     (["compare", "--seeds", "2", "--reset", "easy"], "--reset set a controller's episodes"),
     (["compare", "--seeds", "2", "--max-steps", "5"], "--max-steps set a controller's episodes"),
 ])
@@ -304,3 +305,18 @@ def test_an_interrupt_after_the_table_says_the_table_is_whole(tmp_path, monkeypa
     monkeypatch.undo()
     assert main([*RUNS["sweep"], "--out", str(out)]) == 0  # as it says: the same command writes the rest
     assert (out / "summary.json").is_file()
+
+
+def test_a_video_named_into_its_own_new_out_is_written_and_a_folder_name_refused(tmp_path, capsys):
+    """SURPRISE (seventh pass): `--out s/m1 --video s/m1/v.gif` was refused while s/m1 did not exist yet, though the
+    run makes it; `--video s/dir.gif/` (a folder's name) wrote the file s/dir.gif."""
+    out = tmp_path / "new"
+    video = ["--video-size", "32", "--video-episodes", "2"]
+    assert main([*RUNS["eval"], *video, "--video", str(out / "v.gif"), "--out", str(out)]) == 0, \
+        capsys.readouterr().err
+    assert (out / "v.gif").read_bytes()[:6] == b"GIF89a"
+    assert main([*RUNS["eval"], *video, "--video", str(tmp_path / "nowhere" / "v.gif"), "--out", str(out)]) == 1
+    one_line(capsys, "folder", "does not exist")
+    assert main([*RUNS["eval"], *video, "--video", f"{tmp_path}/dir.gif/", "--out", str(tmp_path / "o")]) == 2
+    one_line(capsys, "names a folder")
+    assert not (tmp_path / "dir.gif").exists() and not (tmp_path / "o").exists()

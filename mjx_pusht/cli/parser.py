@@ -1,13 +1,12 @@
-"""The `mjx-pusht` argument parser: flags, their types and their one-line errors."""
+"""The `mjx-pusht` argument parser: the commands' flags and their one-line errors (the flags' value types:
+flagtypes.py)."""
 
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
-from mjx_pusht import validate
-from mjx_pusht.boundary import MAX_ENVS
+from mjx_pusht.cli import flagtypes as ft
 from mjx_pusht.errors import MjxPushtError
 from mjx_pusht.model.scene import BREAK_MODES
 
@@ -21,125 +20,11 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-def _int_at_least(low: int, high: int | None = None, why: str = ""):
-    """An argparse type: an integer >= low (and <= high, `why` saying what the bound keeps off), with a one-line
-    message otherwise."""
-
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-        if v < low:
-            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {v}")
-        if high is not None and v > high:
-            raise argparse.ArgumentTypeError(f"must be an integer from {low} to {high:,}{why}, got {v:,}")
-        return v
-
-    return parse
-
-
-# counts a jitted program takes (fit steps, minibatches, iterations): past 2**31-1 JAX's int32 overflowed in a traceback
-_positive = _int_at_least(1, 2**31 - 1)
-_rows = _int_at_least(1, MAX_ENVS, " rows at once")  # a batch's rows (boundary.MAX_ENVS: one batch's first arrays)
-_nonneg = _int_at_least(0)
-# The API's bounds (validate.MAX_STEPS, MAX_FRAME_SKIP: why they are there), as flag types
-_steps = _int_at_least(1, validate.MAX_STEPS, " (1,000 s of simulated time at 100 Hz)")
-_frame_skip = _int_at_least(1, validate.MAX_FRAME_SKIP, " physics steps a control step")
-_worlds = _int_at_least(1, 1 << 22, " episodes at once")
-
-
-def _positive_or_off(text: str, high: float = math.inf) -> float | str:
-    """An argparse type: a finite float in (0, high], or "off"."""
-    if text == "off":
-        return text
-    try:
-        v = _positive_float(text)
-    except argparse.ArgumentTypeError:
-        v = None
-    if v is None or v > high:
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0{f' and <= {high:g}' if high < math.inf else ''} "
-                                         f"or 'off', got {text}") from None
-    return v
-
-
-def _positive_float(text: str) -> float:
-    """An argparse type: a finite float > 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
-    return v
-
-
-def _fraction(text: str) -> float:
-    """An argparse type: a number from 0 to 1."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not 0.0 <= v <= 1.0:
-        raise argparse.ArgumentTypeError(f"must be a fraction from 0 to 1, got {text}")
-    return v
-
-
-def _in_unit(what: str):
-    """An argparse type: a number in (0, 1] (validate.fraction's rule: 0, NaN and 1.5 refused), named `what` in the
-    error: a coverage (--success-threshold) or a success rate (train --until: a rate of 0 is met before training)."""
-    def parse(text: str) -> float:
-        try:
-            return validate.fraction(what, float(text))
-        except (ValueError, MjxPushtError):
-            raise argparse.ArgumentTypeError(f"must be {what} in (0, 1], got {text}") from None
-    return parse
-
-
-_threshold, _rate = _in_unit("a coverage"), _in_unit("a success rate")
-
-
 def success_arg(p: argparse.ArgumentParser) -> None:
     """--success-threshold: the coverage an episode succeeds at (every command that judges success takes it)."""
-    p.add_argument("--success-threshold", type=_threshold, default=None, metavar="COVERAGE",
+    p.add_argument("--success-threshold", type=ft.threshold, default=None, metavar="COVERAGE",
                    help="the coverage of the target an episode succeeds (and ends) at, in (0, 1] (default: the "
                         "task's own, 0.95; ManiSkill's PushT scores at 0.9)")
-
-
-def _widths(text: str) -> tuple[int, ...]:
-    """An argparse type: comma-separated positive layer widths."""
-    try:
-        widths = tuple(int(w) for w in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a list of integers like 256,256") from None
-    if not widths or min(widths) < 1 or max(widths) > 65536:
-        raise argparse.ArgumentTypeError(f"layer widths must be integers from 1 to 65,536, got {text!r}")
-    return widths
-
-
-def _folder(text: str) -> Path:
-    """An argparse type: a folder's path, never empty (an empty --out was the current folder, written into)."""
-    if not text.strip():
-        raise argparse.ArgumentTypeError("is empty: give a folder, such as outputs/run")
-    return Path(text)
-
-
-def _seed(text: str) -> int:
-    v = _nonneg(text)
-    from mjx_pusht.task.reset import SEED_MAX
-
-    if v > SEED_MAX:
-        raise argparse.ArgumentTypeError("seeds are integers from 0 to 2**63-1")
-    return v
-
-
-def _train_seed(text: str) -> int:
-    """A training seed: JAX's key takes 32 bits of it (with 64-bit types off, as here), so seeds 2**31 apart would
-    start the same networks: refused, not folded."""
-    v = _nonneg(text)
-    if v > 2**31 - 1:
-        raise argparse.ArgumentTypeError(f"training seeds are integers from 0 to 2**31-1 (JAX's key), got {v}")
-    return v
 
 
 REPLACE_HELP = "overwrite --out even if it holds another command's, or other seeds' or settings', finished results"
@@ -153,12 +38,12 @@ def _batch_args(p: argparse.ArgumentParser, name: str, rows: str, *, seeds: str)
     p.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)"
                    + ("; gym-pusht: gym-pusht 0.1.8 itself, for --task gym-pusht" if name == "eval" else ""))
     p.add_argument("--break", dest="break_it", choices=BREAK_MODES, default="none")
-    p.add_argument("--out", type=_folder, default=Path(f"outputs/{name}"), help=f"the run's folder (default outputs/{name})")
-    p.add_argument("--chunk", type=_rows, default=None, help=f"{rows} per batch (default: by backend)")
+    p.add_argument("--out", type=ft.folder, default=Path(f"outputs/{name}"), help=f"the run's folder (default outputs/{name})")
+    p.add_argument("--chunk", type=ft.rows, default=None, help=f"{rows} per batch (default: by backend)")
     p.add_argument("--resume", action="store_true", help=f"finish an interrupted {name} in --out")
     p.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     p.add_argument("--share-out", action="store_true", help=SHARE_HELP)
-    p.add_argument("--record", type=_nonneg, default=None,  # None: unset, so that one --no-rerun skips is refused
+    p.add_argument("--record", type=ft.nonneg, default=None,  # None: unset, so that one --no-rerun skips is refused
                    help=f"{rows} to show side by side in {name}.rrd (default 4)")
     p.add_argument("--no-rerun", dest="rerun", action="store_false", help=f"skip {name}.rrd")
     p.add_argument("--no-progress", dest="progress", action="store_false")
@@ -202,11 +87,11 @@ def _task_args(p: argparse.ArgumentParser, reset_help: str) -> None:
 
 def _process_args(p: argparse.ArgumentParser, what: str, writes: str) -> None:
     """Several processes joined through jax.distributed (study/distributed.py): sweep and train."""
-    p.add_argument("--num-processes", type=_positive, default=1,
+    p.add_argument("--num-processes", type=ft.positive, default=1,
                    help=f"processes sharing this {what} through jax.distributed, one a host or GPU (default 1)")
-    p.add_argument("--process-id", type=_nonneg, default=0, help=f"this process's index, 0 .. N-1 (0 writes {writes})")
+    p.add_argument("--process-id", type=ft.nonneg, default=0, help=f"this process's index, 0 .. N-1 (0 writes {writes})")
     p.add_argument("--coordinator", default=None, metavar="HOST:PORT", help="where process 0 listens")
-    p.add_argument("--peer-timeout", type=_positive_float, default=None, metavar="SECONDS",
+    p.add_argument("--peer-timeout", type=ft.positive_float, default=None, metavar="SECONDS",
                    help="how long to wait for every process to join before giving up (default 300)")
 
 
@@ -217,10 +102,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     s = sub.add_parser("scene", help="the chapter's run: one seed, settle, push, weld check, recording")
-    s.add_argument("--seed", type=_seed, default=0, help="seeds the block's start pose, like a PushT reset")
-    s.add_argument("--steps", type=_steps, default=None, help="nudge length in steps (default 120; not with --smoke)")
+    s.add_argument("--seed", type=ft.seed, default=0, help="seeds the block's start pose, like a PushT reset")
+    s.add_argument("--steps", type=ft.steps, default=None, help="nudge length in steps (default 120; not with --smoke)")
     s.add_argument("--smoke", action="store_true", help="fixed 120-step run; two runs match byte for byte")
-    s.add_argument("--out", type=_folder, default=Path("outputs/scene"), help="the run's folder (default outputs/scene)")
+    s.add_argument("--out", type=ft.folder, default=Path("outputs/scene"), help="the run's folder (default outputs/scene)")
     s.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     s.add_argument("--share-out", action="store_true", help=SHARE_HELP)
     s.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip the .rrd recording")
@@ -238,8 +123,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     w = sub.add_parser("sweep", help="many seeds at once on a backend; per_seed.parquet + summary.json")
     _batch_args(w, "sweep", "seeds", seeds="4096")
-    w.add_argument("--steps", type=_steps, default=120, help="nudge length in steps (default 120)")
-    w.add_argument("--audit", type=_fraction, default=None, metavar="FRACTION",
+    w.add_argument("--steps", type=ft.steps, default=120, help="nudge length in steps (default 120)")
+    w.add_argument("--audit", type=ft.fraction, default=None, metavar="FRACTION",
                    help="MJX backends: re-run this fraction of the rows (at least 64, at most 16,384) plus every "
                         "flagged row on the CPU reference and record whether they agree (default 0.01; 0 skips)")
     _process_args(w, "sweep", "the table")
@@ -252,13 +137,13 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--action", choices=("velocity", "position"), default=None,
                    help="what your controller's actions mean (default velocity; built-ins command velocities)")
     _task_args(e, "start distribution of the chapter task (default task; gym-pusht's task has its own)")
-    e.add_argument("--max-steps", type=_steps, default=300, help="control steps before truncation (default 300)")
-    e.add_argument("--frame-skip", type=_frame_skip, default=10, help="physics steps per control step (default 10)")
-    e.add_argument("--video", type=Path, default=None, metavar="FILE.gif|FILE.mp4",
+    e.add_argument("--max-steps", type=ft.steps, default=300, help="control steps before truncation (default 300)")
+    e.add_argument("--frame-skip", type=ft.frame_skip, default=10, help="physics steps per control step (default 10)")
+    e.add_argument("--video", type=ft.video_file, default=None, metavar="FILE.gif|FILE.mp4",
                    help="the first --video-episodes episodes as a grid of tiles, coverage on each (rendered on the CPU)")
     # None by default, so that one given without --video is seen (and refused, not ignored)
-    e.add_argument("--video-episodes", type=_positive, default=None, help="tiles in --video (default 16)")
-    e.add_argument("--video-size", type=_int_at_least(32, 2048), default=None,
+    e.add_argument("--video-episodes", type=ft.positive, default=None, help="tiles in --video (default 16)")
+    e.add_argument("--video-size", type=ft.int_at_least(32, 2048), default=None,
                    help="pixels per tile side in --video (default 128)")
 
     t = sub.add_parser("train", help="train a policy (DAgger from the expert, or Brax PPO): policy.msgpack, curve, summary")
@@ -268,38 +153,38 @@ def build_parser() -> argparse.ArgumentParser:
                    help="what the policy sees (default state; pixels_agent_pos: the 96 x 96 top camera and the "
                         "pusher's position, DAgger only)")
     t.add_argument("--backend", default="auto", help="auto, cpu, mjx-jax or mjx-warp (default auto)")
-    t.add_argument("--devices", type=_positive, default=None,
+    t.add_argument("--devices", type=ft.positive, default=None,
                    help="mjx backends: this many of the host's devices (GPUs) roll out and learn, each its share of "
                         "the episodes and of every minibatch, gradients averaged (default: every one)")
     _process_args(t, "training run (its episodes and minibatches split over every process's devices)",
                   "the run's files")
-    t.add_argument("--out", type=_folder, default=Path("outputs/train"), help="the run's folder (default outputs/train)")
+    t.add_argument("--out", type=ft.folder, default=Path("outputs/train"), help="the run's folder (default outputs/train)")
     t.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     t.add_argument("--share-out", action="store_true", help=SHARE_HELP)
-    t.add_argument("--envs", type=_worlds, default=None,
+    t.add_argument("--envs", type=ft.worlds, default=None,
                    help="episodes rolled out per iteration (default 4096; DAgger on cpu 256; 16384 in the pixel recipe)")
-    t.add_argument("--iterations", type=_positive, default=None,
+    t.add_argument("--iterations", type=ft.positive, default=None,
                    help="DAgger iterations, or PPO's held-out judgements over the run (default 10; 300 in the pixel "
                         "recipe: DAgger from pixels_agent_pos on gym-pusht's task on MJX, docs/training.md)")
-    t.add_argument("--timesteps", type=_int_at_least(1, 10**15), default=None, help="PPO: env control steps in all (default 50M)")
-    t.add_argument("--fit-steps", type=_positive, default=None,
+    t.add_argument("--timesteps", type=ft.int_at_least(1, 10**15), default=None, help="PPO: env control steps in all (default 50M)")
+    t.add_argument("--fit-steps", type=ft.positive, default=None,
                    help="DAgger: gradient steps per iteration (default 2000; on cpu 1000; 10000 in the pixel recipe)")
-    t.add_argument("--batch", type=_positive, default=None,
+    t.add_argument("--batch", type=ft.positive, default=None,
                    help="DAgger: samples per gradient step (default 4096; on cpu 1024); PPO: Brax's batch_size "
                         "(default 256)")
-    t.add_argument("--image-batch", type=_positive, default=None,
+    t.add_argument("--image-batch", type=ft.positive, default=None,
                    help="DAgger from pixels: of each step's --batch samples, how many are rendered to teach the image "
                         "trunk the T's pose (all teach the actions from the true pose; default 512, at most --batch)")
-    t.add_argument("--image-steps", type=_positive, default=None,
+    t.add_argument("--image-steps", type=ft.positive, default=None,
                    help="DAgger from pixels: gradient steps an iteration that teach the image trunk the T's pose, "
                         "apart from the --fit-steps that teach the actions (default: as many as --fit-steps; 4000 in the pixel recipe)")
-    t.add_argument("--late-fits", type=_positive, default=None,
+    t.add_argument("--late-fits", type=ft.positive, default=None,
                    help="DAgger: fits of --fit-steps after each rollout once the expert's share is at most 1%% "
                         "(default 1): late in a run the student under-fits a ring that changes little")
-    t.add_argument("--first-fits", type=_positive, default=None,
+    t.add_argument("--first-fits", type=ft.positive, default=None,
                    help="DAgger: the first fit is made from this many initialisations and the one with the lowest "
                         "training loss kept (default 1; 4 in the pixel recipe): where a run starts, its loss holds through the run")
-    t.add_argument("--action-eps", type=lambda v: _positive_or_off(v, 1e3),  # squared in float32: 1e308 overflowed default=None,
+    t.add_argument("--action-eps", type=lambda v: ft.positive_or_off(v, 1e3),  # squared in float32: 1e308 overflowed default=None,
                    help="DAgger: weigh each action's squared error by (0.1^2 + eps^2) / (|label|^2 + eps^2), eps in m/s "
                         "('off': plain squared error; default: the task's, gym-pusht 0.01, chapter off): a nudge of a "
                         "few mm is learned as precisely, relative to its size, as a 0.1 m/s move")
@@ -311,44 +196,44 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--ppo-act", choices=("sample", "mean"), default=None,
                    help="PPO: the saved policy acts with a draw from its Gaussian keyed by seed and step, what PPO "
                         "trains (default), or with the Gaussian's mean, Brax's deterministic action")
-    t.add_argument("--max-grad-norm", type=_positive_or_off, default=None,
+    t.add_argument("--max-grad-norm", type=ft.positive_or_off, default=None,
                    help="clip the gradient's global norm to this before Adam (default 1.0; 'off': unclipped). PPO: "
                         "Brax's max_grad_norm (unclipped runs collapsed from 99-100%% to 0-6%% and back); DAgger: every "
                         "fit (unclipped, 3 of 16 first fits landed where the student succeeds on 0-0.2%%)")
     t.add_argument("--lr-schedule", choices=("adaptive-kl",), default=None,
                    help="PPO: adaptive-kl, Brax's ADAPTIVE_KL (the rate follows the epochs' KL toward 0.01); "
                         "default a constant rate")
-    t.add_argument("--minibatches", type=_positive, default=None,
+    t.add_argument("--minibatches", type=ft.positive, default=None,
                    help="PPO: Brax's num_minibatches, each of --batch unrolls (default 32): a round of updates takes "
                         "--batch x this x 20 env steps")
-    t.add_argument("--hidden", type=_widths, default=None,
+    t.add_argument("--hidden", type=ft.widths, default=None,
                    help="hidden widths (default 256,256,256; 1024,1024,1024 in the pixel recipe)")
-    t.add_argument("--lr", type=_positive_float, default=None, help="Adam's learning rate (default 1e-3; PPO 3e-4)")
-    t.add_argument("--beta-decay", type=_fraction, default=None,
+    t.add_argument("--lr", type=ft.learning_rate, default=None, help="Adam's learning rate (default 1e-3; PPO 3e-4)")
+    t.add_argument("--beta-decay", type=ft.fraction, default=None,
                    help="DAgger: the expert's share of control steps: 1, then times this each iteration (default 0.7)")
     t.add_argument("--teacher", choices=("paced", "expert"), default=None,
                    help="DAgger: whom the student learns from: the expert paced for a student (its slowest actions "
                         "faster, its last trims coarser, so a student's small errors still move the T; default), or "
                         "the expert as is")
-    t.add_argument("--max-samples", type=_int_at_least(1, 1 << 30, " samples"), default=None,
+    t.add_argument("--max-samples", type=ft.int_at_least(1, 1 << 30, " samples"), default=None,
                    help="DAgger: dataset ring size (default 8,000,000; 32,000,000 in the pixel recipe)")
     _task_args(t, "start distribution of the chapter task trained and judged on (default task)")
     randomize_arg(t)  # training's episodes and every held-out judgement at each episode's drawn physics
-    t.add_argument("--eval-envs", type=_worlds, default=None,
+    t.add_argument("--eval-envs", type=ft.worlds, default=None,
                    help="held-out task seeds judged after every iteration (default 4096; DAgger on cpu 64)")
-    t.add_argument("--max-steps", type=_steps, default=300,
+    t.add_argument("--max-steps", type=ft.steps, default=300,
                    help="control steps before an episode is truncated, in training and in every judgement (default "
                         "300, the task's; eval --max-steps judges a policy at the same length)")
-    t.add_argument("--minutes", type=_positive_float, default=None,
+    t.add_argument("--minutes", type=ft.positive_float, default=None,
                    help="training's budget, its last judgement included: no rollout or fit starts that would pass it "
                         "(default none; 19.5 in the pixel recipe)")
-    t.add_argument("--until", type=_rate, default=None, metavar="SUCCESS",
+    t.add_argument("--until", type=ft.rate, default=None, metavar="SUCCESS",
                    help="stop at the first held-out judgement at or above this success rate, in (0, 1] (the time "
                         "to a goal rate; the stop chose that judgement, so judge the policy again on other seeds, "
                         "eval --seeds, for a rate the stop did not pick)")
-    t.add_argument("--seed", type=_train_seed, default=0, help="initialisation and sampling seed (default 0)")
+    t.add_argument("--seed", type=ft.train_seed, default=0, help="initialisation and sampling seed (default 0)")
     t.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
-    t.add_argument("--record", type=_nonneg, default=None, help="held-out episodes in eval/eval.rrd (default 4)")
+    t.add_argument("--record", type=ft.nonneg, default=None, help="held-out episodes in eval/eval.rrd (default 4)")
     t.add_argument("--no-rerun", dest="rerun", action="store_false", help="skip train.rrd and eval/eval.rrd")
     t.add_argument("--no-progress", dest="progress", action="store_false")
 
@@ -356,27 +241,27 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--seeds", default=None, help="N, A:B or a,b,c (default 64; not with --evals: theirs)")
     c.add_argument("--backend", default="mjx-jax", help="mjx-jax or mjx-warp (default mjx-jax); gym-pusht: gym-pusht "
                                                          "0.1.8 itself, for --task gym-pusht --controller C")
-    c.add_argument("--out", type=_folder, default=Path("outputs/compare"),
+    c.add_argument("--out", type=ft.folder, default=Path("outputs/compare"),
                    help="the report's folder (default outputs/compare)")
     c.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     c.add_argument("--share-out", action="store_true", help=SHARE_HELP)
     c.add_argument("--no-root-cause", dest="root_cause", action="store_false",
                    help="skip the one-change-at-a-time runs (x64, solver, contact census)")
-    c.add_argument("--tolerance", type=_positive_float, default=None,
+    c.add_argument("--tolerance", type=ft.positive_float, default=None,
                    help="MJX solver tolerance instead of the scene's 1e-8 (the CPU reference keeps its own)")
-    c.add_argument("--iterations", type=_positive, default=None, help="MJX solver iterations instead of the scene's")
+    c.add_argument("--iterations", type=ft.positive, default=None, help="MJX solver iterations instead of the scene's")
     c.add_argument("--controller", default=None,
                    help="compare closed-loop episodes of this controller instead (e.g. expert): success rates, "
                         "per-seed agreement, final poses")
     _task_args(c, "closed loop: start distribution of the chapter task (default task)")
-    c.add_argument("--max-steps", type=_steps, default=None, help="closed loop: control steps per episode (default 300)")
+    c.add_argument("--max-steps", type=ft.steps, default=None, help="closed loop: control steps per episode (default 300)")
     c.add_argument("--evals", nargs=2, type=Path, metavar=("EVAL_DIR", "EVAL_DIR"), default=None,
                    help="pair two finished eval folders of the same controller and seeds, one run on the cpu backend "
                         "and one on MJX or gym-pusht (e.g. on two machines), into the closed-loop report; runs nothing")
 
     from mjx_pusht.cli.demos import add_parser as add_demos
 
-    add_demos(sub, rows=_rows, steps=_steps, folder=_folder, replace_help=REPLACE_HELP, share_help=SHARE_HELP,
+    add_demos(sub, rows=ft.rows, steps=ft.steps, folder=ft.folder, replace_help=REPLACE_HELP, share_help=SHARE_HELP,
               success=success_arg)
     return p
 

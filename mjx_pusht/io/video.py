@@ -35,7 +35,8 @@ def check_path(path: Path, replace: bool = False, out: Path | None = None) -> Pa
     if path.suffix.lower() == ".mp4":
         needs("an MP4 video (a .gif needs nothing more)", "video")
     parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
+    in_out = out is not None and parent.resolve() == Path(out).resolve()  # a new --out: the run makes it
+    if not parent.is_dir() and not in_out:
         raise VideoError(f"cannot write the video: folder {parent} does not exist")
     if path.is_dir():
         raise VideoError(f"--video {path} is a folder; give a file name such as {path / 'episodes'}{path.suffix}")
@@ -49,6 +50,8 @@ def check_path(path: Path, replace: bool = False, out: Path | None = None) -> Pa
     if out is not None and (parent / RUN_FILE).exists() and parent.resolve() != Path(out).resolve():
         raise VideoError(f"--video {path} is inside another run's folder ({parent} holds its {RUN_FILE}); a run "
                          "never writes into another run's folder, whatever the flags: give another name")
+    if not parent.is_dir():  # --out, made writable by its claim (which refuses one that is not)
+        return path
     try:  # the folder must take a new file now, not after the episodes have run
         import tempfile
 
