@@ -50,7 +50,7 @@ def _bind(function, args, kwargs, where: str | None = None):
     try:
         bound = signature.bind(*args, **kwargs)
     except TypeError as e:
-        takes = [n for n, p in signature.parameters.items() if n != "self" and p.kind != p.VAR_KEYWORD]
+        takes = [n for n, p in signature.parameters.items() if n not in ("self", "cls") and p.kind != p.VAR_KEYWORD]
         raise KeywordError(f"{where or function.__qualname__ + '()'}: {e}; it takes {', '.join(takes)}") from None
     return bound.args, bound.kwargs
 
@@ -98,7 +98,7 @@ def keywords(function):
     import inspect
 
     takes = [n for n, p in inspect.signature(function).parameters.items() if p.kind in (p.POSITIONAL_OR_KEYWORD,
-                                                                                        p.KEYWORD_ONLY) and n != "self"]
+                                                                                        p.KEYWORD_ONLY) and n not in ("self", "cls")]
     where = f"{function.__qualname__}()"  # Python's own words: PushTGymEnv.__init__() got an unexpected ...
     open_ended = any(p.kind == p.VAR_KEYWORD for p in inspect.signature(function).parameters.values())  # its own check
 

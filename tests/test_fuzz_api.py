@@ -52,6 +52,38 @@ def test_scenario_and_make_backend(field, value, options):
         holds(lambda: _rows(backend.run([0, 1])))
 
 
+def _exported():
+    """Every callable `import mjx_pusht` exports, and the public ones under it a user builds by hand."""
+    import inspect
+
+    from mjx_pusht.envs.wrappers import AutoReset
+    from mjx_pusht.train.gym_pusht_policy import GymPushtPolicy
+
+    names = {n: getattr(mjx_pusht, n) for n in mjx_pusht.__all__
+             if callable(getattr(mjx_pusht, n)) and n not in ("Rollouts", "Tree", "TreeMismatch")}  # results, an error
+    names.update({"AutoReset": AutoReset, "GymPushtPolicy": GymPushtPolicy, "PushTEnv.for_task": PushTEnv.for_task})
+    return {n: (f, [p for p in inspect.signature(f).parameters if p != "self"]) for n, f in names.items()}
+
+
+EXPORTED = _exported()
+
+
+KEYWORDS = sorted({p for _, params in EXPORTED.values() for p in params} | {"bogus", "kind"})
+
+
+@FUZZ
+@given(name=st.sampled_from(sorted(EXPORTED)), args=st.lists(ODD, max_size=3),
+       kwargs=st.dictionaries(st.sampled_from(KEYWORDS), ODD, max_size=2))
+@example(name="start_poses", args=[[0, 1]], kwargs={"kind": "bogus"})  # seventh pass: Python's TypeError
+@example(name="PushTEnv.for_task", args=[], kwargs={})  # found here: the task missing, Python's TypeError
+@example(name="GymPushtPolicy", args=[], kwargs={"path": np.zeros((3, 3, 4), bool)})  # found: OSError, name too long
+@example(name="make_backend", args=[np.zeros(2)], kwargs={"scenario": None})  # found: an array's truth value
+def test_every_exported_callable_called_any_way(name, args, kwargs):
+    """Any positional arguments and any keywords (its own names and others), odd values: a result, or one line."""
+    function, _ = EXPORTED[name]
+    holds(lambda: function(*args, **kwargs), check=lambda r: None)
+
+
 @FUZZ
 @given(scene=st.dictionaries(st.sampled_from(["break_it", "pusher", "variant"]),
                              st.one_of(st.sampled_from(["none", "split-tee", "free-tee", "capsule", "cylinder",

@@ -92,8 +92,8 @@ def has_gpu() -> bool:
 
 def resolve(name: str) -> tuple[str, str]:
     """The concrete backend `name` means here, and why (for `auto`)."""
-    if name not in BACKENDS:
-        raise BackendError(f"unknown backend {name!r}; choose from {', '.join(BACKENDS)}")
+    if not isinstance(name, str) or name not in BACKENDS:  # (an array's `in` is no answer)
+        raise BackendError(f"unknown backend {' '.join(repr(name).split())[:60]}; choose from {', '.join(BACKENDS)}")
     if name != "auto":
         return name, "asked for"
     from mjx_pusht.backends.warp import warp_available

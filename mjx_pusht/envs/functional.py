@@ -160,6 +160,7 @@ class PushTEnv(Resets, Observes):
         self.layout = QposLayout.of(self.model)
 
     @classmethod
+    @keywords  # a missing task, or one given twice: one line
     def for_task(cls, task: str, backend: str = "cpu", max_steps: int | None = None,
                  success_threshold: float | None = None, **kwargs) -> "PushTEnv":
         """A task's env (task/tasks.TASKS): its scene, starts, actions and episodes (success at `success_threshold`)."""

@@ -38,8 +38,12 @@ class GymPushtPolicy:
 
     @keywords  # an unknown keyword: one line naming the known ones
     def __init__(self, path, seed: int = 0):
+        import os
+
         from mjx_pusht.train.policy import load_policy
 
+        if not isinstance(path, (str, os.PathLike)):
+            raise ControllerError(f"path must be a policy file's path (a str or a Path), got {type(path).__name__}")
         self.controller = load_policy(f"policy:{path}")
         meta = self.controller.meta
         TASKS["gym-pusht"].check_policy(self.controller, f"policy {path}")  # as eval and demos check it

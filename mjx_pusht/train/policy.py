@@ -246,11 +246,13 @@ def load_checkpoint(path) -> tuple[dict, dict]:
     from flax import serialization
 
     path = Path(path)
-    if not path.is_file():
-        raise ControllerError(f"policy checkpoint {path} does not exist" if not path.exists() else
-                              f"policy checkpoint {path} is not a file")
+    try:  # missing, a folder, unreadable, or a name too long for the filesystem (is_file raised that one)
+        data = path.read_bytes()
+    except OSError as e:
+        raise ControllerError(f"policy checkpoint {path} does not exist" if isinstance(e, FileNotFoundError) else
+                              f"policy checkpoint {path} cannot be read ({e.strerror})") from None
     try:
-        tree = serialization.msgpack_restore(path.read_bytes())
+        tree = serialization.msgpack_restore(data)
         meta = json.loads(tree["meta"])
         params = tree["params"]
     except Exception as e:  # noqa: BLE001 - any decoding failure means the same thing to the user
