@@ -71,26 +71,24 @@ def learning_rate(text: str) -> float:
     return v
 
 
-def positive_float(text: str) -> float:
-    """An argparse type: a finite float > 0."""
+def _number(text: str, ok, rule: str) -> float:
     try:
         v = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    if not ok(v):
+        raise argparse.ArgumentTypeError(f"must be {rule}, got {text}")
     return v
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a finite float > 0."""
+    return _number(text, lambda v: math.isfinite(v) and v > 0, "a finite number > 0")
 
 
 def fraction(text: str) -> float:
     """An argparse type: a number from 0 to 1."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not 0.0 <= v <= 1.0:
-        raise argparse.ArgumentTypeError(f"must be a fraction from 0 to 1, got {text}")
-    return v
+    return _number(text, lambda v: 0.0 <= v <= 1.0, "a fraction from 0 to 1")
 
 
 def in_unit(what: str):
