@@ -3,6 +3,8 @@ changed for each: docs/notebook/boundary.md, "After the seventh pass")."""
 
 from __future__ import annotations
 
+import os
+
 import pytest
 from fuzzing import snapshot
 from helpers import RUNS, one_line
@@ -150,6 +152,7 @@ CONTROLLERS = """
 import numpy as np
 def raises(obs, t): raise RuntimeError("boom")
 def nan3(obs, t): return np.full(obs["state"].shape[:-1] + (2,), np.nan if t >= 3 else 0.0)
+def inf(obs, t): return np.full(obs["state"].shape[:-1] + (2,), np.inf)
 """
 
 
@@ -320,3 +323,23 @@ def test_a_video_named_into_its_own_new_out_is_written_and_a_folder_name_refused
     assert main([*RUNS["eval"], *video, "--video", f"{tmp_path}/dir.gif/", "--out", str(tmp_path / "o")]) == 2
     one_line(capsys, "names a folder")
     assert not (tmp_path / "dir.gif").exists() and not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("argv", [["demos", "--backend", "cpu"], ["eval", "--backend", "gym-pusht", "--task",
+                                                                   "gym-pusht", "--no-rerun"]])
+def test_an_infinite_action_on_gym_pushts_scene_is_one_line_and_no_warning(tmp_path, argv):
+    """SURPRISE (seventh pass): a controller's inf velocity was refused in one line after NumPy's two-line
+    RuntimeWarning from turning it into gym-pusht's target (the demos; eval's gym-pusht workers too). Run as a
+    user runs it (pytest would catch the warning in this process)."""
+    import subprocess
+    import sys
+
+    from helpers import ENV
+
+    (tmp_path / "ctl7.py").write_text(CONTROLLERS)
+    env = {**ENV, "PYTHONPATH": os.pathsep.join(p for p in (str(tmp_path), ENV.get("PYTHONPATH", "")) if p)}
+    r = subprocess.run([sys.executable, "-m", "mjx_pusht", *argv, "--seeds", "2", "--max-steps", "3", "--no-progress",
+                        "--controller", "ctl7:inf", "--out", str(tmp_path / "o")], capture_output=True, text=True,
+                       env=env)
+    err = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.returncode == 1 and len(err) == 1 and "non-finite action" in err[0], err

@@ -44,7 +44,8 @@ def targets_px(ctrl, carry, obs_px: dict, info: dict, t: int, key):
     tee = frame.pose_to_world(pose[:, 0:2], pose[:, 2])
     obs = observe(pusher, tee)
     action, carry = ctrl.act(carry, obs, t, key)
-    px = frame.to_px(np.asarray(action, np.float64))
+    with np.errstate(invalid="ignore", over="ignore"):  # a non-finite action: said below, in one line
+        px = frame.to_px(np.asarray(action, np.float64))
     # a non-finite action is the controller's bug: said, never recorded as a pusher standing still
     if not np.isfinite(px).all():
         rows = np.flatnonzero(~np.isfinite(px).all(-1))

@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
+
 from mjx_pusht import boundary
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model import gym_pusht as frame
@@ -175,7 +177,8 @@ class AsTargets(Wrapper):
         action, carry = self.inner.act(carry, obs, t, key)
         if self.inner.action_type == "position":
             return action, carry
-        return lead_target(obs["state"][..., 0:2], action), carry
+        with np.errstate(invalid="ignore", over="ignore"):  # a non-finite velocity is refused in one line, unwarned
+            return lead_target(obs["state"][..., 0:2], action), carry
 
 
 def as_targets(ctrl: Controller) -> Controller:
