@@ -153,16 +153,18 @@ import numpy as np
 def raises(obs, t): raise RuntimeError("boom")
 def nan3(obs, t): return np.full(obs["state"].shape[:-1] + (2,), np.nan if t >= 3 else 0.0)
 def inf(obs, t): return np.full(obs["state"].shape[:-1] + (2,), np.inf)
+def kbint(obs, t): raise KeyboardInterrupt
 """
 
 
-@pytest.mark.parametrize("name", ["raises", "nan3"])
+@pytest.mark.parametrize("name, code", [("raises", 1), ("nan3", 1), ("kbint", 130)])
 @pytest.mark.parametrize("backend", ["cpu", "gym-pusht"])
-def test_a_batch_whose_controller_fails_before_any_chunk_leaves_nothing(tmp_path, monkeypatch, capsys, name,
+def test_a_batch_whose_controller_fails_before_any_chunk_leaves_nothing(tmp_path, monkeypatch, capsys, name, code,
                                                                          backend):
     """SILENT (seventh pass, 12 tries): a controller that raised, or returned NaN, at the first chunk was one line,
     but left .parts/manifest.json and .run.json: in a new --out a folder of bookkeeping, in a user's folder two
-    files of ours. With no chunk finished there is nothing to resume: none is left."""
+    files of ours. With no chunk finished there is nothing to resume: none is left. (Eighth pass: a controller
+    raising KeyboardInterrupt, taken as ^C, exit 130, left them too.)"""
     (tmp_path / "ctl7.py").write_text(CONTROLLERS)
     monkeypatch.syspath_prepend(str(tmp_path))
     user = tmp_path / "user"
@@ -171,8 +173,8 @@ def test_a_batch_whose_controller_fails_before_any_chunk_leaves_nothing(tmp_path
     task = ["--task", "gym-pusht"] if backend == "gym-pusht" else []
     for out, extra in ((tmp_path / "new" / "o", []), (user, ["--share-out"])):
         assert main([*RUNS["eval"], "--max-steps", "6", "--backend", backend, *task, "--controller", f"ctl7:{name}",
-                     "--out", str(out), *extra]) == 1
-        one_line(capsys, f"ctl7:{name}")
+                     "--out", str(out), *extra]) == code
+        one_line(capsys, f"ctl7:{name}" if code == 1 else "no chunk was finished yet")
     assert not (tmp_path / "new").exists()
     assert snapshot(user) == {"notes.md": b"mine"}
 
@@ -343,3 +345,39 @@ def test_an_infinite_action_on_gym_pushts_scene_is_one_line_and_no_warning(tmp_p
                        env=env)
     err = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert r.returncode == 1 and len(err) == 1 and "non-finite action" in err[0], err
+
+
+def test_a_signal_that_lands_in_a_gc_callback_still_ends_the_command(monkeypatch, capsys):
+    """TRACEBACK (eighth pass): SIGTERM 7 s into a small `train` landed in JAX's gc callback: the KeyboardInterrupt
+    raised there was printed ("Exception ignored in: <function _xla_gc_callback>") and dropped, and the command ran
+    on to exit 0. A signal inside code that drops exceptions is sent again once that code has returned."""
+    import gc
+    import signal
+
+    import mjx_pusht.model.tree as tree_module
+
+    sent = []
+
+    def callback(phase, info):  # as JAX's: a gc callback, where the signal's handler runs
+        if phase == "start" and not sent:
+            sent.append(os.kill(os.getpid(), signal.SIGTERM))
+            for _ in range(1000):  # bytecodes for the handler to run in
+                pass
+
+    real = tree_module.read_tree
+
+    def read_tree_collecting(model):
+        import time
+
+        gc.collect()
+        time.sleep(0.5)  # the command's work goes on after the collection
+        return real(model)
+
+    monkeypatch.setattr(tree_module, "read_tree", read_tree_collecting)
+    gc.callbacks.append(callback)
+    try:
+        assert main(["tree"]) == 128 + signal.SIGTERM
+    finally:
+        gc.callbacks.remove(callback)
+    err = capsys.readouterr().err
+    assert "Exception ignored" not in err and "terminated" in err and err.strip().count("\n") == 0, err

@@ -42,6 +42,8 @@ DISK_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.ENAMETOOLONG, errn
 def kept(args) -> str:
     """What an interrupted or failed run of `args.command` leaves in --out, and how to go on."""
     out = getattr(args, "out", None)
+    if out is None:  # tree: it writes nothing
+        return "nothing was written"
     if args.command == "train" and not (Path(out) / "checkpoints" / "resume.msgpack").is_file():
         return "no checkpoint was written yet (the first comes with the first judgement): rerun without --resume to start"
     if args.command in ("sweep", "eval"):
@@ -110,7 +112,10 @@ class Signals:
 
     def _interrupt(self, signum, frame):
         self.got = signum
-        if self.armed:
+        if self.armed and _swallows(frame):  # raised there, it is printed ("Exception ignored in") and dropped, and
+            # the command ran on to exit 0 (a SIGTERM in JAX's gc callback, during train): sent again once it returned
+            threading.Timer(0.02, os.kill, (os.getpid(), signum)).start()
+        elif self.armed:
             raise KeyboardInterrupt
         # outside `_main`'s try (this handler is set before the watcher thread starts, and is still set while
         # `with` returns): raised there by `arm`, where it is one line; a SIGINT while the watcher started was a
@@ -133,6 +138,18 @@ class Signals:
 
     def code(self) -> int:
         return 128 + (self.got or signal.SIGINT)
+
+
+def _swallows(frame) -> bool:
+    """Whether `frame` runs inside code whose exceptions Python prints and drops: a gc callback, a `__del__`."""
+    import gc
+
+    callbacks = {getattr(cb, "__code__", None) for cb in gc.callbacks}
+    while frame is not None:
+        if frame.f_code in callbacks or frame.f_code.co_name == "__del__":
+            return True
+        frame = frame.f_back
+    return False
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -181,8 +198,9 @@ def _main(argv, signals: Signals) -> int:
             from mjx_pusht.boundary import jax_cache
 
             jax_cache()
-        with held_folders():  # the --out folder is locked while the command runs
+        with held_folders() as held:  # the --out folder is locked while the command runs
             code = COMMANDS[args.command](args)
+            held.failed = code != 0
         if code == 130 and signals.got:  # a command that caught the interrupt and said what it kept
             if argv is None:  # ends now: atexit's jax.distributed shutdown would wait for peers still running
                 end_interrupted(signals.code())

@@ -116,9 +116,8 @@ def atomic_write_table(path: Path, columns: dict) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    table = pa.table(columns)
     sink = pa.BufferOutputStream()
-    pq.write_table(table, sink)
+    pq.write_table(pa.table(columns), sink)
     atomic_write_bytes(path, sink.getvalue().to_pybytes())
 
 
@@ -373,13 +372,14 @@ class held_folders:
     after its claim, as a backend refusing the task) leaves no folder it made that holds only its claim."""
 
     def __enter__(self):
-        self.before = set(_HELD)
+        self.before, self.failed = set(_HELD), False  # failed: a command that answered non-zero (an interrupt's 130)
+        return self
 
     def __exit__(self, kind, exc, tb):
         for key in set(_HELD) - self.before:
             os.close(_HELD.pop(key))
             command, parts = _CLAIMS.pop(key, None), key / ".parts"
-            if exc is None:
+            if exc is None and not self.failed:
                 continue
             if parts.is_dir() and not parts.is_symlink() and not any(parts.glob("seeds-*")):
                 remove_own(parts)  # a failed batch's manifest with no chunk finished: nothing to resume, no trace

@@ -249,8 +249,8 @@ def load_checkpoint(path) -> tuple[dict, dict]:
     try:  # missing, a folder, unreadable, or a name too long for the filesystem (is_file raised that one)
         data = path.read_bytes()
     except OSError as e:
-        raise ControllerError(f"policy checkpoint {path} does not exist" if isinstance(e, FileNotFoundError) else
-                              f"policy checkpoint {path} cannot be read ({e.strerror})") from None
+        why = {FileNotFoundError: "does not exist", IsADirectoryError: "is not a file"}
+        raise ControllerError(f"policy checkpoint {path} {why.get(type(e), f'cannot be read: {e.strerror}')}") from None
     try:
         tree = serialization.msgpack_restore(data)
         meta = json.loads(tree["meta"])
