@@ -243,6 +243,8 @@ def test_first_fits_keep_the_minutes(tmp_path, capsys):
     (["train", "--backend", "cpu", "--lr", "1e308"], "--lr: must be a learning rate > 0 and at most 1e38"),
     (["compare", "--seeds", "2", "--reset", "easy"], "--reset set a controller's episodes"),
     (["compare", "--seeds", "2", "--max-steps", "5"], "--max-steps set a controller's episodes"),
+    (["compare", "--seeds", "2", "--controller", "expert", "--tolerance", "1e-6"], "--tolerance set the open-loop"),
+    (["compare", "--seeds", "2", "--controller", "expert", "--no-root-cause"], "--no-root-cause set the open-loop"),
 ])
 def test_values_a_run_cannot_use_are_refused_at_the_door(tmp_path, capsys, argv, words):
     """TRACEBACK (seventh pass): `--action-eps 1e308` overflowed when squared; SILENT: `compare --reset easy` without

@@ -21,6 +21,10 @@ def cmd_compare(args) -> int:
                                           if v is not None]):  # the open loop's nudge has its own starts and steps
         raise UsageError(f"{' and '.join(given)} set a controller's episodes: give --controller (expert: the task's "
                          "expert), or leave them out for the open-loop comparison")
+    if args.controller and (given := [f for f, v in (("--tolerance", args.tolerance), ("--iterations", args.iterations),
+                                                     ("--no-root-cause", not args.root_cause or None)) if v is not None]):
+        raise UsageError(f"{' and '.join(given)} set the open-loop comparison (its MJX solver, its split-tee probe); "
+                         "a controller's episodes run neither: leave them out, or leave out --controller")
     args.max_steps = args.max_steps or 300
     args.seeds = args.seeds or "64"  # the default, as the fingerprint of an earlier run holds it
     seeds = parse_seeds(args.seeds)
