@@ -10,6 +10,25 @@ import importlib.util as _util
 import os as _os
 import sys as _sys
 
+
+def _end_early(signum, frame):  # noqa: ARG001 - a signal handler's signature
+    _os.write(2, b"\nmjx-pusht: interrupted before the command started: nothing was written\n")
+    _os._exit(128 + signum)
+
+
+# The command line's own process (`mjx-pusht ...`, `python -m mjx_pusht ...`): a Ctrl-C or SIGTERM while this package
+# imports (about a second: the GL probe's ldconfig, NumPy, MuJoCo, gymnasium) ends it in one line, before any file is
+# written, not in a KeyboardInterrupt traceback; the CLI's main() takes both signals over once it runs. Set first: the
+# GL probe below ran before it, and a Ctrl-C in its ldconfig was a traceback. A library import sets nothing.
+_argv = getattr(_sys, "orig_argv", [])
+if any(a == "-m" and b == "mjx_pusht" for a, b in zip(_argv, _argv[1:])) or (
+        len(_argv) > 1 and _os.path.basename(_argv[1]) == "mjx-pusht"):
+    import signal as _signal
+
+    for _sig in (_signal.SIGINT, _signal.SIGTERM):
+        if _signal.getsignal(_sig) is not _signal.SIG_IGN:
+            _signal.signal(_sig, _end_early)
+
 # Headless by default: MuJoCo picks its OpenGL when it is first imported, and on a machine with
 # no screen GLFW cannot open one. EGL renders without a display (MUJOCO_GL=osmesa for OSMesa).
 # Only where the library is there: MuJoCo imports the one it is told to at once, and fails without it.
@@ -35,23 +54,6 @@ elif _os.environ.get("MUJOCO_GL", "").lower().strip() not in (
         *{"linux": ("glx", "egl", "osmesa"), "win32": ("wgl",), "darwin": ("cgl",)}.get(_sys.platform, ())):
     _os.environ["MJX_PUSHT_GL_INVALID"] = _os.environ.pop("MUJOCO_GL")
 
-
-def _end_early(signum, frame):  # noqa: ARG001 - a signal handler's signature
-    _os.write(2, b"\nmjx-pusht: interrupted before the command started: nothing was written\n")
-    _os._exit(128 + signum)
-
-
-# The command line's own process (`mjx-pusht ...`, `python -m mjx_pusht ...`): a Ctrl-C or SIGTERM while this package
-# imports (about a second: NumPy, MuJoCo, gymnasium) ends it in one line, before any file is written, not in a
-# KeyboardInterrupt traceback; the CLI's main() takes both signals over once it runs. A library import sets nothing.
-_argv = getattr(_sys, "orig_argv", [])
-if any(a == "-m" and b == "mjx_pusht" for a, b in zip(_argv, _argv[1:])) or (
-        len(_argv) > 1 and _os.path.basename(_argv[1]) == "mjx-pusht"):
-    import signal as _signal
-
-    for _sig in (_signal.SIGINT, _signal.SIGTERM):
-        if _signal.getsignal(_sig) is not _signal.SIG_IGN:
-            _signal.signal(_sig, _end_early)
 
 # MJX-Warp allocates scratch through Warp, outside XLA's pool: with JAX holding its default 75% of the
 # GPU up front, a 65,536-world environment step failed to allocate 2.3 GB (H100, the gymnasium vector env's

@@ -277,6 +277,9 @@ COMBINATIONS = {
          "graph_mode {graph_mode!r} is MJX-Warp's CUDA-graph mode; backend {backend} has none: leave it None"),
         (lambda v: v.get("raster") and v["backend"] == "cpu",
          "raster=True draws MJX's pixels in JAX; the cpu backend renders with MuJoCo's own renderer: leave it False"),
+        (lambda v: v["backend"] == "cpu" and any(v.get(k) is not None for k in ("contacts_per_world", "rows_per_world")),
+         "contacts_per_world and rows_per_world size MJX's buffers; MuJoCo C on the cpu backend sizes its own: leave "
+         "them None"),
     ),
 }
 _MJX = {"x64": Flag(), "iterations": Maybe(Int(1, 10_000)), "ls_iterations": Maybe(Int(1, 10_000)),

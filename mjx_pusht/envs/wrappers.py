@@ -41,6 +41,7 @@ from mjx_pusht import boundary
 from mjx_pusht import validate
 from mjx_pusht.api import keywords
 from mjx_pusht.envs import physics as per_episode
+from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.controllers import seed_key
 from mjx_pusht.task.goals import draw
 from mjx_pusht.task.reset import SEED_MAX, start_poses
@@ -125,8 +126,8 @@ class AutoReset:
     def __init__(self, env, mode: str = "same_step", depth: int = 8, final_pixels: bool = False,
                  donate: bool = False, image_pool: bool = True):
         boundary.OneOf(tuple(MODES))("autoreset mode", mode)  # an array is refused, not compared
-        if not isinstance(env, AutoReset):  # None was taken, and failed at the first reset
-            boundary.Instance("mjx_pusht.envs.functional:PushTEnv", "a functional PushTEnv")("AutoReset's env", env)
+        # None was taken, and failed at the first reset; an AutoReset too (its reset found no model)
+        boundary.Instance("mjx_pusht.envs.functional:PushTEnv", "a functional PushTEnv")("AutoReset's env", env)
         # the pool's depth, checked at construction (StartPool checked it only at the first reset: depth=0 was taken)
         self.env, self.mode, self.depth = env, mode, boundary.Int(1, 1 << 20)("AutoReset's depth", depth)
         self.final_pixels = final_pixels
@@ -171,8 +172,19 @@ class AutoReset:
                 self.pool.pixels = info["pool_pixels"]
         return state._replace(info=info)
 
+    def _own(self, state, what: str) -> None:
+        """`state` from this wrapper's own reset (its start queue's counters), of its batch: one line, not a
+        TypeError or AttributeError from the step's insides (a bare env's state, another AutoReset's)."""
+        if self.pool is None:
+            raise ConfigError(f"AutoReset.{what} before its reset: call reset(seeds) first, and {what} its state")
+        if not isinstance(getattr(state, "info", None), dict) or "used" not in state.info or self.pool.n != len(
+                state.step):
+            raise ConfigError(f"AutoReset.{what} takes a state from this AutoReset's own reset (of its {self.pool.n} "
+                              "rows), not one from the env it wraps or another AutoReset")
+
     def refill(self, state):
         """Top up every row's start queue (reads `info["used"]` from the device: one small transfer)."""
+        self._own(state, "refill")
         if self.pool.refill(np.asarray(state.info["used"])):
             return self._with_pool(state, state.info["used"])
         return state
@@ -218,6 +230,7 @@ class AutoReset:
 
     # -- the step ------------------------------------------------------------------------------------
     def step(self, state, action):
+        self._own(state, "step")
         if self.env.backend == "cpu":
             return self._step_cpu(state, action)
         import jax
