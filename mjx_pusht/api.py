@@ -41,12 +41,18 @@ def _positions(*names):
     return rule
 
 
+@functools.lru_cache(maxsize=None)
+def _signature(function):
+    """`function`'s signature, made once (a policy's __call__ binds its argument every step)."""
+    import inspect
+
+    return inspect.signature(function)
+
+
 def _bind(function, args, kwargs, where: str | None = None):
     """Python's own check of a call's arguments (a missing one, one given twice, a keyword not taken), as one
     `KeywordError` line naming the arguments `function` takes; returns the arguments as positional and keyword."""
-    import inspect
-
-    signature = inspect.signature(function)
+    signature = _signature(function)
     try:
         bound = signature.bind(*args, **kwargs)
     except TypeError as e:

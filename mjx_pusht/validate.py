@@ -62,9 +62,8 @@ def positive_int(name: str, value, low: int = 1, high: int | None = None) -> int
 
 
 def image_size(value, name: str = "image size") -> int:
-    """An image side in pixels, 8 to 2048."""
-    if isinstance(value, numbers.Real) and not isinstance(value, bool) and float(value).is_integer():
-        value = int(value)
+    """An image side in pixels, an integer from 8 to 2048 (96.0 was taken, and reached gymnasium's Box as a float
+    shape: a TypeError from the space)."""
     return positive_int(name, value, 8, 2048)
 
 

@@ -130,11 +130,12 @@ class AutoReset:
         boundary.Instance("mjx_pusht.envs.functional:PushTEnv", "a functional PushTEnv")("AutoReset's env", env)
         # the pool's depth, checked at construction (StartPool checked it only at the first reset: depth=0 was taken)
         self.env, self.mode, self.depth = env, mode, boundary.Int(1, 1 << 20)("AutoReset's depth", depth)
-        self.final_pixels = final_pixels
+        self.final_pixels = boundary.Flag()("final_pixels", final_pixels)  # "no" was taken as True
         # the new episodes' first images from the pool (one render a step), where two would be needed
-        self.image_pool = image_pool
+        self.image_pool = boundary.Flag()("image_pool", image_pool)
         self._put_images: dict = {}
-        self.donate = donate  # the step may reuse the old state's memory (a stateful caller keeps no old state)
+        # the step may reuse the old state's memory (a stateful caller keeps no old state)
+        self.donate = boundary.Flag()("donate", donate)
         self.pool: StartPool | None = None
         self._jitted: dict = {}
 

@@ -186,8 +186,8 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
             "fingerprint": hashlib.sha256(json.dumps(fingerprint, sort_keys=True, default=str).encode()).hexdigest()}
     held, owner = _owner(path)
     who = owner.get("command")
-    if held:
-        foreign = held if who != command else [n for n in held if n not in OWN[command]]  # a policy in an eval's folder
+    if held or who not in (None, command):  # a run file alone is a run too: `sweep --share-out` rewrote demos'
+        foreign = (held or [RUN_FILE]) if who != command else [n for n in held if n not in OWN[command]]
         if foreign:
             what = (f"{who}'s results" if who in OWN else f"results whose {RUN_FILE} is unreadable"
                     if (path / RUN_FILE).exists() else "files no mjx-pusht run wrote here") if who != command \

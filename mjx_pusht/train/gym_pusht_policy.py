@@ -56,6 +56,7 @@ class GymPushtPolicy:
         self._key = seed_key([validate.seed(seed)])  # a sampling policy's draws are keyed by seed and step
         self.reset()
 
+    @keywords  # as __init__: a keyword it does not take, one line
     def reset(self, seed: int | None = None) -> None:
         """Forget the last episode: the policy's memory, and the step count. `seed`: the episode's (the one given to
         `env.reset`), which keys a sampling policy's draws as `eval` keys them, so the episode is eval's to the bit."""
@@ -63,6 +64,7 @@ class GymPushtPolicy:
             self._key = seed_key([validate.seed(seed)])
         self._carry, self._t = self._targets.init(self._key), 0
 
+    @keywords  # an action per observation: a second argument is one line, not a TypeError
     def __call__(self, obs) -> np.ndarray:
         """gym-pusht's action (2,) float32: the agent's target in its pixels, for `obs` of `self.obs_type`."""
         check_gym_pusht_obs(obs, self.obs_type)  # a wrong, non-finite or foreign observation: one line, no NaN out
