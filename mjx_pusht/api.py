@@ -61,18 +61,20 @@ def _bind(function, args, kwargs, where: str | None = None):
     return bound.args, bound.kwargs
 
 
-def _checked(function, *rules):
-    """`function` with its arguments bound (`_bind`) and the first ones through `rules` (one each, in order)."""
+def _checked(function, *rules, **keyword_rules):
+    """`function` with its arguments bound (`_bind`), the first ones through `rules` (one each, in order) and its
+    keyword-only ones through `keyword_rules` (by name)."""
     @functools.wraps(function)
     def call(*args, **kwargs):
         args, kwargs = _bind(function, args, kwargs)
+        kwargs = {k: keyword_rules[k](k, v) if k in keyword_rules else v for k, v in kwargs.items()}
         return function(*(rule(v) for rule, v in zip(rules, args)), *args[len(rules):], **kwargs)
     return call
 
 
 start_pose = _checked(_reset.start_pose, lambda v: _seed("seed", v))
 start_poses = _checked(_reset.start_poses, validate.seed_array)
-build_model = _checked(_scene.build_model, lambda v: _SPEC("spec", v))
+build_model = _checked(_scene.build_model, lambda v: _SPEC("spec", v), validate=boundary.Flag())  # "no" was True
 scene_xml = _checked(_scene.scene_xml, lambda v: _SPEC("spec", v))
 read_tree = _checked(_tree.read_tree, lambda v: _MODEL("model", v))
 check_tree = _checked(_tree.check_tree, lambda v: _MODEL("model", v),

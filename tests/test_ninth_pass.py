@@ -63,3 +63,38 @@ def test_a_gym_pusht_policys_calls_bind_their_arguments():
     with pytest.raises(MjxPushtError, match="too many positional arguments; it takes obs"):
         policy(obs, 3)
     assert np.isfinite(policy(obs)).all()
+
+
+@pytest.mark.parametrize("call, needle", [
+    (lambda env, s: env.reset(), "missing a required argument: 'seeds'"),
+    (lambda env, s: env.step(s), "missing a required argument: 'action'"),
+    (lambda env, s: env.step(s, np.zeros((2, 2)), bogus=1), "unexpected keyword argument 'bogus'"),
+    (lambda env, s: env.reset(np.arange(2), bogus=1), "unexpected keyword argument 'bogus'"),
+    (lambda env, s: env.reset_to(), "missing a required argument: 'starts'"),
+    (lambda env, s: env.reset_where(s), "missing a required argument: 'mask'"),
+    (lambda env, s: __import__("mjx_pusht").make_backend("cpu", __import__("mjx_pusht").Scenario()).run(),
+     "CpuBackend.run(): missing a required argument: 'seeds'"),
+    (lambda env, s: gym.make_vec("mjx_pusht/PushT-v0", num_envs=2, backend="cpu").set_attr("success_threshold"),
+     "missing a required argument: 'values'"),
+    (lambda env, s: __import__("mjx_pusht").build_model(__import__("mjx_pusht").SceneSpec(), validate="no"),
+     "validate must be True or False"),
+])
+def test_public_methods_bind_their_arguments(call, needle):
+    """TRACEBACK (ninth pass, 12 tries): the functional env's reset/step/reset_to/reset_where, a backend's run and
+    the vector env's set_attr given a missing or unknown argument were Python's TypeError; SILENT: build_model's
+    validate="no" was taken as True."""
+    env = PushTEnv()
+    state = env.reset(np.arange(2))
+    with pytest.raises(MjxPushtError, match=needle.replace("(", r"\(").replace(")", r"\)")):
+        call(env, state)
+
+
+@pytest.mark.parametrize("flag", [["--success-threshold", "0.9"], ["--backend", "mjx-warp"], ["--reset", "easy"],
+                                  ["--goal", "random"], ["--no-root-cause"]])
+def test_compare_evals_refuses_the_settings_of_a_run(tmp_path, capsys, flag):
+    """SILENT (ninth pass, 6 tries): `compare --evals A B` took --success-threshold, --backend, --reset, --goal and
+    --no-root-cause and ignored them (the report was the same); it runs nothing, so they are refused."""
+    assert main(["compare", "--evals", str(tmp_path / "a"), str(tmp_path / "b"), *flag,
+                 "--out", str(tmp_path / "c")]) == 2
+    one_line(capsys, f"so {flag[0]} is not taken")
+    assert not (tmp_path / "c").exists()

@@ -36,6 +36,16 @@ class Backend:
     default_chunk: int = 16384
     buffer_info: dict | None = None  # MJX-Warp's buffers and growths
     warp_kernels: dict | None = None  # MJX-Warp's kernel set-up
+
+    def __init_subclass__(cls, **kwargs):
+        """Each backend's `run` and `submit` bind their arguments at the door (`api.keywords`): `run(bogus=1)` or
+        `run()` is one line naming what they take, not Python's TypeError."""
+        from mjx_pusht.api import keywords
+
+        super().__init_subclass__(**kwargs)
+        for name in ("run", "submit"):
+            if name in cls.__dict__:
+                setattr(cls, name, keywords(cls.__dict__[name]))
     collisions: dict = {}  # collision functions per pair kind, for the summary
     # True: `submit` returns at once and the device works while the host does (a sweep keeps two chunks in
     # flight); False: the work happens in `collect`

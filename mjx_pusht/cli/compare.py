@@ -17,6 +17,7 @@ def cmd_compare(args) -> int:
 
     if args.evals:
         return _compare_evals(args)
+    args.backend = args.backend or "mjx-jax"  # (None until here: --evals refuses one given)
     if not args.controller and (given := [f for f, v in (("--reset", args.reset), ("--max-steps", args.max_steps))
                                           if v is not None]):  # the open loop's nudge has its own starts and steps
         raise UsageError(f"{' and '.join(given)} set a controller's episodes: give --controller (expert: the task's "
@@ -78,7 +79,10 @@ def _compare_evals(args) -> int:
     if args.seeds is not None:
         raise UsageError("--evals pairs two finished evals; their seeds are theirs, so --seeds is not taken")
     given = [f for f, v in (("--max-steps", args.max_steps), ("--tolerance", args.tolerance),
-                            ("--iterations", args.iterations), ("--task", args.task != "chapter" or None)) if v]
+                            ("--iterations", args.iterations), ("--task", args.task != "chapter" or None),
+                            ("--backend", args.backend), ("--reset", args.reset), ("--goal", args.goal != "fixed" or None),
+                            ("--success-threshold", args.success_threshold), ("--no-root-cause", not args.root_cause or None))
+             if v is not None and v is not False]
     if given:  # the evals' own settings made their rows; nothing here runs
         raise UsageError(f"--evals pairs two finished evals and runs nothing, so {', '.join(given)} is not taken")
     from mjx_pusht.study.closed_loop import evals_report, write_report

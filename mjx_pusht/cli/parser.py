@@ -239,7 +239,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser("compare", help="CPU vs MJX fidelity report: compare.json, compare.md, compare.png")
     c.add_argument("--seeds", default=None, help="N, A:B or a,b,c (default 64; not with --evals: theirs)")
-    c.add_argument("--backend", default="mjx-jax", help="mjx-jax or mjx-warp (default mjx-jax); gym-pusht: gym-pusht "
+    c.add_argument("--backend", default=None, help="mjx-jax or mjx-warp (default mjx-jax); gym-pusht: gym-pusht "
                                                          "0.1.8 itself, for --task gym-pusht --controller C")
     c.add_argument("--out", type=ft.folder, default=Path("outputs/compare"),
                    help="the report's folder (default outputs/compare)")

@@ -235,6 +235,7 @@ class PushTEnv(Resets, Observes):
             carry = {**carry, "inv": {**carry["inv"], "finite": carry["inv"]["finite"] & ~reset}}
         return self._after(state, qpos, carry, np, qvel=worlds.qvel[-1])._replace(data=worlds)
 
+    @keywords  # a missing argument or an unknown keyword: one line naming what it takes
     def step(self, state: State, action) -> State:  # replaced by _step_mjx on MJX
         return self._step_cpu(state, action)
 

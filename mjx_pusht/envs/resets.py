@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from mjx_pusht import boundary, validate
+from mjx_pusht.api import keywords
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.envs import physics as per_episode
 from mjx_pusht.envs.starts import START_HI, START_LO, clear_of_tee
@@ -21,6 +22,7 @@ from mjx_pusht.task.reset import start_poses
 class Resets:
     """PushTEnv's resets (a mixin: the env's fields and backend are PushTEnv's)."""
 
+    @keywords  # a missing argument or an unknown keyword: one line naming what it takes
     def reset(self, seeds) -> State:
         """A fresh episode per seed, from the reset distribution's start pose for that seed."""
         seeds = validate.seed_array(seeds)
@@ -33,6 +35,7 @@ class Resets:
                  "reset fewer worlds at once")
         return self.reset_to(start_poses(seeds, reset=self.reset_kind), seeds, drawn=True)
 
+    @keywords  # a missing argument or an unknown keyword: one line naming what it takes
     def reset_to(self, starts, seeds=None, drawn: bool = False) -> State:
         """Episodes from given (N, 5) starts: tee x, y, yaw and pusher x, y (seeds key random controllers).
         A given start (not `drawn` by a reset distribution) must not put the pusher inside the T."""
@@ -109,6 +112,7 @@ class Resets:
         return State(data, carry, obs, xp.zeros(n, dtype=qpos.dtype), ep["done"] & ep["success"],
                      xp.zeros(n, dtype=bool), xp.zeros(n, dtype=xp.int32) + step, key, dropped, None, physics)
 
+    @keywords  # a missing argument or an unknown keyword: one line naming what it takes
     def reset_where(self, state: State, mask, seeds=None, starts=None) -> State:
         """`state` with the rows where `mask` holds started afresh (from `seeds`' start poses, or `starts`),
         every other row untouched: how a vector env resets the episodes that ended."""

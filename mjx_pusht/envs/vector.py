@@ -373,9 +373,11 @@ class PushTVectorEnv(Pictures, VectorEnv):
         value = attr(*args, **kwargs) if callable(attr) else attr
         return (value,) * self.num_envs
 
+    @keywords  # a missing argument or an unknown keyword: one line naming what it takes
     def get_attr(self, name: str) -> tuple:
         return self.call(name)
 
+    @keywords  # a missing argument or an unknown keyword: one line naming what it takes
     def set_attr(self, name: str, values) -> None:
         from mjx_pusht import boundary
 
