@@ -73,7 +73,7 @@ def test_a_gym_pusht_policys_calls_bind_their_arguments():
     (lambda env, s: env.reset_to(), "missing a required argument: 'starts'"),
     (lambda env, s: env.reset_where(s), "missing a required argument: 'mask'"),
     (lambda env, s: __import__("mjx_pusht").make_backend("cpu", __import__("mjx_pusht").Scenario()).run(),
-     "CpuBackend.run(): missing a required argument: 'seeds'"),
+     "CpuBackend.run() missing a required argument: 'seeds'"),
     (lambda env, s: gym.make_vec("mjx_pusht/PushT-v0", num_envs=2, backend="cpu").set_attr("success_threshold"),
      "missing a required argument: 'values'"),
     (lambda env, s: __import__("mjx_pusht").build_model(__import__("mjx_pusht").SceneSpec(), validate="no"),

@@ -36,6 +36,10 @@ class Backend:
     default_chunk: int = 16384
     buffer_info: dict | None = None  # MJX-Warp's buffers and growths
     warp_kernels: dict | None = None  # MJX-Warp's kernel set-up
+    collisions: dict = {}  # collision functions per pair kind, for the summary
+    # True: `submit` returns at once and the device works while the host does (a sweep keeps two chunks in
+    # flight); False: the work happens in `collect`
+    pipelined: bool = False
 
     def __init_subclass__(cls, **kwargs):
         """Each backend's `run` and `submit` bind their arguments at the door (`api.keywords`): `run(bogus=1)` or
@@ -46,10 +50,6 @@ class Backend:
         for name in ("run", "submit"):
             if name in cls.__dict__:
                 setattr(cls, name, keywords(cls.__dict__[name]))
-    collisions: dict = {}  # collision functions per pair kind, for the summary
-    # True: `submit` returns at once and the device works while the host does (a sweep keeps two chunks in
-    # flight); False: the work happens in `collect`
-    pipelined: bool = False
 
     @property
     def pusher(self) -> str:
