@@ -233,7 +233,7 @@ def fits(what: str, count: int, per: int, hint: str, error=ConfigError, measured
 def jax_cache(path=None):
     """The folder of XLA's compile cache (`path`, else $MJX_PUSHT_JAX_CACHE, else ~/.cache/mjx_pusht/jax), refused
     in one line where it or a folder above it is a file: checked before a command claims its --out (a file there was
-    a FileExistsError traceback once the run's .run.json was written)."""
+    a FileExistsError traceback once the run's .run.json was written), and made (one that cannot be is refused)."""
     from pathlib import Path
 
     given = path or os.environ.get("MJX_PUSHT_JAX_CACHE")
@@ -245,6 +245,11 @@ def jax_cache(path=None):
                               "made if missing) or unset it")
         if p.exists():
             break
+    try:  # made here, at the door: a folder that cannot be made (/proc/x, no permission) is one line, not a traceback
+        cache.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ConfigError(f"{where}: cannot make the folder {cache} ({e.strerror}): point it at a folder this user "
+                          "can write, or unset it") from None
     return cache
 
 
@@ -351,16 +356,22 @@ def attribute(env, name) -> None:
         raise UnknownAttribute(f"the vector env has no attribute {name!r}")
 
 
-def env_state(value, kind, backend: str) -> None:
-    """The functional env's `step` takes the State its `reset` or `step` returned (None was an AttributeError), from
-    an env of its own backend: a cpu State's worlds are MuJoCo C's, an MJX State's arrays (the other's was a raw
-    TypeError or AttributeError deep in the step)."""
+def env_state(value, kind, backend: str, env=None, what: str = "step") -> None:
+    """The functional env's `step` (and `reset_where`: `what`) takes the State its `reset` or `step` returned (None
+    was an AttributeError), from an env of its own backend: a cpu State's worlds are MuJoCo C's, an MJX State's arrays
+    (the other's was a raw TypeError or AttributeError deep in the step); of its own task and goal (`env`), as what
+    it observes says (a chapter env stepped a gym-pusht State in the wrong frame: the tenth hostile pass)."""
     if not isinstance(value, kind):
-        raise ConfigError(f"step takes the State that reset or step returned, got {_show(value)}")
+        raise ConfigError(f"{what} takes the State that reset or step returned, got {_show(value)}")
     on_cpu = type(value.data).__module__ == "mjx_pusht.backends.cpu"
     if on_cpu != (backend == "cpu"):
         raise ConfigError(f"this PushTEnv runs on {backend}, but the State came from "
                           f"{'a cpu' if on_cpu else 'an MJX'} env's reset or step: step each env's own States")
+    if env is not None and isinstance(value.obs, dict) and (
+            ("pusher_vel" in value.obs) != (env.scene.variant == "gym-pusht") or
+            ("goal" in value.obs) != (env.goal == "random")):
+        raise ConfigError(f"this PushTEnv is the {env.scene.variant} scene with a {env.goal} goal, but the State came "
+                          "from an env of another task or goal: step each env's own States")
 
 
 def check_gym_pusht_obs(obs, obs_type: str) -> None:

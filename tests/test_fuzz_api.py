@@ -10,6 +10,7 @@ pass or this fuzzer found (a traceback, or an input ignored or honoured wrongly)
 from __future__ import annotations
 
 import functools
+import os
 
 import gymnasium as gym
 import numpy as np
@@ -121,6 +122,56 @@ def test_mjx_buffer_sizes_that_are_no_size_are_refused_on_every_backend(kw):
 @functools.cache
 def _functional() -> PushTEnv:
     return PushTEnv()
+
+
+@functools.cache
+def _holders() -> dict:
+    """The objects a user holds, built once: the functional env and its state, an AutoReset and its state, a start
+    pool, a gym-pusht policy, a backend."""
+    from mjx_pusht import Scenario, make_backend
+    from mjx_pusht.envs.wrappers import AutoReset, StartPool
+    from mjx_pusht.train.gym_pusht_policy import GymPushtPolicy
+
+    env = PushTEnv()
+    auto = AutoReset(PushTEnv())
+    policy = "outputs/reports/train/ppo-state-gym-pusht-h200/seed-0/policy.msgpack"
+    return {"PushTEnv": (env, env.reset(np.arange(2))), "AutoReset": (auto, auto.reset(np.arange(2))),
+            "StartPool": (StartPool(env, 2, 2), None),
+            "GymPushtPolicy": (GymPushtPolicy(os.path.join(os.path.dirname(__file__), "..", policy)), None),
+            "Backend": (make_backend("cpu", Scenario()), None)}
+
+
+def _methods() -> list[str]:
+    """Their public methods, by their classes (nothing built to list them)."""
+    import inspect
+
+    from mjx_pusht.backends.cpu import CpuBackend
+    from mjx_pusht.envs.wrappers import AutoReset, StartPool
+    from mjx_pusht.train.gym_pusht_policy import GymPushtPolicy
+
+    classes = {"PushTEnv": PushTEnv, "AutoReset": AutoReset, "StartPool": StartPool, "GymPushtPolicy": GymPushtPolicy,
+               "Backend": CpuBackend}
+    return sorted(f"{k}.{n}" for k, c in classes.items() for n, m in inspect.getmembers(c)
+                  if not n.startswith("_") and inspect.isfunction(m))
+
+
+@FUZZ
+@given(method=st.sampled_from(_methods()), keyword=st.one_of(st.just("bogus"), st.text(min_size=1, max_size=5)),
+       value=ODD, with_state=st.booleans())
+@example(method="AutoReset.refill", keyword="bogus", value=1, with_state=True)  # tenth pass: Python's TypeError
+def test_every_public_method_refuses_a_keyword_it_does_not_take(method, keyword, value, with_state):
+    """Any public method of what a user holds, called with a keyword it does not take (its state first, or not):
+    the package's own one line, never Python's TypeError (each pass found one more method that had none)."""
+    import inspect
+
+    holder, name = method.split(".")
+    obj, state = _holders()[holder]
+    function = getattr(obj, name)
+    if keyword in inspect.signature(function).parameters:
+        return
+    args = [state] if with_state and state is not None else []
+    with pytest.raises(MjxPushtError):
+        function(*args, **{keyword: value})
 
 
 @FUZZ

@@ -64,7 +64,8 @@ GOOD = {  # a valid value per flag, drawn half the time, so that tries get past 
     "--frame-skip": ["5", "10"], "--video-episodes": ["1", "2"], "--video-size": ["32", "48"], "--batch": ["1", "2"],
     "--backend": ["cpu", "gym-pusht"], "--process-id": ["0"], "--coordinator": ["127.0.0.1:12345"],
     "--peer-timeout": ["1"]}
-OUTS = st.sampled_from(["fresh", "users", "link", "loop", "file", "root", "empty", "train", "train/eval", "train/checkpoints"])
+OUTS = st.sampled_from(["fresh", "users", "link", "loop", "file", "root", "empty", "train", "train/eval",
+                        "train/checkpoints", "finished"])
 VIDEOS = st.sampled_from([None, "fresh.gif", "users/picture.gif", "fresh.avi", "users", "link/new.gif", "train/v.gif"])
 _count = itertools.count()
 
@@ -96,13 +97,21 @@ def worlds(tmp_path_factory):
     root = tmp_path_factory.mktemp("worlds")
     (root / "ctl_fuzz.py").write_text(CONTROLLERS)
     sys.path.insert(0, str(root))
+    for command in BASE:  # a finished run of each command, copied into each try's world as its "finished" --out
+        if command != "tree":
+            with contextlib.redirect_stdout(io.StringIO()):
+                assert main([*BASE[command], "--out", str(root / f"finished-{command}")]) == 0
     yield root
     sys.path.remove(str(root))
 
 
-def _world(root):
-    """A user's folder (and a symlink to it, a loop, a file), and a train run's folder with its own eval/: made
-    afresh for every try, so that one try's files are never the next one's."""
+def _world(root, command: str):
+    """A user's folder (and a symlink to it, a loop, a file), a train run's folder with its own eval/, and a finished
+    run of `command`: made afresh for every try, so that one try's files are never the next one's."""
+    import shutil
+
+    if command != "tree":
+        shutil.copytree(root.parent / f"finished-{command}", root / "finished", symlinks=True)
     users = root / "users"
     (users / "data").mkdir(parents=True)
     (users / "notes.md").write_text("mine")
@@ -131,9 +140,11 @@ def _out(world, kind: str) -> tuple[str, str | None]:
     return {"root": "/", "empty": ""}.get(kind, str(world / kind)), None
 
 
-def _try(argv, world, owned: list[str], replaced: list[str]):
+def _try(argv, world, owned: list[str], replaced: list[str], finished: bool = False):
     """`argv` run, and the property checked: `owned` the paths it may add files under, `replaced` those whose
-    existing files it may change (a --video named with --replace)."""
+    existing files it may change (a --video named with --replace); `finished`: its --out holds a finished run of
+    its command, which only a run that ends with exit 0 may change (a rerun, or --replace: a failed one leaves the
+    earlier results as they were)."""
     before = snapshot(world)
     root_before = sorted(os.listdir("/"))
     err = io.StringIO()
@@ -147,6 +158,8 @@ def _try(argv, world, owned: list[str], replaced: list[str]):
     assert sorted(os.listdir("/")) == root_before, "a file was left in /"
     lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
     if code == 0:
+        owned, replaced = (owned + ["finished"], replaced + ["finished"]) if finished else (owned, replaced)
+
         def theirs(p, mine):
             return not any(p == o or p.startswith(o + "/") for o in mine)
 
@@ -184,8 +197,11 @@ def _try(argv, world, owned: list[str], replaced: list[str]):
 @example(command="eval", data=["--controller", "ctl_fuzz:osexit", "--out", "fresh"])  # a silent exit 0, no table
 @example(command="eval", data=["--controller", "ctl_fuzz:cplx", "--out", "fresh"])  # imaginary part dropped
 @example(command="eval", data=["--controller", "ctl_fuzz:as_list", "--out", "fresh"])  # refused as "shape None"
+@example(command="eval", data=["--replace", "--controller", "ctl_fuzz:raises", "--out", "finished"])  # tenth pass: the
+@example(command="sweep", data=["--replace", "--break", "bogus", "--out", "finished"])  # earlier results were lost
+@example(command="demos", data=["--replace", "--controller", "ctl_fuzz:nan", "--out", "finished"])
 def test_every_command_keeps_the_property(command, data, worlds):
-    world = _world(worlds / f"w{next(_count)}")
+    world = _world(worlds / f"w{next(_count)}", command)
     os.chdir(world)  # an --out of "" would write here
     if isinstance(data, list):  # an @example: flags as given, with --out's and --video's kinds
         flags, kinds = data, {}
@@ -217,4 +233,4 @@ def test_every_command_keeps_the_property(command, data, worlds):
                 owned.append(os.path.relpath(os.path.realpath(world / a), world))
             a = str(world / a)
         argv.append(a)
-    _try(argv, world, owned, replaced)
+    _try(argv, world, owned, replaced, finished=any(kinds.get(i) == "finished" for i in kinds))

@@ -97,8 +97,8 @@ def test_video_onto_an_existing_file_is_refused_unless_replace(tmp_path, capsys)
     video = tmp_path / "v.gif"
     video.write_bytes(b"a user's picture")
     args = [*RUNS["eval"], "--seeds", "1", "--video", str(video), "--video-size", "32"]
-    assert main([*args, "--out", str(tmp_path / "o")]) == 1
-    one_line(capsys, f"--video {video} already exists", "--replace")
+    assert main([*args, "--out", str(tmp_path / "o")]) == 1  # a user's file: never, so no hint to pass --replace
+    assert "--replace" not in one_line(capsys, f"--video {video} already exists", "no earlier eval")
     assert video.read_bytes() == b"a user's picture" and sorted(os.listdir(tmp_path)) == ["v.gif"]
     assert main([*args, "--out", str(tmp_path / "o"), "--replace"]) == 1  # no run wrote it: --replace or not
     one_line(capsys, f"--video {video} already exists", "no earlier eval")

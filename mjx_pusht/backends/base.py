@@ -12,6 +12,7 @@ import functools
 import importlib.metadata
 import platform
 
+from mjx_pusht.api import keyword_checked
 from mjx_pusht.backends.results import Rollouts
 from mjx_pusht.errors import MjxPushtError
 
@@ -42,14 +43,10 @@ class Backend:
     pipelined: bool = False
 
     def __init_subclass__(cls, **kwargs):
-        """Each backend's `run` and `submit` bind their arguments at the door (`api.keywords`): `run(bogus=1)` or
-        `run()` is one line naming what they take, not Python's TypeError."""
-        from mjx_pusht.api import keywords
-
+        """Each backend's public methods (`run`, `submit`, `close`, ...) bind their arguments at the door
+        (`api.keyword_checked`): `run(bogus=1)` or `run()` is one line naming what they take, not Python's TypeError."""
         super().__init_subclass__(**kwargs)
-        for name in ("run", "submit"):
-            if name in cls.__dict__:
-                setattr(cls, name, keywords(cls.__dict__[name]))
+        keyword_checked(cls)
 
     @property
     def pusher(self) -> str:
@@ -79,6 +76,9 @@ class Backend:
 
     def close(self) -> None:
         """Release worker processes and the like (nothing for most backends)."""
+
+
+keyword_checked(Backend)  # its own public methods too (collect, describe): __init_subclass__ wraps a subclass's
 
 
 def versions() -> dict[str, str]:

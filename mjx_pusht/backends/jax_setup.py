@@ -12,8 +12,7 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
 
     from mjx_pusht.boundary import jax_cache
 
-    cache = jax_cache(path)
-    cache.mkdir(parents=True, exist_ok=True)
+    cache = jax_cache(path)  # checked and made
     jax.config.update("jax_compilation_cache_dir", str(cache))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)

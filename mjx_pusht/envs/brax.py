@@ -46,6 +46,7 @@ with requires("the Brax adapter", "brax"):  # optional: say what to install, in 
     from brax.envs.wrappers import training as brax_training
 
 from mjx_pusht import validate
+from mjx_pusht.api import keywords
 from mjx_pusht.backends import actions as action_check
 from mjx_pusht.envs import physics as per_episode
 from mjx_pusht.envs.functional import PushTEnv
@@ -176,6 +177,10 @@ class BraxPushT(Env):
     @property
     def backend(self) -> str:
         return self.env.backend
+
+
+# an unknown keyword (`BraxPushT(bogus=1)`: the tenth hostile pass): one line naming the known ones
+BraxPushT.__init__ = keywords(BraxPushT.__init__)
 
 
 class FreshStartAutoReset(brax_training.Wrapper):

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from mjx_pusht import boundary, validate
-from mjx_pusht.api import keywords
+from mjx_pusht.api import keyword_checked, keywords
 from mjx_pusht.envs import physics as per_episode
 from mjx_pusht.envs.observation import Observes
 from mjx_pusht.envs.resets import Resets
@@ -215,7 +215,7 @@ class PushTEnv(Resets, Observes):
 
     def _step_cpu(self, state: State, action) -> State:
         """The batch's control step on MuJoCo C: the same episode.py functions on NumPy arrays."""
-        boundary.env_state(state, State, self.backend)
+        boundary.env_state(state, State, self.backend, self)
         return self._step_checked(state, validate.actions(action, (len(state.step), 2), -np.inf, np.inf))
 
     def _step_checked(self, state: State, action: np.ndarray) -> State:
@@ -260,7 +260,7 @@ class PushTEnv(Resets, Observes):
         import jax
         import jax.numpy as jnp
 
-        boundary.env_state(state, State, self.backend)
+        boundary.env_state(state, State, self.backend, self)
         action = jnp.asarray(action)
         validate.actions_shape_on_device(action, len(state.step))  # (n, 2), never reshaped; traced too
         if not isinstance(action, jax.core.Tracer):
@@ -280,5 +280,5 @@ class PushTEnv(Resets, Observes):
         return state
 
 
-# an unknown keyword (`PushTEnv.for_task('gym-pusht', bogus=1)`): one line naming the known ones
-PushTEnv.__init__ = keywords(PushTEnv.__init__)
+# an unknown keyword (`PushTEnv.for_task('gym-pusht', bogus=1)`, any public method's): one line naming the known ones
+keyword_checked(PushTEnv)

@@ -4,10 +4,12 @@ pusher velocity, and obs["pixels"] (rendered inside the jitted step on MJX, by M
 
 from __future__ import annotations
 
+from mjx_pusht.api import keyword_checked
 from mjx_pusht.envs.state import State
 from mjx_pusht.task.rules import observe
 
 
+@keyword_checked  # every public method: an unknown keyword is one line naming the known ones
 class Observes:
     """PushTEnv's observations (a mixin: the env's fields and backend are PushTEnv's)."""
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from mjx_pusht import boundary, validate
-from mjx_pusht.api import keywords
+from mjx_pusht.api import keyword_checked, keywords
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.envs import physics as per_episode
 from mjx_pusht.envs.starts import START_HI, START_LO, clear_of_tee
@@ -19,6 +19,7 @@ from mjx_pusht.task.episode import begin
 from mjx_pusht.task.reset import start_poses
 
 
+@keyword_checked  # every public method: an unknown keyword is one line naming the known ones
 class Resets:
     """PushTEnv's resets (a mixin: the env's fields and backend are PushTEnv's)."""
 

@@ -39,7 +39,7 @@ import numpy as np
 
 from mjx_pusht import boundary
 from mjx_pusht import validate
-from mjx_pusht.api import keywords
+from mjx_pusht.api import keyword_checked, keywords
 from mjx_pusht.envs import physics as per_episode
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.controllers import seed_key
@@ -50,6 +50,7 @@ from mjx_pusht.task.rules import coverage
 MODES = ("same_step", "next_step")
 
 
+@keyword_checked  # every public method: an unknown keyword is one line naming the known ones
 class StartPool:
     """Each row's next `depth` episode seeds, their start qpos and keys: host bookkeeping for AutoReset."""
 
@@ -119,6 +120,7 @@ class StartPool:
         return out if self.physics is None else out | {"pool_physics": xp.asarray(self.physics.astype(dtype))}
 
 
+@keyword_checked
 class AutoReset:
     """Resets the episodes that ended, on the device, inside the step (see the module's docstring)."""
 
@@ -131,6 +133,9 @@ class AutoReset:
         # the pool's depth, checked at construction (StartPool checked it only at the first reset: depth=0 was taken)
         self.env, self.mode, self.depth = env, mode, boundary.Int(1, 1 << 20)("AutoReset's depth", depth)
         self.final_pixels = boundary.Flag()("final_pixels", final_pixels)  # "no" was taken as True
+        if self.final_pixels and not env.pixels:  # it meant nothing there, and was taken without a word
+            raise ConfigError("final_pixels=True keeps an ended episode's last image, but this env draws none "
+                              "(PushTEnv(pixels=0)): give the env pixels, or leave final_pixels out")
         # the new episodes' first images from the pool (one render a step), where two would be needed
         self.image_pool = boundary.Flag()("image_pool", image_pool)
         self._put_images: dict = {}

@@ -9,6 +9,8 @@ import threading
 from pathlib import Path
 
 from mjx_pusht.errors import MjxPushtError
+from mjx_pusht.io.own import BOOKKEEPING, INSIDE, OWN, RESULTS, RUN_FILE, owns, remove_own
+from mjx_pusht.io.replace import ASIDE, remember_run_file, set_aside, settle
 
 
 class OutputError(MjxPushtError, OSError):
@@ -128,43 +130,13 @@ def read_table(path: Path) -> dict:
     return {name: table.column(name).to_numpy() for name in table.column_names}
 
 
-# What a folder's finished results are, by the file each command writes last (a folder from before the run
-# file existed is known by these names).
-RESULTS = {"per_seed.parquet": "sweep", "per_episode.parquet": "eval", "metrics.json": "scene",
-           "compare.json": "compare", "compare_episodes.json": "compare", "policy.msgpack": "train"}
-RUN_FILE = ".run.json"  # which command, and which seeds and settings, the folder's results are from
-# Every name each command writes in its --out: what --replace may remove, and never anything else. A rerun
-# of the same command replaces its own results; another command's results are never touched.
-OWN = {
-    "sweep": ("per_seed.parquet", "summary.json", "sweep.rrd", "audit_cpu.parquet", ".parts"),
-    "eval": ("per_episode.parquet", "summary.json", "eval.rrd", ".parts"),
-    "scene": ("metrics.json", "scene.rrd", "walk.rrd"),
-    "compare": ("compare.json", "compare.md", "compare.png", "compare_episodes.json", "compare_episodes.md"),
-    "train": ("policy.msgpack", "summary.json", "first_fits.json", "curve.csv", "curve.png", "train.rrd",
-              "checkpoints", "eval"),
-    "demos": ("data", "meta", ".demos-partial"),
-}
-# the run file, and the lock file runs of earlier versions left (the lock is now the OS's, on the folder itself)
-BOOKKEEPING = (RUN_FILE, ".lock")
-# Inside the folders a command writes, the files it puts there: a file matching none of these is a user's, and no
-# command removes it (a user's data/mine.txt in demos' data/ stays, and the folder is refused).
-_DATASET = ("data/chunk-*/file-*.parquet", "meta/info.json", "meta/stats.json", "meta/tasks.parquet",
-            "meta/episodes/chunk-*/file-*.parquet")
-INSIDE = {
-    ".parts": ("manifest.json", "seeds-*.parquet"),
-    "checkpoints": ("policy_*.msgpack", "resume.msgpack", "resume-ring-*.f32"),
-    "eval": (*OWN["eval"][:-1], *(f".parts/{p}" for p in ("manifest.json", "seeds-*.parquet")), *BOOKKEEPING),
-    "data": tuple(p.removeprefix("data/") for p in _DATASET if p.startswith("data/")),
-    "meta": tuple(p.removeprefix("meta/") for p in _DATASET if p.startswith("meta/")),
-    ".demos-partial": _DATASET,
-}
 _HELD: dict[Path, int] = {}  # folders this process has locked, and the descriptors holding their locks
 _CREATED: dict[Path, list] = {}  # --out folders this process made, and the folders it made above them
 _CLAIMS: dict[Path, str] = {}  # folders whose run file this process wrote where there was none, and its command
 
 
 def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool = False, reads=(),
-                  share: bool = False, check=None) -> Path:
+                  share: bool = False, check=None, writes=()) -> Path:
     """Make `path` this run's folder: writable, locked against a second run, and holding no results of another
     command, nor of this command with other seeds or settings unless `replace` says to drop those, nor files
     no run of this command wrote unless `share` says to write beside them.
@@ -175,7 +147,8 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
     seeds and settings may overwrite its own results. A name this command writes (demos' data/, sweep's .parts)
     that holds a file it did not write is refused whatever the flags: writing there would mix or remove it.
 
-    `check(path, same)`: the command's own refusals (`same`: the folder's run file is this command's, with these
+    `writes`: files the run writes in `path` besides its own names (eval's --video, checked by its own rule: a
+    file there is an earlier eval's of this folder), not strays. `check(path, same)`: the command's own refusals (`same`: the folder's run file is this command's, with these
     seeds and settings), run after these and before the run file is written: a refused run changes nothing."""
     import hashlib
 
@@ -194,7 +167,7 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
                 else f"files {command} does not write"
             raise OutputError(f"--out {path} holds {what} ({', '.join(foreign)}); {command} never removes or "
                               "overwrites another command's results, whatever the flags: choose another --out")
-    strays = stray_files(path, command)
+    strays = [s for s in stray_files(path, command) if (path / s).resolve() not in {Path(w).resolve() for w in writes}]
     # this command's names, not written by a run of it here (no run file of its own): a user's data/, .parts, eval/
     taken = [n for n in OWN[command] if who != command and (os.path.lexists(path / n))]
     mixed = taken + [s for s in strays if s.split("/")[0] in OWN[command] and s.split("/")[0] not in taken]
@@ -211,12 +184,13 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
     _refuse_to_remove_inputs(path, command, reads)  # this run writes over its own files: none may be an input
     if check is not None:  # before --replace removes anything and before the run file: a refused run changes nothing
         check(path, who == command and owner.get("fingerprint") == mine["fingerprint"])
-    if other:
-        for name in OWN[command]:
-            remove_own(path / name)
-        print(f"--replace: removed the earlier {command} results in {path} ({', '.join(held)})")
+    if other:  # set aside, not removed, until this run finishes (replace.py): a failed run puts them back
+        set_aside(path, command)
+        print(f"--replace: the earlier {command} results in {path} ({', '.join(held)}) are set aside until this run "
+              "finishes")
     if not (path / RUN_FILE).exists():
         _CLAIMS[path.resolve()] = command
+    remember_run_file(path)
     atomic_write_json(path / RUN_FILE, mine)
     return path
 
@@ -256,18 +230,6 @@ def _listed(names: list[str], most: int = 6) -> str:
     return ", ".join(names[:most]) + (f" and {len(names) - most} more" if len(names) > most else "")
 
 
-def _owns(rel: str, patterns) -> bool:
-    """Whether `rel` (a path inside a folder, with /) is one of `patterns`, or an atomic write's leftover of one."""
-    import fnmatch
-    import posixpath
-
-    for p in patterns:
-        head, base = posixpath.split(p)
-        if fnmatch.fnmatchcase(rel, p) or fnmatch.fnmatchcase(rel, posixpath.join(head, f".{base}.*.tmp")):
-            return True
-    return False
-
-
 def stray_files(path: Path, command: str) -> list[str]:
     """What `path` holds that `command` never writes: files and folders by their path inside it (a folder that is
     not one of the command's is named whole, with a trailing /, and not looked into)."""
@@ -277,34 +239,13 @@ def stray_files(path: Path, command: str) -> list[str]:
     for root, dirs, files in os.walk(path):
         rel = Path(root).relative_to(path)
         for d in list(dirs):
-            if os.path.islink(Path(root) / d) or (rel == Path(".") and d not in OWN[command]):
+            if rel == Path(".") and d == ASIDE and not os.path.islink(path / d):  # --replace's (replace.py)
+                dirs.remove(d)
+            elif os.path.islink(Path(root) / d) or (rel == Path(".") and d not in OWN[command]):
                 dirs.remove(d)
                 strays.append((rel / d).as_posix() + "/")
-        strays += [f for f in ((rel / f).as_posix() for f in files) if not _owns(f, patterns)]
+        strays += [f for f in ((rel / f).as_posix() for f in files) if not owns(f, patterns)]
     return sorted(strays)
-
-
-def remove_own(p: Path) -> None:
-    """Remove a file a command writes, or the files of one of its folders that it writes there (`INSIDE`), and the
-    folders they leave empty; anything else in it stays."""
-    p = Path(p)
-    if p.is_symlink() or not p.is_dir():
-        p.unlink(missing_ok=True)
-        return
-    for root, dirs, files in os.walk(p, topdown=False):
-        rel = Path(root).relative_to(p)
-        for f in files:
-            if _owns((rel / f).as_posix(), INSIDE.get(p.name, ())):
-                (Path(root) / f).unlink()
-        for d in dirs:
-            try:
-                (Path(root) / d).rmdir()
-            except OSError:  # it holds something this command did not write
-                pass
-    try:
-        p.rmdir()
-    except OSError:
-        pass
 
 
 def _results_in(path: Path) -> list[str]:
@@ -378,6 +319,7 @@ class held_folders:
     def __exit__(self, kind, exc, tb):
         for key in set(_HELD) - self.before:
             os.close(_HELD.pop(key))
+            settle(key, exc is None and not self.failed)
             command, parts = _CLAIMS.pop(key, None), key / ".parts"
             if exc is None and not self.failed:
                 continue

@@ -40,11 +40,12 @@ def check_path(path: Path, replace: bool = False, out: Path | None = None) -> Pa
         raise VideoError(f"cannot write the video: folder {parent} does not exist")
     if path.is_dir():
         raise VideoError(f"--video {path} is a folder; give a file name such as {path / 'episodes'}{path.suffix}")
-    if os.path.lexists(path) and not replace:
-        raise VideoError(f"--video {path} already exists; pass --replace to overwrite it, or give another name")
+    # a user's file first: "pass --replace" is said only where --replace would overwrite it (the tenth pass)
     if out is not None and os.path.lexists(path) and not wrote(out, path):
         raise VideoError(f"--video {path} already exists and no earlier eval into {out} wrote it; a file no run "
                          "wrote is never overwritten, whatever the flags: give another name")
+    if os.path.lexists(path) and not replace:
+        raise VideoError(f"--video {path} already exists; pass --replace to overwrite it, or give another name")
     from mjx_pusht.io.outputs import RUN_FILE
 
     if out is not None and (parent / RUN_FILE).exists() and parent.resolve() != Path(out).resolve():

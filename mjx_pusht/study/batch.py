@@ -31,7 +31,7 @@ class Clock:
 
 
 def start_batch(command: str, out, seeds, name: str, why: str, config: dict, scenario, *, replace: bool = False,
-                resume: bool = False, check: bool = True, reads=(), share: bool = False):
+                resume: bool = False, check: bool = True, reads=(), share: bool = False, writes=()):
     """What every batch command does before its first row: the rows, a writable `out` that holds no
     other unfinished run (nor, replaced, a file in `reads`), the banner, and the backend (which compiles the
     scene and checks its tree). Returns (row seeds, their parameter combinations, out, banner, clock, backend)."""
@@ -61,7 +61,7 @@ def start_batch(command: str, out, seeds, name: str, why: str, config: dict, sce
 
     if check:  # with several processes, process 0 checks, locks (and clears) the folder for all
         claim_out_dir(out, command, fingerprint(row_seeds, config), replace=replace, reads=reads, share=share,
-                      check=resumable)
+                      check=resumable, writes=writes)
     banner = Banner(command)
     print(f"backend: {name} ({why})")
     clock = Clock()

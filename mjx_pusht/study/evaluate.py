@@ -68,7 +68,7 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
     reads = [spec.removeprefix("policy:")] if spec.startswith("policy:") else []  # never replaced by this run
     row_seeds, combos, out, banner, clock, backend = start_batch("eval", out, seeds, name, why, config, scenario,
                                                                  replace=replace, resume=resume, reads=reads,
-                                                                 share=share)
+                                                                 share=share, writes=[video] if video else [])
     print(f"controller: {describe(controller)}; task: {task}; reset: {reset}; {len(seeds)} episodes of at most "
           f"{max_steps} control steps x {frame_skip} physics steps; device: {backend.device}; "
           f"pusher shape: {backend.pusher}")

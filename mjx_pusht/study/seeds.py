@@ -18,12 +18,13 @@ class SeedSpecError(MjxPushtError, ValueError):
 MAX_SEEDS = 1 << 30
 
 
-def _int(text: str, spec: str) -> int:
+def _int(text: str, spec: str, end: bool = False) -> int:
+    """A seed of `spec`; `end`: a range's end, which is past its last seed (so 2**63 reaches the last legal one)."""
     try:
         value = int(text.strip())
     except ValueError:
         raise SeedSpecError(f"malformed --seeds {spec!r}: {text.strip()!r} is not an integer") from None
-    if value < 0 or value > MAX_SEED:
+    if value < 0 or value > MAX_SEED + end:
         raise SeedSpecError(f"malformed --seeds {spec!r}: seeds are integers from 0 to 2**63-1, got {value}")
     return value
 
@@ -37,11 +38,11 @@ def parse_seeds(spec: str) -> np.ndarray:
         parts = spec.split(":")
         if len(parts) != 2:
             raise SeedSpecError(f"malformed --seeds {spec!r}: a range is A:B")
-        lo, hi = _int(parts[0], spec), _int(parts[1], spec)
+        lo, hi = _int(parts[0], spec), _int(parts[1], spec, end=True)
         if hi <= lo:
             raise SeedSpecError(f"--seeds {spec!r} is an empty range: B must be greater than A")
         _check_count(hi - lo, spec)
-        return np.arange(lo, hi, dtype=np.int64)
+        return np.arange(hi - lo, dtype=np.int64) + np.int64(lo)  # hi itself may be 2**63, past int64
     if "," in spec:
         seeds = np.array([_int(p, spec) for p in spec.split(",")], dtype=np.int64)
         if len(np.unique(seeds)) != len(seeds):

@@ -105,8 +105,16 @@ def check_resumable(out: Path, seeds: np.ndarray, config: dict, resume: bool) ->
 
 
 def _is_out_of_memory(e: BaseException) -> bool:
+    """A device's memory error (retried at half the chunk); never a user's controller's own error, and "oom" only
+    as a word (a controller's "boom" was retried seven times as out of memory: the tenth hostile pass)."""
+    import re
+
+    from mjx_pusht.task.controller_base import ControllerError
+
     text = str(e).lower()
-    return any(k in text for k in ("resource_exhausted", "out of memory", "failed to allocate", "oom"))
+    return not isinstance(e, ControllerError) and (
+        any(k in text for k in ("resource_exhausted", "out of memory", "failed to allocate")) or
+        re.search(r"\boom\b", text) is not None)
 
 
 def _stop_at_failed_write(written: list, parts: Path) -> None:

@@ -42,6 +42,8 @@ class GymPushtPolicy:
 
         from mjx_pusht.train.policy import load_policy
 
+        if validate.seed(seed) is None:  # reset(seed=None) keeps the key; the policy's own seed is one (was numpy's TypeError)
+            raise ControllerError("seed must be an integer from 0 to 2**63-1, got None (reset(seed=None) keeps it)")
         if not isinstance(path, (str, os.PathLike)):
             raise ControllerError(f"path must be a policy file's path (a str or a Path), got {type(path).__name__}")
         self.controller = load_policy(f"policy:{path}")
