@@ -27,7 +27,8 @@ def success_arg(p: argparse.ArgumentParser) -> None:
                         "task's own, 0.95; ManiSkill's PushT scores at 0.9)")
 
 
-REPLACE_HELP = "overwrite --out even if it holds another command's, or other seeds' or settings', finished results"
+REPLACE_HELP = ("overwrite this command's finished results of other seeds or settings in --out (set aside until this run "
+                "finishes; a run that fails puts them back); another command's results are never overwritten")
 SHARE_HELP = ("write into an --out that holds files this command did not write (they are left alone; by default such "
               "an --out is refused)")
 
