@@ -76,11 +76,12 @@ from mjx_pusht.scenario import Scenario
 from mjx_pusht.api import (build_model, check_tree, gap_deviation, read_tree, scene_xml, start_pose, start_poses,
                            stayed_rigid, weld_gap)
 from mjx_pusht.api import keywords as _keywords
+from mjx_pusht.task.episode import Episode as _Episode
 from mjx_pusht.task.schedule import Schedule
 
 # The exported constructors and functions bind their arguments at the door: a keyword they do not take, a missing
 # argument or one given twice is one line naming what they take (api.keywords), not Python's TypeError traceback.
-for _cls in (Scenario, SceneSpec, Schedule):
+for _cls in (Scenario, SceneSpec, Schedule, _Episode):  # Episode: the functional env's, documented there
     _cls.__init__ = _keywords(_cls.__init__)
 resolve, make_backend = _keywords(resolve), _keywords(make_backend)
 from mjx_pusht.train.controller import register_policy as _register_policy

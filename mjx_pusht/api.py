@@ -58,7 +58,7 @@ def _bind(function, args, kwargs, where: str | None = None):
     except TypeError as e:
         takes = [n for n, p in signature.parameters.items() if n not in ("self", "cls") and p.kind != p.VAR_KEYWORD]
         # in Python's own words ("X() got an unexpected keyword argument 'y'": torchrl's GymEnv retries on them)
-        raise KeywordError(f"{where or function.__qualname__ + '()'} {e}; it takes {', '.join(takes)}") from None
+        raise KeywordError(f"{where or function.__qualname__ + '()'} {e}; it takes {', '.join(takes) or 'no arguments'}") from None
     return bound.args, bound.kwargs
 
 

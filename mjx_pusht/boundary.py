@@ -356,24 +356,6 @@ def attribute(env, name) -> None:
         raise UnknownAttribute(f"the vector env has no attribute {name!r}")
 
 
-def env_state(value, kind, backend: str, env=None, what: str = "step") -> None:
-    """The functional env's `step` (and `reset_where`: `what`) takes the State its `reset` or `step` returned (None
-    was an AttributeError), from an env of its own backend: a cpu State's worlds are MuJoCo C's, an MJX State's arrays
-    (the other's was a raw TypeError or AttributeError deep in the step); of its own task and goal (`env`), as what
-    it observes says (a chapter env stepped a gym-pusht State in the wrong frame: the tenth hostile pass)."""
-    if not isinstance(value, kind):
-        raise ConfigError(f"{what} takes the State that reset or step returned, got {_show(value)}")
-    on_cpu = type(value.data).__module__ == "mjx_pusht.backends.cpu"
-    if on_cpu != (backend == "cpu"):
-        raise ConfigError(f"this PushTEnv runs on {backend}, but the State came from "
-                          f"{'a cpu' if on_cpu else 'an MJX'} env's reset or step: step each env's own States")
-    if env is not None and isinstance(value.obs, dict) and (
-            ("pusher_vel" in value.obs) != (env.scene.variant == "gym-pusht") or
-            ("goal" in value.obs) != (env.goal == "random")):
-        raise ConfigError(f"this PushTEnv is the {env.scene.variant} scene with a {env.goal} goal, but the State came "
-                          "from an env of another task or goal: step each env's own States")
-
-
 def check_gym_pusht_obs(obs, obs_type: str) -> None:
     """A gym-pusht observation for a policy: obs_type "state", 5 finite numbers ([agent x, y, block x, y, angle]);
     "pixels_agent_pos", {"pixels": (H, W, 3) uint8, "agent_pos": 2 finite numbers}. A random goal's observation

@@ -133,9 +133,9 @@ def test_a_functional_env_takes_only_its_own_tasks_states():
     chapter, gym_pusht = PushTEnv(backend="cpu"), PushTEnv.for_task("gym-pusht")
     for env, other in ((chapter, gym_pusht), (gym_pusht, chapter)):
         state = other.reset(np.arange(2))
-        with pytest.raises(MjxPushtError, match="came from an env of another task or goal"):
+        with pytest.raises(MjxPushtError, match="came from an env of another scene, task, goal"):
             env.step(state, np.zeros((2, 2)))
-        with pytest.raises(MjxPushtError, match="came from an env of another task or goal"):
+        with pytest.raises(MjxPushtError, match="came from an env of another scene, task, goal"):
             env.reset_where(state, np.array([True, False]), np.arange(1))
         assert np.isfinite(other.step(state, np.zeros((2, 2))).reward).all()  # its own env steps it
     with pytest.raises(MjxPushtError, match="reset_where takes the State that reset or step returned, got None"):

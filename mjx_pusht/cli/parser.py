@@ -65,9 +65,20 @@ def _randomize(text: str) -> dict:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
+class _Once(argparse.Action):
+    """A flag whose one value names several things (--randomize's parameters): a second one is refused, not taken
+    over the first (the eleventh pass: `--randomize tee_mass=0.5:2 --randomize kv=0.9:1.1` drew kv alone)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if getattr(namespace, self.dest) is not None:
+            raise argparse.ArgumentError(self, "given twice: give it once, its parameters comma-separated "
+                                               "(e.g. tee_mass=0.5:2,kv=0.8:1.2)")
+        setattr(namespace, self.dest, values)
+
+
 def randomize_arg(p: argparse.ArgumentParser) -> None:
     """--randomize: physics drawn per episode from its seed (eval, sweep, train)."""
-    p.add_argument("--randomize", type=_randomize, default=None, metavar="NAME=LO:HI,...",
+    p.add_argument("--randomize", type=_randomize, default=None, action=_Once, metavar="NAME=LO:HI,...",
                    help="draw physics per episode from its seed: scale factors on the task's own values, uniform in "
                         "[LO, HI] (LO = HI: fixed). chapter: tee_mass, tee_damping, tee_frictionloss, kv; gym-pusht: "
                         "kp, kv (e.g. tee_mass=0.5:2,kv=0.8:1.2)")

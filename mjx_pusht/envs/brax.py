@@ -130,6 +130,9 @@ class BraxPushT(Env):
         return State(pipeline_state=s, obs=obs, reward=reward, done=done, metrics=metrics, info=pipeline_info)
 
     def reset(self, rng: jax.Array) -> State:
+        if not (isinstance(rng, jax.Array) or isinstance(rng, np.ndarray) and rng.dtype == np.uint32):
+            # one key, as Brax's trainers hand it ('x' was JAX's own TypeError on key data: the eleventh pass)
+            raise ConfigError(f"reset takes a JAX random key (jax.random.PRNGKey(seed)), got {type(rng).__name__}")
         i = jax.random.randint(rng, (), 0, self.table)
         s = self.env.fresh_one(self._d0, self._qpos[i], self._keys[i],
                                physics=None if self._physics is None else self._physics[i])

@@ -38,7 +38,7 @@ from mjx_pusht.envs import physics as per_episode
 from mjx_pusht.envs.observation import Observes
 from mjx_pusht.envs.resets import Resets
 from mjx_pusht.envs.starts import episode_with_goal
-from mjx_pusht.envs.state import State
+from mjx_pusht.envs.state import State, check_state
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.model.layout import QposLayout
 from mjx_pusht.model.scene import SceneSpec
@@ -215,7 +215,7 @@ class PushTEnv(Resets, Observes):
 
     def _step_cpu(self, state: State, action) -> State:
         """The batch's control step on MuJoCo C: the same episode.py functions on NumPy arrays."""
-        boundary.env_state(state, State, self.backend, self)
+        check_state(state, self.backend, self)
         return self._step_checked(state, validate.actions(action, (len(state.step), 2), -np.inf, np.inf))
 
     def _step_checked(self, state: State, action: np.ndarray) -> State:
@@ -260,7 +260,7 @@ class PushTEnv(Resets, Observes):
         import jax
         import jax.numpy as jnp
 
-        boundary.env_state(state, State, self.backend, self)
+        check_state(state, self.backend, self)
         action = jnp.asarray(action)
         validate.actions_shape_on_device(action, len(state.step))  # (n, 2), never reshaped; traced too
         if not isinstance(action, jax.core.Tracer):

@@ -108,6 +108,7 @@ class PushTGymEnv(OneWorld, Pictures, gym.Env):
         self._state = None
         self._open_window()
 
+    @keywords  # (not step: the hot path, where gymnasium's wrappers meet a stray keyword first)
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         seed = validate.seed(seed)
         options = validate.reset_options(options, ("reset_to_state",), type(self).__name__)
@@ -163,6 +164,7 @@ class PushTGymEnv(OneWorld, Pictures, gym.Env):
             warn_broken(info)
         return info | physics.info(self._env, None if s.physics is None else s.physics[0])
 
+    @keywords
     def render(self):
         """rgb_array: the picture; human: shown in the window (None); no render_mode: None."""
         if self.render_mode is None:

@@ -266,6 +266,7 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
         self._state, self._last_action, self._seed = None, None, -1
         self._open_window()
 
+    @keywords  # (not step: the hot path, where gymnasium's wrappers meet a stray keyword first)
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         seed = validate.seed(seed)
         options = validate.reset_options(options, ("reset_to_state",), type(self).__name__)
@@ -316,6 +317,7 @@ class GymPushTEnv(OneWorld, Pictures, base.gym.Env):
             warn_broken(info)
         return obs, info | physics.info(self._env, None if s.physics is None else s.physics[0])
 
+    @keywords
     def render(self):
         """rgb_array: the picture (with gym-pusht's cross at the last target); human: shown in the window."""
         if self.render_mode is None:

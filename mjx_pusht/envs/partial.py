@@ -15,10 +15,9 @@ from mjx_pusht.task.reset import start_poses
 def reset_where(env, state, mask, seeds=None, starts=None):
     """`state` with the rows where `mask` holds started afresh (from `seeds`' start poses, or `starts`),
     every other row untouched."""
-    from mjx_pusht import boundary
-    from mjx_pusht.envs.state import State
+    from mjx_pusht.envs.state import check_state
 
-    boundary.env_state(state, State, env.backend, env, what="reset_where")  # not a State: was an AttributeError
+    check_state(state, env.backend, env, what="reset_where")  # not a State: was an AttributeError
     mask = validate.mask(mask, len(state.step), "mask")
     rows = np.flatnonzero(mask)
     if not len(rows):

@@ -14,7 +14,7 @@ from gymnasium.vector.utils import batch_space
 
 from mjx_pusht.task import goals
 from mjx_pusht import validate
-from mjx_pusht.api import keywords
+from mjx_pusht.api import keyword_checked, keywords
 from mjx_pusht.boundary import BYTES_PER_CPU_ENV, MAX_ENVS, fits
 from mjx_pusht.envs import physics
 from mjx_pusht.envs.common import (
@@ -41,6 +41,7 @@ def _jnp():
     return jnp
 
 
+@keyword_checked  # reset, step, render too (the eleventh pass: reset(foo=1) was a TypeError)
 class PushTVectorEnv(Pictures, VectorEnv):
     """N PushT episodes stepped as one batch on any backend (`auto`: MJX-Warp on a GPU, else MuJoCo C).
 

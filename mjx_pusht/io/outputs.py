@@ -190,7 +190,7 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
               "finishes")
     if not (path / RUN_FILE).exists():
         _CLAIMS[path.resolve()] = command
-    remember_run_file(path)
+    remember_run_file(path, command)
     atomic_write_json(path / RUN_FILE, mine)
     return path
 
@@ -203,9 +203,10 @@ def _owner(path: Path) -> tuple[list[str], dict]:
         if not isinstance(owner, dict):
             raise ValueError(RUN_FILE)
     except (OSError, ValueError):
-        # results from before the run file existed are known by their name, chunks by their manifest (whose
-        # seeds and settings the resume check compares); a lone summary.json by nobody
-        owner = {"command": next((RESULTS[n] for n in held if n in RESULTS), None) or _chunks_command(path)}
+        # chunks are known by their manifest (whose seeds and settings the resume check compares); results with
+        # no run file by nobody: a user's lone per_episode.parquet was taken for an eval's and overwritten (the
+        # eleventh pass), so it is refused as files no run wrote
+        owner = {"command": _chunks_command(path)}
     return held, owner
 
 
@@ -232,19 +233,21 @@ def _listed(names: list[str], most: int = 6) -> str:
 
 def stray_files(path: Path, command: str) -> list[str]:
     """What `path` holds that `command` never writes: files and folders by their path inside it (a folder that is
-    not one of the command's is named whole, with a trailing /, and not looked into)."""
+    not one of the command's is named whole, with a trailing /, and not looked into). Inside `.replaced/` (--replace's
+    earlier results, replace.py) the same: a user's file there is a stray, as anywhere else."""
     patterns = (*BOOKKEEPING, *(n for n in OWN[command] if n not in INSIDE),
                 *(f"{n}/{p}" for n in OWN[command] if n in INSIDE for p in INSIDE[n]))
     strays = []
     for root, dirs, files in os.walk(path):
         rel = Path(root).relative_to(path)
+        inner = Path(*rel.parts[1:]) if rel.parts[:1] == (ASIDE,) else rel  # the same names, set aside
         for d in list(dirs):
-            if rel == Path(".") and d == ASIDE and not os.path.islink(path / d):  # --replace's (replace.py)
-                dirs.remove(d)
-            elif os.path.islink(Path(root) / d) or (rel == Path(".") and d not in OWN[command]):
+            if rel == Path(".") and d == ASIDE and not os.path.islink(path / d):
+                continue
+            if os.path.islink(Path(root) / d) or (inner == Path(".") and d not in OWN[command]):
                 dirs.remove(d)
                 strays.append((rel / d).as_posix() + "/")
-        strays += [f for f in ((rel / f).as_posix() for f in files) if not owns(f, patterns)]
+        strays += [(rel / f).as_posix() for f in files if not owns((inner / f).as_posix(), patterns)]
     return sorted(strays)
 
 

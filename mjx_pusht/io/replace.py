@@ -20,12 +20,14 @@ ASIDE = ".replaced"  # inside --out: the earlier results, laid out as they were
 _PENDING: dict[Path, str] = {}  # folders whose results this process set aside, and the command
 _SAID: dict[Path, str] = {}  # what became of them, for the interrupted line (commands.kept)
 _RUN_FILES: dict[Path, bytes] = {}  # the run file a claim wrote over: a run that fails puts it back
+_COMMANDS: dict[Path, str] = {}  # the command each folder this process claimed is for
 
 
-def remember_run_file(path: Path) -> None:
+def remember_run_file(path: Path, command: str) -> None:
     """Keep the run file `path` holds before a claim writes its own: a run that fails with nothing to resume puts
     it back, so a folder's earlier results (demos' dataset, kept by demos itself) stay described by their own
     seeds and settings, not by the failed run's."""
+    _COMMANDS[path.resolve()] = command
     if (path / RUN_FILE).is_file() and not (path / RUN_FILE).is_symlink():
         _RUN_FILES[path.resolve()] = (path / RUN_FILE).read_bytes()
 
@@ -43,14 +45,14 @@ def set_aside(path: Path, command: str) -> list[str]:
     moved. A `.replaced` already there (left by an interrupted replacement) keeps the older finished results, and
     the unfinished ones now in the folder are removed, as --replace says."""
     aside, moved = path / ASIDE, []
-    if aside.is_dir() and not aside.is_symlink():
+    _PENDING[path.resolve()] = command
+    if aside.is_dir() and any(_own_files(aside / n, INSIDE.get(n, ())) for n in OWN[command]):
         for name in OWN[command]:
             remove_own(path / name)
-        _PENDING[path.resolve()] = command
         return moved
-    aside.mkdir()
-    _PENDING[path.resolve()] = command
-    shutil.copy2(path / RUN_FILE, aside / RUN_FILE) if (path / RUN_FILE).is_file() else None
+    aside.mkdir(exist_ok=True)  # (a user's file in one is theirs: the claim let it be only with --share-out)
+    if (path / RUN_FILE).is_file():
+        shutil.copy2(path / RUN_FILE, aside / RUN_FILE)
     for name in OWN[command]:
         for f in _own_files(path / name, INSIDE.get(name, ())):
             rel = f.relative_to(path)
@@ -75,8 +77,9 @@ def settle(key: Path, ok: bool) -> None:
     aside = key / ASIDE
     if not aside.is_dir() or aside.is_symlink():
         return
-    if ok:  # this run, or a resumed one, finished: what it replaced goes (left by an interrupted one too)
-        shutil.rmtree(aside)
+    owner = _COMMANDS.pop(key, command)
+    if ok and owner:  # this run, or a resumed one, finished: what it replaced goes (left by an interrupted one too)
+        _discard(aside, owner)
         return
     if command is None:  # a run that replaced nothing, failed: what an earlier one set aside keeps waiting
         return
@@ -86,14 +89,26 @@ def settle(key: Path, ok: bool) -> None:
         return
     for name in OWN[command]:
         remove_own(key / name)
-    for root, _, files in os.walk(aside):
-        for f in files:
-            rel = (Path(root) / f).relative_to(aside)
+    for name in (*OWN[command], RUN_FILE):  # only what a run of it wrote: a user's file there stays put
+        for f in _own_files(aside / name, INSIDE.get(name, ())):
+            rel = f.relative_to(aside)
             (key / rel).parent.mkdir(parents=True, exist_ok=True)
-            os.replace(Path(root) / f, key / rel)
-    shutil.rmtree(aside)
+            os.replace(f, key / rel)
+    _discard(aside, command)
     _SAID[key] = f"the earlier results in {key} are back as they were; this run's are removed"
     print(f"--replace: this run did not finish: {_SAID[key]}")
+
+
+def _discard(aside: Path, command: str) -> None:
+    """Remove what `.replaced/` holds of `command`'s (and its run file), and the folder if that empties it: a user's
+    file there stays (the eleventh pass: a finishing --replace deleted the whole folder)."""
+    for name in OWN[command]:
+        remove_own(aside / name)
+    (aside / RUN_FILE).unlink(missing_ok=True)
+    try:
+        aside.rmdir()
+    except OSError:
+        pass
 
 
 def said(out) -> str | None:

@@ -51,6 +51,11 @@ class Episode:
         # truncates); a backend's rollout is a scan of max_steps, bounded by Scenario at validate.MAX_STEPS
         validate.steps("max_steps", self.max_steps, 2**31 - 1)
         validate.fraction("success_threshold", self.success)  # NaN never ends an episode, 2.0 never succeeds, 0 always does
+        if self.goal is not None:  # a region of 7 finite numbers (goals.region); 'x' failed at the first step
+            from mjx_pusht import boundary
+
+            object.__setattr__(self, "goal", tuple(boundary.Array((7,))("Episode's goal region (goals.region)",
+                                                                       self.goal).tolist()))
 
     @property
     def physics_steps(self) -> int:
