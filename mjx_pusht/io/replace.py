@@ -18,7 +18,6 @@ from mjx_pusht.io.own import INSIDE, OWN, RUN_FILE, owns, remove_own
 
 ASIDE = ".replaced"  # inside --out: the earlier results, laid out as they were
 _PENDING: dict[Path, str] = {}  # folders whose results this process set aside, and the command
-_SAID: dict[Path, str] = {}  # what became of them, for the interrupted line (commands.kept)
 _RUN_FILES: dict[Path, bytes] = {}  # the run file a claim wrote over: a run that fails puts it back
 _COMMANDS: dict[Path, str] = {}  # the command each folder this process claimed is for
 
@@ -84,8 +83,7 @@ def settle(key: Path, ok: bool) -> None:
     if command is None:  # a run that replaced nothing, failed: what an earlier one set aside keeps waiting
         return
     if _resumable(key):
-        _SAID[key] = f"the earlier results wait in {aside} until a run here finishes"
-        print(f"--replace: {_SAID[key]}")
+        print(f"--replace: the earlier results wait in {aside} until a run here finishes")
         return
     for name in OWN[command]:
         remove_own(key / name)
@@ -95,8 +93,8 @@ def settle(key: Path, ok: bool) -> None:
             (key / rel).parent.mkdir(parents=True, exist_ok=True)
             os.replace(f, key / rel)
     _discard(aside, command)
-    _SAID[key] = f"the earlier results in {key} are back as they were; this run's are removed"
-    print(f"--replace: this run did not finish: {_SAID[key]}")
+    print(f"--replace: this run did not finish: the earlier results in {key} are back as they were; this run's are "
+          "removed")
 
 
 def _discard(aside: Path, command: str) -> None:
@@ -109,8 +107,3 @@ def _discard(aside: Path, command: str) -> None:
         aside.rmdir()
     except OSError:
         pass
-
-
-def said(out) -> str | None:
-    """What `settle` did with `out`'s earlier results, if anything (for the interrupted line)."""
-    return _SAID.get(Path(out).resolve()) if out is not None else None
