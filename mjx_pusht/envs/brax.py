@@ -159,6 +159,9 @@ class BraxPushT(Env):
     def check(self, state: State) -> State:
         """Raise a one-line `ConfigError` if any world of `state` (one or a batch) got a non-finite action since
         its reset, naming the world, its seed, the control step and the value; else return `state`."""
+        if not isinstance(getattr(state, "info", None), dict) or "bad_action" not in state.info:
+            # None, 'x', 5 were an AttributeError (the twelfth pass)
+            raise ConfigError(f"check takes the State that reset or step returned, got {type(state).__name__}")
         step = np.atleast_1d(np.asarray(state.info["bad_action"]["step"]))
         rows = np.flatnonzero(step >= 0)
         if len(rows):
