@@ -39,16 +39,15 @@ def _own_files(p: Path, patterns) -> list[Path]:
             if owns((Path(root).relative_to(p) / f).as_posix(), patterns)]
 
 
-def set_aside(path: Path, command: str) -> list[str]:
-    """Move the command's earlier results in `path` (and its run file, copied) into `path/.replaced`; the names
-    moved. A `.replaced` already there (left by an interrupted replacement) keeps the older finished results, and
+def set_aside(path: Path, command: str) -> None:
+    """Move the command's earlier results in `path` (and its run file, copied) into `path/.replaced`. A `.replaced` already there (left by an interrupted replacement) keeps the older finished results, and
     the unfinished ones now in the folder are removed, as --replace says."""
-    aside, moved = path / ASIDE, []
+    aside = path / ASIDE
     _PENDING[path.resolve()] = command
     if aside.is_dir() and any(_own_files(aside / n, INSIDE.get(n, ())) for n in OWN[command]):
         for name in OWN[command]:
             remove_own(path / name)
-        return moved
+        return
     aside.mkdir(exist_ok=True)  # (a user's file in one is theirs: the claim let it be only with --share-out)
     if (path / RUN_FILE).is_file():
         shutil.copy2(path / RUN_FILE, aside / RUN_FILE)
@@ -57,9 +56,7 @@ def set_aside(path: Path, command: str) -> list[str]:
             rel = f.relative_to(path)
             (aside / rel).parent.mkdir(parents=True, exist_ok=True)
             os.rename(f, aside / rel)
-            moved.append(rel.as_posix())
         remove_own(path / name)  # the folders the move left empty
-    return moved
 
 
 def _resumable(path: Path) -> bool:

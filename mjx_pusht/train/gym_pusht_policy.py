@@ -42,7 +42,8 @@ class GymPushtPolicy:
 
         from mjx_pusht.train.policy import load_policy
 
-        if validate.seed(seed) is None:  # reset(seed=None) keeps the key; the policy's own seed is one (was numpy's TypeError)
+        seed = validate.seed(seed)
+        if seed is None:  # reset(seed=None) keeps the key; the policy's own seed is one (was numpy's TypeError)
             raise ControllerError("seed must be an integer from 0 to 2**63-1, got None (reset(seed=None) keeps it)")
         if not isinstance(path, (str, os.PathLike)):
             raise ControllerError(f"path must be a policy file's path (a str or a Path), got {type(path).__name__}")
@@ -55,7 +56,7 @@ class GymPushtPolicy:
         self.obs_type = "pixels_agent_pos" if self.controller.pixels else "state"
         self.task = task
         self._targets = as_targets(self.controller)
-        self._key = seed_key([validate.seed(seed)])  # a sampling policy's draws are keyed by seed and step
+        self._key = seed_key([seed])  # a sampling policy's draws are keyed by seed and step
         self.reset()
 
     @keywords  # as __init__: a keyword it does not take, one line
