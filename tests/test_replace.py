@@ -46,7 +46,7 @@ def test_eval_and_sweep_into_a_train_folder_are_refused_with_or_without_replace_
         # the train's own judgement (run/eval) is the train's: an eval --replace there would overwrite it
         r = cli(*EVAL, "--seeds", "3", "--controller", f"policy:{run / 'policy.msgpack'}", "--out", str(run / "eval"),
                 *extra)
-        refused(r, "part of the train run", "never writes into another run's folder")
+        refused(r, "inside the train run", "never writes into another run's folder")
         assert tree(run) == before
     # the policy is still there to evaluate, elsewhere
     r = cli(*EVAL, "--seeds", "2", "--controller", f"policy:{run / 'policy.msgpack'}", "--out", str(tmp_path / "e"))

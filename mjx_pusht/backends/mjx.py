@@ -47,6 +47,9 @@ class MjxRunner:
             raise BackendError(f"unknown MJX impl {cfg.impl!r}; choose from {', '.join(IMPLS)}")
         if cfg.impl == "warp" and not warp_available():
             raise BackendError("backend mjx-warp needs warp-lang, which is not installed: pip install 'mjx-pusht[warp]'")
+        if cfg.impl == "warp" and (cfg.x64 or jax.config.jax_enable_x64):  # Warp's FFI refuses float64 arrays
+            raise ConfigError("MuJoCo Warp computes in float32 only: mjx-warp cannot run in float64 (x64), nor in a "
+                              "process where JAX's x64 is already on; use mjx-jax for float64")
         if cfg.x64:
             jax.config.update("jax_enable_x64", True)
         enable_compilation_cache()

@@ -9,7 +9,7 @@ import threading
 from pathlib import Path
 
 from mjx_pusht.errors import MjxPushtError
-from mjx_pusht.io.own import BOOKKEEPING, INSIDE, OWN, RESULTS, RUN_FILE, owns, remove_own
+from mjx_pusht.io.own import BOOKKEEPING, INSIDE, OWN, RESULTS, RUN_FILE, owns, remove_own, runs_holding
 from mjx_pusht.io.replace import ASIDE, remember_run_file, set_aside, settle
 
 
@@ -211,19 +211,16 @@ def _owner(path: Path) -> tuple[list[str], dict]:
 
 
 def _refuse_another_runs_folder(path: Path, command: str) -> None:
-    """Refuse `path` when it is a folder another run writes inside its own (a train's eval/, whose results the
-    train wrote as its judgement): --replace there would remove that run's files. The run that holds the folder
-    above (train judging its policy) may. The run is known by its run file (a folder merely holding a policy file
-    is a user's, and its eval/ theirs to write)."""
-    parent = path.resolve().parent
-    if parent == path.resolve() or parent in _HELD:
-        return
-    try:
-        who = json.loads((parent / RUN_FILE).read_text()).get("command")
-    except (OSError, ValueError, AttributeError):
-        return
-    if who in OWN and path.resolve().name in OWN[who]:
-        raise OutputError(f"--out {path} is part of the {who} run in {parent} (its {path.resolve().name}/); "
+    """Refuse `path` when it lies inside another run's folder, at any depth (a train's eval/, whose results the
+    train wrote as its judgement; a new folder under a finished eval's): --replace there would remove that run's
+    files, and a new run's files there are strays in it. The run that holds a folder above (train judging its
+    policy) may. A run is known by its run file (a folder merely holding a policy file is a user's, and its eval/
+    theirs to write; benchmarks' folders of runs, like train_scaling's OUT/devices-N, have none)."""
+    here = path.resolve()
+    for above, who in runs_holding(here.parent):
+        if above in _HELD:
+            return
+        raise OutputError(f"--out {path} is inside the {who} run in {above} (its {here.relative_to(above).parts[0]}/); "
                           f"{command} never writes into another run's folder, whatever the flags: choose another --out")
 
 

@@ -72,3 +72,17 @@ def remove_own(p: Path) -> None:
         p.rmdir()
     except OSError:
         pass
+
+
+def runs_holding(path: Path):
+    """The run folders at or above `path`, nearest first, each with its command: a folder is a run's by its run
+    file (one naming no command is not, and neither is a folder merely holding a result's name, a user's)."""
+    import json
+
+    for folder in (path, *path.parents):
+        try:
+            who = json.loads((folder / RUN_FILE).read_text()).get("command")
+        except (OSError, ValueError, AttributeError):
+            continue
+        if who in OWN:
+            yield folder, who

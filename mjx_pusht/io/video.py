@@ -27,7 +27,7 @@ def check_path(path: Path, replace: bool = False, out: Path | None = None) -> Pa
     """Fail before any work if the video could not be written, or would overwrite a file without `replace`
     saying to. `replace` overwrites only the video this command's earlier run into `out` wrote (its summary names
     the file and its bytes' hash): a file no run wrote is a user's and refused, as `--out` refuses them. A new
-    name inside another run's folder (one holding a run file) is refused: only that run writes there. (Without `out`,
+    name inside another run's folder (one holding a run file, at any depth) is refused: only that run writes there. (Without `out`,
     as the writer checks again once the frames are drawn, neither of those.)"""
     path = Path(path)
     if path.suffix.lower() not in FORMATS:
@@ -46,10 +46,11 @@ def check_path(path: Path, replace: bool = False, out: Path | None = None) -> Pa
                          "wrote is never overwritten, whatever the flags: give another name")
     if os.path.lexists(path) and not replace:
         raise VideoError(f"--video {path} already exists; pass --replace to overwrite it, or give another name")
-    from mjx_pusht.io.outputs import RUN_FILE
+    from mjx_pusht.io.own import RUN_FILE, runs_holding
 
-    if out is not None and (parent / RUN_FILE).exists() and parent.resolve() != Path(out).resolve():
-        raise VideoError(f"--video {path} is inside another run's folder ({parent} holds its {RUN_FILE}); a run "
+    run = next(runs_holding(parent.resolve()), None) if out is not None else None
+    if run is not None and run[0] != Path(out).resolve():  # at any depth: a new name under a finished eval's folder
+        raise VideoError(f"--video {path} is inside another run's folder ({run[0]} holds its {RUN_FILE}); a run "
                          "never writes into another run's folder, whatever the flags: give another name")
     if not parent.is_dir():  # --out, made writable by its claim (which refuses one that is not)
         return path

@@ -95,6 +95,9 @@ def render_markdown(r: dict) -> str:
         for key, v in r["root_cause"].items():
             if key == "contacts_on_cpu_states":
                 continue
+            if isinstance(v, str):  # a run this backend cannot make (float64 on MuJoCo Warp), and why
+                lines.append(f"| {key} | {v} | | |")
+                continue
             lines.append(f"| {key} | {v['final_pose_diff']['median_m']:.2e} | {v['final_pose_diff']['frac_over_1mm']:.1%} "
                          f"| {v['energy_distance_m']:.2e} |")
         c = r["root_cause"]["contacts_on_cpu_states"]
