@@ -326,7 +326,8 @@ def record_episodes(path: Path, model: mujoco.MjModel, traced: Rollouts, everyon
             cov = coverage_np(layout.tee_pose(qpos), *(() if goal is None else (goal[k],)))
             tl = rr.TimeColumn("sim_time", duration=np.arange(frames) * dt)
             rr.send_columns(f"plots/coverage/{label}", indexes=[tl], columns=rr.Scalars.columns(scalars=cov))
-            steps = np.arange(1, frames // fs + 1) * fs  # the frame that ends each control step
+            # the frame that ends each control step: frame 0 is the start, so L steps end at fs, 2 fs, ..., L fs
+            steps = np.arange(1, (len(qpos) - 1) // fs + 1) * fs  # (frames // fs was L + 1 at --frame-skip 1)
             rr.send_columns(f"plots/reward/{label}", indexes=[rr.TimeColumn("sim_time", duration=steps * dt)],
                             columns=rr.Scalars.columns(scalars=cov[steps]))
         tl = rr.TimeColumn("sim_time", duration=[0.0, traced.trace.qpos.shape[1] * dt])
