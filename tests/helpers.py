@@ -41,6 +41,20 @@ RUNS = {
     "demos": ("demos", "--backend", "cpu", "--seeds", "2", "--max-steps", "5", "--no-progress"),
 }
 
+def over(base, *extra) -> list:
+    """`base`'s arguments with `extra`'s flags in place of its own (each flag's value, if it has one, goes with it):
+    the CLI refuses a flag given twice, so a test's other settings replace the base's rather than follow them."""
+    given = {a for a in extra if a.startswith("--")}
+    out, i = [], 0
+    while i < len(base):
+        if base[i] in given:
+            i += 2 if i + 1 < len(base) and not str(base[i + 1]).startswith("--") else 1
+            continue
+        out.append(base[i])
+        i += 1
+    return [*out, *extra]
+
+
 def one_line(capsys, *words) -> str:
     """The one stderr line a refused command printed (capsys), holding each of `words`."""
     err = capsys.readouterr().err.strip().splitlines()

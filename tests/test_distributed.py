@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 import pytest
+from helpers import over
 
 from mjx_pusht.cli.commands import main
 from mjx_pusht.io.outputs import read_table
@@ -21,8 +22,8 @@ def _free_port() -> int:
 
 
 def _sweep_args(out, *extra):
-    return ["sweep", "--seeds", "40", "--backend", "cpu", "--chunk", "8", "--no-rerun", "--no-progress",
-            "--out", str(out), *extra]
+    return ["sweep", *over(("--seeds", "40", "--backend", "cpu", "--chunk", "8", "--no-rerun", "--no-progress"),
+                           "--out", str(out), *extra)]
 
 
 def test_two_processes_on_localhost_write_the_one_process_table(tmp_path):

@@ -7,7 +7,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from fuzzing import snapshot
-from helpers import RUNS, one_line
+from helpers import RUNS, one_line, over
 
 import mjx_pusht  # noqa: F401 - registers the gym ids
 from mjx_pusht import SceneSpec
@@ -50,9 +50,9 @@ def test_a_users_file_in_the_replaced_folder_is_never_removed(tmp_path, capsys):
     (out / ".replaced").mkdir()
     (out / ".replaced" / "mine.txt").write_text("mine")
     capsys.readouterr()
-    assert main([*RUNS["eval"], "--seeds", "3", "--out", str(out), "--replace"]) == 1
+    assert main(over(RUNS["eval"], "--seeds", "3", "--out", str(out), "--replace")) == 1
     one_line(capsys, ".replaced/mine.txt", "--share-out")
-    assert main([*RUNS["eval"], "--seeds", "3", "--out", str(out), "--replace", "--share-out"]) == 0
+    assert main(over(RUNS["eval"], "--seeds", "3", "--out", str(out), "--replace", "--share-out")) == 0
     assert (out / ".replaced" / "mine.txt").read_text() == "mine"
     assert sorted(p.name for p in (out / ".replaced").iterdir()) == ["mine.txt"]  # the earlier results went
 

@@ -12,7 +12,7 @@ nothing the command did not write is removed.
 from __future__ import annotations
 
 import pytest
-from helpers import RUNS, one_line
+from helpers import RUNS, one_line, over
 
 from mjx_pusht.cli import main
 from mjx_pusht.io.outputs import OutputError, claim_out_dir, held_folders, remove_own
@@ -61,7 +61,7 @@ def test_shared_out_runs_and_reruns_with_replace_beside_the_users_files(command,
     before = users_files(out, ["notes.md", "other/mine.txt"])
     assert main([*RUNS[command], "--out", str(out), "--share-out"]) == 0
     first = (out / result).read_bytes()
-    assert main([*RUNS[command], *other, "--out", str(out), "--share-out", "--replace"]) == 0
+    assert main(over(RUNS[command], *other, "--out", str(out), "--share-out", "--replace")) == 0
     assert (out / result).read_bytes() != first and tree(out).items() >= before.items()
 
 

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from helpers import cli, train_run
+from helpers import cli, over, train_run
 
 pytest.importorskip("flax")
 pytest.importorskip("optax")
@@ -90,6 +90,6 @@ def test_train_randomize_is_checked_before_anything_runs():
                                         (("--algo", "ppo", "--backend", "mjx-jax", "--randomize", "kp=0.5:2"),
                                          "kp means nothing on the chapter task")])
 def test_bad_train_randomize_is_one_line_and_writes_nothing(tmp_path, args, says):
-    r = cli("train", "--backend", "cpu", "--no-rerun", *args, "--out", str(tmp_path / "out"))
+    r = cli("train", *over(("--backend", "cpu", "--no-rerun"), *args, "--out", str(tmp_path / "out")))
     assert r.returncode != 0 and says in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert not (tmp_path / "out").exists()

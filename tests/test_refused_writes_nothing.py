@@ -16,7 +16,7 @@ import time
 
 import pytest
 from fuzzing import snapshot
-from helpers import RUNS, one_line
+from helpers import RUNS, one_line, over
 
 from mjx_pusht.cli import main
 
@@ -96,7 +96,7 @@ def test_the_lock_is_held_by_the_process_and_goes_with_it(tmp_path, capsys):
 def test_video_onto_an_existing_file_is_refused_unless_replace(tmp_path, capsys):
     video = tmp_path / "v.gif"
     video.write_bytes(b"a user's picture")
-    args = [*RUNS["eval"], "--seeds", "1", "--video", str(video), "--video-size", "32"]
+    args = over(RUNS["eval"], "--seeds", "1", "--video", str(video), "--video-size", "32")
     assert main([*args, "--out", str(tmp_path / "o")]) == 1  # a user's file: never, so no hint to pass --replace
     assert "--replace" not in one_line(capsys, f"--video {video} already exists", "no earlier eval")
     assert video.read_bytes() == b"a user's picture" and sorted(os.listdir(tmp_path)) == ["v.gif"]

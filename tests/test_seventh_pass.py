@@ -7,7 +7,7 @@ import os
 
 import pytest
 from fuzzing import snapshot
-from helpers import RUNS, one_line
+from helpers import RUNS, one_line, over
 
 from mjx_pusht.cli import main
 from mjx_pusht.io.outputs import OutputError, claim_out_dir, held_folders
@@ -80,7 +80,7 @@ def test_an_interrupted_sweep_says_how_many_rows_it_kept(tmp_path, monkeypatch, 
 
     monkeypatch.setattr(sweep_module, "run_sweep", cut)
     out = tmp_path / "o"
-    assert main([*RUNS["sweep"], "--seeds", "12", "--out", str(out)]) == 130
+    assert main(over(RUNS["sweep"], "--seeds", "12", "--out", str(out))) == 130
     chunks = sorted((out / ".parts").glob("seeds-*.parquet"))
     assert len(chunks) == stop_after
     err = capsys.readouterr().err.strip()
@@ -172,8 +172,8 @@ def test_a_batch_whose_controller_fails_before_any_chunk_leaves_nothing(tmp_path
     (user / "notes.md").write_text("mine")
     task = ["--task", "gym-pusht"] if backend == "gym-pusht" else []
     for out, extra in ((tmp_path / "new" / "o", []), (user, ["--share-out"])):
-        assert main([*RUNS["eval"], "--max-steps", "6", "--backend", backend, *task, "--controller", f"ctl7:{name}",
-                     "--out", str(out), *extra]) == code
+        assert main(over(RUNS["eval"], "--max-steps", "6", "--backend", backend, *task, "--controller", f"ctl7:{name}",
+                     "--out", str(out), *extra)) == code
         one_line(capsys, f"ctl7:{name}" if code == 1 else "no chunk was finished yet")
     assert not (tmp_path / "new").exists()
     assert snapshot(user) == {"notes.md": b"mine"}

@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from fuzzing import snapshot
-from helpers import ENV, RUNS, one_line
+from helpers import ENV, RUNS, one_line, over
 
 import mjx_pusht
 from mjx_pusht import Scenario, make_backend
@@ -82,7 +82,7 @@ def test_a_refused_rerun_leaves_the_run_file_and_is_refused_again(command, tmp_p
     capsys.readouterr()
     before = snapshot(tmp_path)
     for _ in range(2):
-        assert main([*base, *other, "--out", out]) == 1
+        assert main(over(base, *other, "--out", out)) == 1
         one_line(capsys, "--replace")
         assert snapshot(tmp_path) == before
     assert main([*base, "--out", out]) == 0, capsys.readouterr().err  # the first run's own settings: its rerun
@@ -106,7 +106,7 @@ def test_replace_on_an_unfinished_same_settings_sweep_starts_it_again(tmp_path, 
     removes them. The rerun's table equals an uninterrupted run's."""
     from mjx_pusht.io.outputs import read_table
 
-    args = [*RUNS["sweep"], "--seeds", "4", "--chunk", "2", "--out", str(tmp_path / "o")]
+    args = over(RUNS["sweep"], "--seeds", "4", "--chunk", "2", "--out", str(tmp_path / "o"))
     assert main(args) == 0
     table = read_table(tmp_path / "o" / "per_seed.parquet")
     (tmp_path / "o" / "per_seed.parquet").unlink()

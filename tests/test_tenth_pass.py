@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fuzzing import snapshot
-from helpers import RUNS, one_line
+from helpers import RUNS, one_line, over
 
 from mjx_pusht.cli import main
 from mjx_pusht.envs.functional import PushTEnv
@@ -88,9 +88,9 @@ def test_an_evals_video_inside_its_own_folder_can_be_rerun(tmp_path, capsys):
     out = tmp_path / "e"
     video = ["--video", str(out / "v.gif"), "--video-size", "32"]
     assert main([*RUNS["eval"], "--out", str(out), *video]) == 0
-    assert main([*RUNS["eval"], "--out", str(out), *video, "--replace", "--seeds", "3"]) == 0
+    assert main(over(RUNS["eval"], "--out", str(out), *video, "--replace", "--seeds", "3")) == 0
     capsys.readouterr()
-    assert main([*RUNS["eval"], "--out", str(out), *video, "--seeds", "3"]) == 1
+    assert main(over(RUNS["eval"], "--out", str(out), *video, "--seeds", "3")) == 1
     one_line(capsys, "already exists", "pass --replace")
 
 
@@ -108,12 +108,12 @@ def test_a_range_reaches_the_last_seed(tmp_path, capsys):
     """REFUSED (tenth pass): `--seeds 2**63-2:2**63` (its seeds 2**63-2 and 2**63-1, both legal) was refused as
     "got 9223372036854775808". A range's end is past its last seed."""
     out = tmp_path / "e"
-    assert main([*RUNS["eval"], "--seeds", f"{2**63 - 2}:{2**63}", "--out", str(out)]) == 0
+    assert main(over(RUNS["eval"], "--seeds", f"{2**63 - 2}:{2**63}", "--out", str(out))) == 0
     import pyarrow.parquet as pq
 
     assert pq.read_table(out / "per_episode.parquet").column("seed").to_pylist() == [2**63 - 2, 2**63 - 1]
     capsys.readouterr()
-    assert main([*RUNS["eval"], "--seeds", f"0:{2**63 + 1}", "--out", str(tmp_path / "f")]) == 1
+    assert main(over(RUNS["eval"], "--seeds", f"0:{2**63 + 1}", "--out", str(tmp_path / "f"))) == 1
     one_line(capsys, "got 9223372036854775809")
 
 

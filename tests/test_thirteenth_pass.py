@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helpers import one_line
+
 from mjx_pusht.cli import main
 from mjx_pusht.io.outputs import read_table
 
@@ -30,3 +32,22 @@ def test_an_eval_recording_has_one_reward_point_per_control_step_at_any_frame_sk
         dt = r["sim_time"][0].total_seconds() / frame_skip  # the first point ends the first control step
         assert [t.total_seconds() for t in r["sim_time"]] == pytest.approx(np.arange(1, steps + 1) * frame_skip * dt)
         assert r["Scalars:scalars"][-1][0] == pytest.approx(table["final_coverage"][k], abs=1e-6)
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["eval", "--seeds", "2", "--seeds", "3"], "--seeds"),
+    (["eval", "--seeds", "2", "--se", "3"], "--seeds"),  # argparse's prefix of the same flag
+    (["sweep", "--backend", "cpu", "--backend", "mjx-jax"], "--backend"),
+    (["eval", "--no-rerun", "--no-rerun"], "--no-rerun"),
+    (["train", "--randomize", "kv=0.9:1.1", "--randomize", "kv=1:1"], "--randomize"),
+])
+def test_a_flag_given_twice_is_refused_and_writes_nothing(argv, flag, tmp_path, capsys):
+    """SILENT (thirteenth pass): `eval --seeds 2 --seeds 3` ran seeds 0-2, the first value dropped without a word
+    (argparse's last-wins). Each flag is taken once; --param, whose repeats are its meaning, still sweeps both."""
+    assert main([*argv, "--out", str(tmp_path / "o")]) == 2
+    one_line(capsys, f"argument {flag}", "given twice")
+    assert not (tmp_path / "o").exists()
+    assert main(["eval", "--backend", "cpu", "--seeds", "1", "--max-steps", "2", "--no-rerun", "--no-progress",
+                 "--param", "kv=10", "--param", "tee_mass=0.5", "--out", str(tmp_path / "p")]) == 0
+    table = read_table(tmp_path / "p" / "per_episode.parquet")
+    assert table["param_kv"].tolist() == [10.0] and table["param_tee_mass"].tolist() == [0.5]

@@ -4,6 +4,7 @@ flagtypes.py)."""
 from __future__ import annotations
 
 import argparse
+import functools
 from pathlib import Path
 
 from mjx_pusht.cli import flagtypes as ft
@@ -15,9 +16,45 @@ class UsageError(MjxPushtError):
     """Bad input: printed as one line, exit 2."""
 
 
+_GIVEN = "_flags_given"  # the flags a parse has met, by dest; gone from the namespace it returns
+# flags whose repeats are their meaning (--param NAME=VALUES per parameter), or that end the parse (--help)
+_REPEATABLE = (argparse._AppendAction, argparse._AppendConstAction, argparse._CountAction, argparse._HelpAction,
+               argparse._VersionAction)
+
+
 class _Parser(argparse.ArgumentParser):
+    """One-line errors, and each flag at most once: argparse lets the last of `--seeds 2 --seeds 3` win and drops the
+    first without a word (the thirteenth pass); what the package cannot honour, it refuses."""
+
     def error(self, message: str):  # one line, no usage dump
         raise UsageError(message)
+
+    def add_argument(self, *args, **kwargs):
+        action = super().add_argument(*args, **kwargs)
+        if action.option_strings and not isinstance(action, (*_REPEATABLE, _Once)):
+            action.__class__ = _given_once(type(action))
+        return action
+
+    def parse_known_args(self, args=None, namespace=None):
+        namespace, extras = super().parse_known_args(args, namespace)
+        namespace.__dict__.pop(_GIVEN, None)
+        return namespace, extras
+
+
+@functools.cache
+def _given_once(cls: type) -> type:
+    """`cls` refusing a second use of its flag in one parse (aliases and prefixes of it count as the flag)."""
+
+    class Once(cls):
+        def __call__(self, parser, namespace, values, option_string=None):
+            given = namespace.__dict__.setdefault(_GIVEN, set())
+            if self.dest in given:
+                raise argparse.ArgumentError(self, "given twice: give it once")
+            given.add(self.dest)
+            super().__call__(parser, namespace, values, option_string)
+
+    Once.__name__ = Once.__qualname__ = cls.__name__
+    return Once
 
 
 def success_arg(p: argparse.ArgumentParser) -> None:

@@ -31,6 +31,16 @@ case "${1:-}" in
     export MJX_PUSHT_JAX_CACHE=$HOME/jax_cache NCCL_NVLS_ENABLE=0 TORCH_SYMM_MEM_DISABLE_MULTICAST=1 NVSHMEM_DISABLE_NVLS=1
     cd "$runs" || exit 1
     run() { echo "$(date +%T) \$ $*"; [ -n "${DRY:-}" ] && return "${DRY_RC:-0}"; "$@"; }
+    # FLAGS... with a later flag in place of an earlier one of the same name (the CLI refuses a flag given twice):
+    # a probe's sizes over the recipe's
+    over() { python3 -c 'import sys
+a, out, i = sys.argv[1:], [], 0
+while i < len(a):
+    n = 2 if a[i].startswith("--") and i + 1 < len(a) and not a[i + 1].startswith("--") else 1
+    if not (a[i].startswith("--") and a[i] in a[i + n:]):
+        out += a[i:i + n]
+    i += n
+print(" ".join(out))' "$@"; }
     common="--task gym-pusht --keep best --no-progress --no-rerun --record 0"
     # each run ends at its goal rate (--until) or its budget: the minutes to the goal are the figure, and a run
     # that stops there leaves the hold's time to the next one
@@ -118,14 +128,16 @@ case "${1:-}" in
     fi
     # 1. the probes, 2 GPUs each (one GPU's share each), a hang ended by timeout
     # shellcheck disable=SC2086  # the recipes: lists of flags
-    (run env CUDA_VISIBLE_DEVICES=0,1 timeout 400 python3 -m mjx_pusht train --backend mjx-warp $px --envs 2048 \
+    # shellcheck disable=SC2046  # the recipe: a list of flags
+    (run env CUDA_VISIBLE_DEVICES=0,1 timeout 400 python3 -m mjx_pusht train $(over --backend mjx-warp $px --envs 2048 \
        --batch 2048 --image-batch 256 --first-fits 1 --fit-steps 200 --image-steps 100 --iterations 2 --eval-envs 1024 \
-       --devices 2 --out probe-px > probe-px.log 2>&1; echo "exit $?" >> probe-px.log) &
+       --devices 2 --out probe-px) > probe-px.log 2>&1; echo "exit $?" >> probe-px.log) &
     probe_ppo() {  # probe_ppo GRAPH-MODE: 30 s of PPO on MJX-Warp, GPUs 2 and 3, in that graph mode
       # shellcheck disable=SC2086  # the recipe: a list of flags
+      # shellcheck disable=SC2046  # the recipe: a list of flags
       run env CUDA_VISIBLE_DEVICES=2,3 MJX_PUSHT_ENV_GRAPH_MODE=$1 timeout 400 python3 -m mjx_pusht train \
-        --backend mjx-warp $ppo --envs 16384 --batch 1024 --timesteps 800000000 --minutes 0.5 --devices 2 \
-        --out "probe-ppo-$1" > "probe-ppo-$1.log" 2>&1; echo "exit $?" >> "probe-ppo-$1.log"
+        $(over --backend mjx-warp $ppo --envs 16384 --batch 1024 --timesteps 800000000 --minutes 0.5 --devices 2 \
+        --out "probe-ppo-$1") > "probe-ppo-$1.log" 2>&1; echo "exit $?" >> "probe-ppo-$1.log"
     }
     probe_ppo WARP &
     wait
