@@ -28,6 +28,9 @@ SEED_MAX = 2**63 - 1  # task.reset.SEED_MAX (a seed is a non-negative int64)
 # killing the process).
 MAX_STEPS = 100_000  # control or schedule steps: 1,000 s of simulated time at 100 Hz
 MAX_FRAME_SKIP = 1_000  # physics steps a control step
+# physics steps one backend rollout runs (max_steps x frame_skip): 10,000 s at 100 Hz, what --max-steps 100,000 reaches
+# at the default frame skip; --max-steps 100,000 at --frame-skip 1,000 was 10**8 steps an episode, hours a seed
+MAX_PHYSICS_STEPS = 1_000_000
 RENDER_MODES = (None, "rgb_array")
 log = logging.getLogger("mjx_pusht")
 

@@ -19,7 +19,13 @@ def make_backend(name: str, scenario, **kwargs) -> Backend:
     # CLI's --max-steps bound. An env's own episode may be longer (it steps one control step a call).
     # (A schedule's steps are bounded by Schedule itself.)
     if scenario.controller is not None:
-        validate.steps("episode max_steps", scenario.driver()[1].max_steps)
+        episode = scenario.driver()[1]
+        validate.steps("episode max_steps", episode.max_steps)
+        if episode.physics_steps > validate.MAX_PHYSICS_STEPS:
+            raise ConfigError(f"an episode of {episode.max_steps:,} control steps x {episode.frame_skip:,} physics "
+                              f"steps each is {episode.physics_steps:,} physics steps, more than the "
+                              f"{validate.MAX_PHYSICS_STEPS:,} a rollout runs (10,000 s at 100 Hz): fewer --max-steps "
+                              "or a smaller --frame-skip")
     if name == "cpu":
         from mjx_pusht.backends.cpu import CpuBackend
 

@@ -222,6 +222,15 @@ def _check_state(state, rows: int) -> np.ndarray:
     """reset_to_state in gym-pusht's convention: [agent x, y, block x, y, angle], pixels and radians, both
     bodies in the window; returned in the world frame."""
     a = validate.starts(state, rows, START_LO, START_HI, "[agent x, y, block x, y, block angle] in pixels")
+    lo, hi = frame.WALL_INNER_PX
+    walled = ((a[:, :4] < lo) | (a[:, :4] > hi)).any(axis=1)
+    if walled.any():  # taken, as gym-pusht takes it (its docstring's own example puts the agent at x = 0), but said:
+        import warnings  # a body there is pushed out at the first step (the thirteenth pass: a T at (0, 0) px jumped)
+
+        r = int(np.flatnonzero(walled)[0])
+        warnings.warn(f"reset_to_state puts the agent or the block in gym-pusht's walls (their inner faces are at "
+                      f"{lo:g} and {hi:g} px), row {r}: {a[r].tolist()}; gym-pusht takes such a start, and its first "
+                      "step pushes the body back inside, as here", stacklevel=3)
     return frame.legacy_state_to_world(a)
 
 

@@ -81,6 +81,8 @@ class Resets:
         if self.scene.variant != "chapter" or a.shape[1] == 3:  # the tee alone: finite only (its yaw is free)
             if not np.isfinite(a).all():
                 raise ConfigError("starts must be finite numbers")
+            if self.scene.variant == "gym-pusht":
+                _in_gym_pushts_window(a)
             return a
         return validate.starts(a, len(a), START_LO, START_HI)
 
@@ -120,3 +122,23 @@ class Resets:
         from mjx_pusht.envs.partial import reset_where
 
         return reset_where(self, state, mask, seeds, starts)
+
+
+def _in_gym_pushts_window(a: np.ndarray) -> None:
+    """gym-pusht's scene's starts (world frame): the pusher in gym-pusht's 512-pixel window, as the drop-in's
+    reset_to_state takes it, and the T's body origin within the window widened by the T's reach (gym-pusht's
+    legacy reset puts the origin up to 2 x 45 px from the block position it is given). A start metres away, a
+    drop-in's pixels handed to the functional env, was taken (the thirteenth pass)."""
+    from mjx_pusht.model import gym_pusht as frame
+
+    origin, _ = frame.pose_to_px(a[:, :3])
+    reach = 2 * frame.COG_PX
+    bad = ((origin < -reach) | (origin > 512 + reach)).any(axis=1)
+    if a.shape[1] == 5:
+        agent = frame.to_px(a[:, 3:5])
+        bad |= ((agent < -1e-6) | (agent > 512 + 1e-6)).any(axis=1)  # (the round trip from pixels: its rounding)
+    if bad.any():
+        r = int(np.flatnonzero(bad)[0])
+        raise ConfigError(f"starts put a body outside gym-pusht's 512-pixel window (the T's origin within "
+                          f"{reach:g} px of it): row {r}, {a[r].tolist()} (world frame, metres and radians; the "
+                          "drop-in's reset_to_state takes gym-pusht's pixels)")

@@ -41,6 +41,7 @@ from mjx_pusht import boundary
 from mjx_pusht import validate
 from mjx_pusht.api import keyword_checked, keywords
 from mjx_pusht.envs import physics as per_episode
+from mjx_pusht.envs.state import check_state
 from mjx_pusht.errors import ConfigError
 from mjx_pusht.task.controllers import seed_key
 from mjx_pusht.task.goals import draw
@@ -164,6 +165,7 @@ class AutoReset:
         if self._pooled_images():
             info["pool_pixels"] = self._render_pool(len(used))
         info.setdefault("broken", xp.zeros(len(used), dtype=bool))
+        info.setdefault("nonfinite_action", xp.zeros(len(used), dtype=bool))  # (in the carry from the first step)
         if self.mode == "same_step" and "final" not in info:
             info["final"] = self._final(state)
         if xp is not np:
@@ -183,14 +185,22 @@ class AutoReset:
         TypeError or AttributeError from the step's insides (a bare env's state, another AutoReset's)."""
         if self.pool is None:
             raise ConfigError(f"AutoReset.{what} before its reset: call reset(seeds) first, and {what} its state")
+        # of this env's backend, scene, task and goal (MJX: another task's State was JAX's scan-carry TypeError;
+        # refill took it without a word: the thirteenth pass). Shapes and types only: no wait for the device
+        check_state(state, self.env.backend, self.env, f"AutoReset.{what}")
         if not isinstance(getattr(state, "info", None), dict) or "used" not in state.info or self.pool.n != len(
                 state.step):
             raise ConfigError(f"AutoReset.{what} takes a state from this AutoReset's own reset (of its {self.pool.n} "
                               "rows), not one from the env it wraps or another AutoReset")
 
     def refill(self, state):
-        """Top up every row's start queue (reads `info["used"]` from the device: one small transfer)."""
+        """Top up every row's start queue (reads `info["used"]` from the device: one small transfer). A row given a
+        non-finite action since the reset (held still by the step, on the device) is one line here."""
         self._own(state, "refill")
+        bad = state.info.get("nonfinite_action")
+        if bad is not None and np.asarray(bad).any():
+            raise ConfigError(f"actions must be finite: rows {np.flatnonzero(np.asarray(bad))[:10].tolist()} were given "
+                              "a non-finite action since reset (held still, and marked broken)")
         if self.pool.refill(np.asarray(state.info["used"])):
             return self._with_pool(state, state.info["used"])
         return state
@@ -242,7 +252,10 @@ class AutoReset:
         import jax
         import jax.numpy as jnp
 
-        n, action = len(state.step), jnp.asarray(action)
+        n = len(state.step)
+        if not isinstance(action, jax.Array):  # the caller's own numbers: checked here, as the env's step does (a
+            validate.actions_on_device(np.asarray(action), n, np)  # NaN was stepped as 0: the thirteenth pass)
+        action = jnp.asarray(action)
         validate.actions_shape_on_device(action, n)  # (n, 2), never reshaped
         self.env._batch_fns(n)  # this batch size's renderer
         if n not in self._jitted:
@@ -274,6 +287,10 @@ class AutoReset:
         import jax.numpy as jnp
 
         env, info = self.env, state.info
+        # device actions are looked at on the device (a look from the host would wait for it every step, as the
+        # vector env measured): a non-finite row is held still and marked broken, which refill raises on
+        nonfinite = ~jnp.all(jnp.isfinite(action), axis=1)
+        action = jnp.where(nonfinite[:, None], jnp.zeros_like(action), action)
         stepped = jax.vmap(env.advance_one)(state._replace(info=None), action)  # info's pool is not per world
         if self.mode == "same_step":
             ended = stepped.terminated | stepped.truncated
@@ -303,7 +320,8 @@ class AutoReset:
         # an overflow is kept for the row whatever episode it was in: a dropped contact is never forgotten,
         # and so is a world that went non-finite or left the walls (checked by the caller when it syncs)
         m = stepped.metrics
-        new_info["broken"] = info["broken"] | ~(m["finite"] & m["contained"])
+        new_info["broken"] = info["broken"] | ~(m["finite"] & m["contained"]) | nonfinite
+        new_info["nonfinite_action"] = info["nonfinite_action"] | nonfinite
         out = out._replace(dropped=stepped.dropped)
         if not pooled:  # the image after the merge (with final_pixels and no pool: the step's second render)
             out = jax.vmap(env.with_pixels)(out)

@@ -136,7 +136,7 @@ _CLAIMS: dict[Path, str] = {}  # folders whose run file this process wrote where
 
 
 def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool = False, reads=(),
-                  share: bool = False, check=None, writes=()) -> Path:
+                  share: bool = False, check=None, writes=(), earlier=()) -> Path:
     """Make `path` this run's folder: writable, locked against a second run, and holding no results of another
     command, nor of this command with other seeds or settings unless `replace` says to drop those, nor files
     no run of this command wrote unless `share` says to write beside them.
@@ -148,7 +148,9 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
     that holds a file it did not write is refused whatever the flags: writing there would mix or remove it.
 
     `writes`: files the run writes in `path` besides its own names (eval's --video, checked by its own rule: a
-    file there is an earlier eval's of this folder), not strays. `check(path, same)`: the command's own refusals (`same`: the folder's run file is this command's, with these
+    file there is an earlier eval's of this folder), not strays. `earlier`: files in `path` an earlier run of this
+    command wrote besides its own names (the video an eval drew inside its --out, by its summary's stamp): not
+    strays, and set aside with the results under --replace. `check(path, same)`: the command's own refusals (`same`: the folder's run file is this command's, with these
     seeds and settings), run after these and before the run file is written: a refused run changes nothing."""
     import hashlib
 
@@ -167,7 +169,8 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
                 else f"files {command} does not write"
             raise OutputError(f"--out {path} holds {what} ({', '.join(foreign)}); {command} never removes or "
                               "overwrites another command's results, whatever the flags: choose another --out")
-    strays = [s for s in stray_files(path, command) if (path / s).resolve() not in {Path(w).resolve() for w in writes}]
+    strays = [s for s in stray_files(path, command)
+              if (path / s).resolve() not in {Path(w).resolve() for w in (*writes, *earlier)}]
     # this command's names, not written by a run of it here (no run file of its own): a user's data/, .parts, eval/
     taken = [n for n in OWN[command] if who != command and (os.path.lexists(path / n))]
     mixed = taken + [s for s in strays if s.split("/")[0] in OWN[command] and s.split("/")[0] not in taken]
@@ -185,7 +188,8 @@ def claim_out_dir(path: Path, command: str, fingerprint: dict, *, replace: bool 
     if check is not None:  # before --replace removes anything and before the run file: a refused run changes nothing
         check(path, who == command and owner.get("fingerprint") == mine["fingerprint"])
     if other:  # set aside, not removed, until this run finishes (replace.py): a failed run puts them back
-        set_aside(path, command)
+        set_aside(path, command, also=[rel for rel in (Path(e).resolve().relative_to(path.resolve()) for e in earlier)
+                                       if rel.parts[0] != ASIDE])
         print(f"--replace: the earlier {command} results in {path} ({', '.join(held)}) are set aside until this run "
               "finishes")
     if not (path / RUN_FILE).exists():

@@ -40,13 +40,15 @@ INSIDE = {
 
 
 def owns(rel: str, patterns) -> bool:
-    """Whether `rel` (a path inside a folder, with /) is one of `patterns`, or an atomic write's leftover of one."""
+    """Whether `rel` (a path inside a folder, with /) is one of `patterns`, or the leftover of one's write that did
+    not finish: an atomic write's `.NAME.*.tmp`, a recording's `.NAME.partial` (record.partial; a recording that
+    failed or was killed left it, and every rerun into the folder was refused for it: the thirteenth pass)."""
     import fnmatch
     import posixpath
 
     for p in patterns:
         head, base = posixpath.split(p)
-        if fnmatch.fnmatchcase(rel, p) or fnmatch.fnmatchcase(rel, posixpath.join(head, f".{base}.*.tmp")):
+        if any(fnmatch.fnmatchcase(rel, posixpath.join(head, q)) for q in (base, f".{base}.*.tmp", f".{base}.partial")):
             return True
     return False
 

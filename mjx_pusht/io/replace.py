@@ -20,6 +20,7 @@ ASIDE = ".replaced"  # inside --out: the earlier results, laid out as they were
 _PENDING: dict[Path, str] = {}  # folders whose results this process set aside, and the command
 _RUN_FILES: dict[Path, bytes] = {}  # the run file a claim wrote over: a run that fails puts it back
 _COMMANDS: dict[Path, str] = {}  # the command each folder this process claimed is for
+_ALSO: dict[Path, list] = {}  # files besides the command's own names set aside with its results (eval's video)
 
 
 def remember_run_file(path: Path, command: str) -> None:
@@ -39,11 +40,17 @@ def _own_files(p: Path, patterns) -> list[Path]:
             if owns((Path(root).relative_to(p) / f).as_posix(), patterns)]
 
 
-def set_aside(path: Path, command: str) -> None:
-    """Move the command's earlier results in `path` (and its run file, copied) into `path/.replaced`. A `.replaced` already there (left by an interrupted replacement) keeps the older finished results, and
-    the unfinished ones now in the folder are removed, as --replace says."""
+def set_aside(path: Path, command: str, also=()) -> None:
+    """Move the command's earlier results in `path` (and its run file, copied) into `path/.replaced`, with `also`
+    (paths inside `path` an earlier run of it wrote besides its own names: an eval's video inside its --out). A
+    `.replaced` already there (left by an interrupted replacement) keeps the older finished results, and the
+    unfinished ones now in the folder are removed, as --replace says."""
     aside = path / ASIDE
     _PENDING[path.resolve()] = command
+    _ALSO[path.resolve()] = [Path(a) for a in also if not (aside / a).exists()]
+    for rel in _ALSO[path.resolve()]:
+        (aside / rel).parent.mkdir(parents=True, exist_ok=True)
+        os.rename(path / rel, aside / rel)
     if aside.is_dir() and any(_own_files(aside / n, INSIDE.get(n, ())) for n in OWN[command]):
         for name in OWN[command]:
             remove_own(path / name)
@@ -66,7 +73,7 @@ def _resumable(path: Path) -> bool:
 def settle(key: Path, ok: bool) -> None:
     """When the command that claimed `key` ends: finished (`ok`), the earlier results set aside go; failed with
     nothing to resume, they come back and this run's own files go; failed with something to resume, they wait."""
-    command, earlier = _PENDING.pop(key, None), _RUN_FILES.pop(key, None)
+    command, earlier, also = _PENDING.pop(key, None), _RUN_FILES.pop(key, None), _ALSO.pop(key, [])
     if not ok and earlier is not None and not _resumable(key) and (key / RUN_FILE).is_file():
         (key / f"{RUN_FILE}.restore").write_bytes(earlier)
         os.replace(key / f"{RUN_FILE}.restore", key / RUN_FILE)  # (one set aside comes back whole below)
@@ -75,7 +82,7 @@ def settle(key: Path, ok: bool) -> None:
         return
     owner = _COMMANDS.pop(key, command)
     if ok and owner:  # this run, or a resumed one, finished: what it replaced goes (left by an interrupted one too)
-        _discard(aside, owner)
+        _discard(aside, owner, also)
         return
     if command is None:  # a run that replaced nothing, failed: what an earlier one set aside keeps waiting
         return
@@ -89,16 +96,22 @@ def settle(key: Path, ok: bool) -> None:
             rel = f.relative_to(aside)
             (key / rel).parent.mkdir(parents=True, exist_ok=True)
             os.replace(f, key / rel)
-    _discard(aside, command)
+    for rel in also:
+        if os.path.lexists(aside / rel) and not os.path.lexists(key / rel):
+            os.replace(aside / rel, key / rel)
+    _discard(aside, command, also)
     print(f"--replace: this run did not finish: the earlier results in {key} are back as they were; this run's are "
           "removed")
 
 
-def _discard(aside: Path, command: str) -> None:
-    """Remove what `.replaced/` holds of `command`'s (and its run file), and the folder if that empties it: a user's
-    file there stays (the eleventh pass: a finishing --replace deleted the whole folder)."""
+def _discard(aside: Path, command: str, also=()) -> None:
+    """Remove what `.replaced/` holds of `command`'s (and its run file, and the `also` files set aside with it), and
+    the folder if that empties it: a user's file there stays (the eleventh pass: a finishing --replace deleted the
+    whole folder)."""
     for name in OWN[command]:
         remove_own(aside / name)
+    for rel in also:
+        (aside / rel).unlink(missing_ok=True)
     (aside / RUN_FILE).unlink(missing_ok=True)
     try:
         aside.rmdir()

@@ -83,6 +83,27 @@ def wrote(out: Path, path: Path) -> bool:
         return False
 
 
+def earlier(out: Path, aside: bool = False) -> list[Path]:
+    """The video an earlier eval drew inside `out` (its summary's stamp names it, unchanged since), or (`aside`) the
+    one a --replace that was interrupted set aside with its results in `.replaced/`: the eval's own files, not
+    strays (a --replace rerun without --video was refused for its own video: the thirteenth pass)."""
+    import json
+
+    from mjx_pusht.io.replace import ASIDE
+
+    out, found = Path(out), []
+    for folder in (out / ASIDE,) if aside else (out,):
+        try:
+            video = json.loads((folder / "summary.json").read_text())["video"]
+            rel = Path(video["path"]).relative_to(out.resolve())
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        p = folder / rel
+        if p.is_file() and not p.is_symlink() and stamp(p)["sha256"] == video["sha256"]:
+            found.append(p)
+    return found
+
+
 MAX_FRAME_BYTES = 4 << 30  # every frame is held in memory before it is encoded
 
 

@@ -31,7 +31,7 @@ class Clock:
 
 
 def start_batch(command: str, out, seeds, name: str, why: str, config: dict, scenario, *, replace: bool = False,
-                resume: bool = False, check: bool = True, reads=(), share: bool = False, writes=()):
+                resume: bool = False, check: bool = True, reads=(), share: bool = False, writes=(), earlier=()):
     """What every batch command does before its first row: the rows, a writable `out` that holds no
     other unfinished run (nor, replaced, a file in `reads`), the banner, and the backend (which compiles the
     scene and checks its tree). Returns (row seeds, their parameter combinations, out, banner, clock, backend)."""
@@ -61,7 +61,7 @@ def start_batch(command: str, out, seeds, name: str, why: str, config: dict, sce
 
     if check:  # with several processes, process 0 checks, locks (and clears) the folder for all
         claim_out_dir(out, command, fingerprint(row_seeds, config), replace=replace, reads=reads, share=share,
-                      check=resumable, writes=writes)
+                      check=resumable, writes=writes, earlier=earlier)
     banner = Banner(command)
     print(f"backend: {name} ({why})")
     clock = Clock()
@@ -84,7 +84,13 @@ def record(path: Path, rows: str, backend, r, combos, pick, writer, summary: dic
         return
     shown = pick()
     traced = backend.run(r.seeds[shown], trace=True, combos=combos[shown])
-    writer(path, backend.model, traced, r, row_labels(r, shown))
+    try:
+        writer(path, backend.model, traced, r, row_labels(r, shown))
+    except BaseException:  # whole or not at all: the half-written recording goes too (a kill leaves it: own.owns)
+        from mjx_pusht.io.record import partial
+
+        partial(path).unlink(missing_ok=True)
+        raise
     summary["timing"]["recording"] = round(clock.lap("recording"), 3)
     atomic_write_json(path.parent / "summary.json", summary)
     print(f"recording: {path} ({len(shown)} {rows} side by side) - open it with: {viewer_command(path)}")

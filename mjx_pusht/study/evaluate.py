@@ -66,9 +66,13 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
     if scenario.randomize:  # an unrandomised run's config (and so its fingerprint) stays as it was
         config["randomize"] = [[n, list(r)] for n, r in scenario.randomize]
     reads = [spec.removeprefix("policy:")] if spec.startswith("policy:") else []  # never replaced by this run
+    from mjx_pusht.io.video import earlier, stamp
+
+    here = earlier(out)  # the video an earlier eval drew in this --out: its own, set aside with it by --replace
     row_seeds, combos, out, banner, clock, backend = start_batch("eval", out, seeds, name, why, config, scenario,
                                                                  replace=replace, resume=resume, reads=reads,
-                                                                 share=share, writes=[video] if video else [])
+                                                                 share=share, writes=[video] if video else [],
+                                                                 earlier=[*here, *earlier(out, aside=True)])
     print(f"controller: {describe(controller)}; task: {task}; reset: {reset}; {len(seeds)} episodes of at most "
           f"{max_steps} control steps x {frame_skip} physics steps; device: {backend.device}; "
           f"pusher shape: {backend.pusher}")
@@ -90,6 +94,8 @@ def evaluate(controller: str, seeds, out, *, backend: str = "auto", action: str 
     finish(out, run, name="per_episode.parquet", episodes=True)
     clock.lap("table_writing")
     summary["timing"] = clock.report(run.timing)
+    if video is None and here and here[0].is_file():  # kept in place: this run's results are the same seeds and
+        summary["video"] = stamp(here[0])  # settings' (other ones' --replace set the video aside)
     atomic_write_json(out / "summary.json", summary)
     lo, hi = summary["success_rate_ci95"]
     print(f"success: {summary['n_success']} of {summary['n_finite']} episodes ({summary['success_rate']:.1%}, "
