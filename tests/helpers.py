@@ -44,15 +44,19 @@ RUNS = {
 def over(base, *extra) -> list:
     """`base`'s arguments with `extra`'s flags in place of its own (each flag's value, if it has one, goes with it):
     the CLI refuses a flag given twice, so a test's other settings replace the base's rather than follow them."""
-    given = {a for a in extra if a.startswith("--")}
+    return [*without(base, {a for a in extra if str(a).startswith("--")}), *extra]
+
+
+def without(base, flags) -> list:
+    """`base`'s arguments less each of `flags` and its value, if it has one."""
     out, i = [], 0
     while i < len(base):
-        if base[i] in given:
+        if base[i] in flags:
             i += 2 if i + 1 < len(base) and not str(base[i + 1]).startswith("--") else 1
             continue
         out.append(base[i])
         i += 1
-    return [*out, *extra]
+    return out
 
 
 def one_line(capsys, *words) -> str:
