@@ -161,8 +161,10 @@ class Array:
             a = np.asarray(value)
         except (ValueError, TypeError):  # ragged lists
             raise error(f"{name} must be an array of shape {_dims(self.shape)}, got {_show(value)}") from None
-        if a.dtype.kind not in self.kinds:
-            raise error(f"{name} must be real numbers, got {a.dtype} ({_show(value)})")
+        if a.dtype.kind not in self.kinds:  # named by the kinds asked for (float images were "not real numbers")
+            what = {"fiu": "real numbers", "iu": "integers", "u": "unsigned integers (uint8 for an image)"}.get(
+                self.kinds, "real numbers")
+            raise error(f"{name} must be {what}, got {a.dtype} ({_show(value)})")
         if a.ndim != len(self.shape) or any(w not in (-1, d) for w, d in zip(self.shape, a.shape)):
             raise error(f"{name} must have shape {_dims(self.shape)}, got {a.shape}")
         if self.finite and a.dtype.kind == "f" and not np.isfinite(a).all():

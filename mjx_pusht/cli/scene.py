@@ -23,6 +23,10 @@ def cmd_scene(args) -> int:
     schedule = Schedule(nudge_steps=SMOKE_NUDGE_STEPS if args.smoke else args.steps or 120)
     if args.compare_welded and args.break_it == "none":
         raise UsageError("--compare-welded compares a broken scene with the welded one: give --break split-tee or free-tee")
+    if args.compare_welded and not args.rerun:  # its one output is a recording (it wrote walk.rrd under --no-rerun,
+        # the fourteenth pass)
+        raise UsageError("--compare-welded records the welded and broken T side by side in walk.rrd, which --no-rerun "
+                         "skips: give one")
     # one seed's look: a rerun with another seed may overwrite the last; other settings need --replace, and another
     # command's results are never overwritten
     out = claim_out_dir(args.out, "scene", {"steps": schedule.nudge_steps, "break": args.break_it,
@@ -53,8 +57,6 @@ def cmd_scene(args) -> int:
 
         welded = CpuBackend(Scenario(SceneSpec("none"), schedule), nthread=1)
         w = welded.run(np.array([args.seed]), trace=True)
-        if not args.rerun:
-            run = backend.run(np.array([args.seed]), trace=True)
         record_walk(out / "walk.rrd", [("welded", welded.model, w), (args.break_it.replace("-", "_"), backend.model, run)])
         print(f"walk: welded gap settled at {w.gap_settled[0]:.4f} m, {args.break_it} at {run.gap_settled[0]:.4f} m; "
               f"recording: {out / 'walk.rrd'} - scrub sim_time to 0.40 s, the first settled frame")

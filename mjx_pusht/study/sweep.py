@@ -76,10 +76,11 @@ def check_resumable(out: Path, seeds: np.ndarray, config: dict, resume: bool) ->
     if not manifest.exists():
         return
     done = _done_ranges(parts)
+    what = config.get("command", "sweep")  # an eval's chunks are an eval's (it said "sweep": the fourteenth pass)
     if not resume:
         if done:
             raise ResumeError(
-                f"{out} holds an unfinished sweep ({sum(h - lo for lo, h in done)} seeds done): "
+                f"{out} holds an unfinished {what} ({sum(h - lo for lo, h in done)} seeds done): "
                 "pass --resume to finish it, or choose another --out"
             )
         return
@@ -89,7 +90,7 @@ def check_resumable(out: Path, seeds: np.ndarray, config: dict, resume: bool) ->
         raise ResumeError(f"--resume: {manifest} is unreadable ({type(e).__name__}), so its chunks cannot be trusted; "
                           f"choose another --out (or remove {parts} to run every seed again)") from None
     if theirs != fingerprint(seeds, config):
-        raise ResumeError(f"--resume: the unfinished sweep in {out} used other seeds or settings; choose another --out")
+        raise ResumeError(f"--resume: the unfinished {what} in {out} used other seeds or settings; choose another --out")
     import pyarrow.parquet as pq
 
     for lo, hi in done:  # before any work: a chunk cut or damaged on disk would only show at the end
