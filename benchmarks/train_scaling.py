@@ -46,7 +46,7 @@ def measure(run: Path, goal: float) -> dict:
     steady_s = (sum(c["learn_seconds"] for c in later) if s["method"] == "ppo"
                 else curve[-1]["wall_seconds"] - curve[first]["wall_seconds"] if later else 0.0)
     return {"devices": s.get("devices", 1), "device": s["device"], "method": s["method"], "obs_type": s["obs_type"],
-            "env_steps": s["env_steps"], "training_seconds": train_s,
+            "envs": s.get("config", {}).get("envs"), "env_steps": s["env_steps"], "training_seconds": train_s,
             "steps_per_second": s["env_steps"] / train_s if train_s else None,
             "steady_steps_per_second": ((curve[-1]["env_steps"] - curve[first]["env_steps"]) / steady_s
                                         if steady_s > 0 else None),
@@ -90,7 +90,18 @@ def markdown(rows: list[dict], goal: float) -> str:
     return "\n".join(lines + ["", f"{rows[0]['method']} from {rows[0]['obs_type']} on {rows[0]['device']}"]) + "\n"
 
 
-def scaling_mode(per: list[str]) -> str:
+def scaling_mode(per: list[str], rows: list[dict] = ()) -> str:
+    """The mode the runs ran in, read from their own episode counts where each wrote one: a run made apart (a process
+    a device, started by hand) records no per-device flags, and its collection was once labelled strong when it ran
+    weak (notebook lead30). Runs that wrote none: the per-device flags declared."""
+    envs = [(r["devices"], r.get("envs")) for r in rows]
+    flags = f" ({', '.join('--' + f for f in per)} per device)" if per else ""
+    if len(envs) > 1 and all(e for _, e in envs):
+        if len({e / n for n, e in envs}) == 1:
+            return f"weak: {envs[0][1] // envs[0][0]:,} episodes per device{flags}"
+        if len({e for _, e in envs}) == 1:
+            return f"strong: the one run's {envs[0][1]:,} episodes split over the devices{flags}"
+        return "neither weak nor strong: " + ", ".join(f"{e:,} episodes on {n}" for n, e in envs) + flags
     return (f"weak: {', '.join('--' + f for f in per)} per device" if per
             else "strong: the one run's work split over the devices")
 
@@ -142,9 +153,9 @@ def main(argv=None) -> int:
         except (OSError, KeyError, ValueError) as e:  # unreadable, cut or unfinished: listed, not dropped
             failed.append(f"{run} ({e})")
     atomic_write_json(args.out / "scaling.json", {"goal": args.goal, "train_args": train_args, "per_device": per,
-                                                  "scaling": scaling_mode(per), "runs": rows, "failed": failed})
+                                                  "scaling": scaling_mode(per, rows), "runs": rows, "failed": failed})
     if rows:
-        atomic_write_bytes(args.out / "scaling.md", (markdown(rows, args.goal) + scaling_mode(per) + "\n").encode())
+        atomic_write_bytes(args.out / "scaling.md", (markdown(rows, args.goal) + scaling_mode(per, rows) + "\n").encode())
         print(markdown(rows, args.goal), end="")
     print("\n".join(f"failed: {f}" for f in failed), file=sys.stderr)
     return 0 if rows and not failed else 1

@@ -173,13 +173,29 @@ def test_train_scaling_times_each_device_counts_run_against_one_devices(tmp_path
     assert one["minutes_to_goal"] == pytest.approx(first["wall_seconds"] / 60) == 2 * two["minutes_to_goal"]
     assert two["steady_steps_per_second"] == pytest.approx(2 * one["steady_steps_per_second"])
     assert "| 2 | " in (tmp_path / "scaling.md").read_text() and "| 2.00 |" in (tmp_path / "scaling.md").read_text()
-    # counts run apart (a process each) are collected in the mode they ran in, read from the recipe they wrote
+    # the mode is the runs' own: both ran the same episodes, so the one run's work was split (strong)
+    envs = s["config"]["envs"]
     made = json.loads((tmp_path / "scaling.json").read_text())
-    (tmp_path / "scaling.json").write_text(json.dumps(made | {"train_args": ["--envs", "64"], "per_device": ["envs"]}))
+    assert made["scaling"] == f"strong: the one run's {envs:,} episodes split over the devices"
+    # counts run apart (a process each, started by hand, lead30) are collected in the mode they ran in, read from
+    # the runs' own episode counts, whatever the recipe declared: here 2 devices ran twice one device's episodes
+    two_s = json.loads((tmp_path / "devices-2" / "summary.json").read_text())
+    (tmp_path / "devices-2" / "summary.json").write_text(json.dumps(two_s | {"config": two_s["config"] | {
+        "envs": 2 * envs}}))
+    (tmp_path / "scaling.json").write_text(json.dumps(made | {"train_args": ["--envs", "64"], "per_device": []}))
     assert train_scaling.main(["--devices", "1,2", "--goal", "0.9", "--out", str(tmp_path), "--collect"]) == 0
     again = json.loads((tmp_path / "scaling.json").read_text())
-    assert again["scaling"] == "weak: --envs per device" and again["train_args"] == ["--envs", "64"]
-    assert again["runs"] == made["runs"] and (tmp_path / "scaling.md").read_text().endswith("weak: --envs per device\n")
+    assert again["scaling"] == f"weak: {envs:,} episodes per device" and again["train_args"] == ["--envs", "64"]
+    assert [r["steps_per_second"] for r in again["runs"]] == [r["steps_per_second"] for r in made["runs"]]
+    assert (tmp_path / "scaling.md").read_text().endswith(f"weak: {envs:,} episodes per device\n")
+    # runs that wrote no episode count: the declared recipe's mode
+    for n in (1, 2):
+        bare = json.loads((tmp_path / f"devices-{n}" / "summary.json").read_text())
+        (tmp_path / f"devices-{n}" / "summary.json").write_text(json.dumps(
+            bare | {"config": {k: v for k, v in bare["config"].items() if k != "envs"}}))
+    (tmp_path / "scaling.json").write_text(json.dumps(made | {"train_args": ["--envs", "64"], "per_device": ["envs"]}))
+    assert train_scaling.main(["--devices", "1,2", "--goal", "0.9", "--out", str(tmp_path), "--collect"]) == 0
+    assert json.loads((tmp_path / "scaling.json").read_text())["scaling"] == "weak: --envs per device"
     (tmp_path / "scaling.json").write_text("{")  # cut short: argparse's one line, not a traceback
     with pytest.raises(SystemExit):
         train_scaling.main(["--devices", "1,2", "--goal", "0.9", "--out", str(tmp_path), "--collect"])

@@ -73,9 +73,10 @@ print(" ".join(out))' "$@"; }
       # PPO on MJX-Warp as a process a GPU (`--num-processes`, Brax's pmap over every process's one GPU) against one
       # GPU, weak scaling, a fixed budget each (PPO over processes refuses --minutes and --until): ppo-apart's four
       # lone processes kept 3.75x one GPU's steps where one process over four made 2.8x. GPUS: the host's (2 or 4).
-      # T: env steps a GPU (60 M: ~70 s of epochs at one H200's ~850k a second, lead19)
+      # T: env steps a GPU (60 M: ~70 s of epochs at one H200's ~850k a second, lead19); ENVS: envs a GPU
       n=${GPUS:-$(nvidia-smi -L | wc -l)} t=${T:-60000000}
-      w() { echo --algo ppo --backend mjx-warp --envs $((8192 * $1)) --batch $((512 * $1)) --timesteps $((t * $1)) \
+      e=${ENVS:-8192}  # envs a GPU: 8,192 made 1.71x on 2 H200s, 16,384 1.81x (lead29)
+      w() { echo --algo ppo --backend mjx-warp --envs $((e * $1)) --batch $((e / 16 * $1)) --timesteps $((t * $1)) \
               --iterations 8 $common; }  # the run on N GPUs: N x one GPU's envs, minibatch and steps
       # shellcheck disable=SC2046  # the recipe: a list of flags
       scale 0 0.95 procs 1 "" "" $(w 1) > procs-1.log 2>&1
@@ -92,7 +93,7 @@ print(" ".join(out))' "$@"; }
       # One GPU against two of the same host, side by side in one plan (GPU_LIST: the two, default 0,1; the others
       # may train meanwhile): DAgger from pixels as one program over the two (weak scaling, to 90% or 5 minutes),
       # then PPO on MJX-Warp as a process a GPU (Brax's pmap over the processes, weak scaling, T env steps a GPU,
-      # the whole budget: PPO over processes refuses --until).
+      # the whole budget: PPO over processes refuses --until; ENVS envs a GPU, default 8,192).
       IFS=, read -r g0 g1 <<< "${GPU_LIST:-0,1}"
       # shellcheck disable=SC2086  # the recipes: lists of flags
       {
@@ -100,7 +101,8 @@ print(" ".join(out))' "$@"; }
       scale "$g0,$g1" 0.9 pair-px 2 $px_per "" --backend mjx-warp $px --seed 0 > pair-px-2.log 2>&1
       }
       t=${T:-60000000}
-      w() { echo --algo ppo --backend mjx-warp --envs $((8192 * $1)) --batch $((512 * $1)) --timesteps $((t * $1)) \
+      e=${ENVS:-8192}  # envs a GPU: 8,192 made 1.71x on 2 H200s, 16,384 1.81x (lead29)
+      w() { echo --algo ppo --backend mjx-warp --envs $((e * $1)) --batch $((e / 16 * $1)) --timesteps $((t * $1)) \
               --iterations 8 $common; }  # the run on N GPUs: N x one GPU's envs, minibatch and steps
       # shellcheck disable=SC2046  # the recipe: a list of flags
       scale "$g0" 0.95 pair-ppo 1 "" "" $(w 1) > pair-ppo-1.log 2>&1
