@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from jax.tree_util import tree_leaves as jax_leaves
-from helpers import ENV
+from helpers import ENV, over
 
 from mjx_pusht.cli.commands import main
 from mjx_pusht.train.policy import load_checkpoint
@@ -115,6 +115,29 @@ def test_ppo_hands_the_device_count_to_braxs_own_device_mapping(tmp_path, monkey
 TINY = ["train", "--backend", "mjx-warp", "--reset", "chapter", "--envs", "4", "--iterations", "2", "--fit-steps", "20",
         "--batch", "64", "--hidden", "32,32", "--eval-envs", "2", "--max-samples", "5000", "--max-steps", "10",
         "--no-rerun", "--record", "0", "--no-progress"]
+
+
+@pytest.mark.parametrize("algo", ["dagger", "ppo"])
+def test_process_0_refusing_the_folder_ends_every_training_process_in_one_line(tmp_path, algo):
+    """Process 0 claims --out for the run; refused there (a user's file in it), process 1 would have trained on and
+    waited for process 0 in its first all-reduce for ever (notebook lead29). Both end in one line, before training."""
+    if algo == "ppo":
+        pytest.importorskip("brax")
+    (tmp_path / "notes.txt").write_text("mine")
+    port = _free_port()
+    tiny = (over(TINY, "--backend", "mjx-jax") if algo == "dagger" else  # PPO's tiny run (its test below)
+            ["train", "--algo", "ppo", "--backend", "mjx-jax", "--envs", "8", "--batch", "8", "--timesteps", "10240",
+             "--iterations", "1", "--eval-envs", "8", "--hidden", "32,32", "--no-rerun", "--record", "0"])
+    args = [*tiny, "--out", str(tmp_path), "--num-processes", "2", "--coordinator", f"127.0.0.1:{port}"]
+    procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *args, "--process-id", str(i)],
+                              env={**ENV, "JAX_PLATFORMS": "cpu"}, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True) for i in (1, 0)]
+    errs = [p.communicate(timeout=300)[1] for p in procs]
+    assert [p.returncode for p in procs] == [1, 1], errs
+    one, zero = (e.strip().splitlines() for e in errs)
+    assert len(zero) == 1 and "holds files train did not write (notes.txt)" in zero[0], zero
+    assert len(one) == 1 and "process 0 stopped before any work" in one[0], one
+    assert sorted(os.listdir(tmp_path)) == ["notes.txt"]
 
 
 @pytest.mark.slow

@@ -78,6 +78,34 @@ def test_processes_given_other_settings_stop_before_writing_a_mixed_table(tmp_pa
     assert not (tmp_path / "per_seed.parquet").exists() and not (tmp_path / ".parts").exists()
 
 
+def test_process_0_refusing_the_folder_ends_every_process_in_one_line(tmp_path):
+    """Process 0 claims --out for all. Refused there (a user's file in it), it left process 1 waiting for it at the
+    chunks' barrier for 24 hours (the fast loop hung so, on process 1's own write probe taken for a user's file:
+    notebook lead29). Now both end in one line, process 1's naming process 0's refusal, and the user's file stays."""
+    (tmp_path / "notes.txt").write_text("mine")
+    port = _free_port()
+    procs = [_start(1, tmp_path, port), _start(0, tmp_path, port)]
+    errs = [p.communicate(timeout=240)[1] for p in procs]
+    assert [p.returncode for p in procs] == [1, 1], errs
+    one, zero = (e.strip().splitlines() for e in errs)
+    assert len(zero) == 1 and "holds files sweep did not write (notes.txt)" in zero[0]
+    assert len(one) == 1 and "process 0 stopped before any work" in one[0] and "notes.txt" in one[0]
+    assert sorted(os.listdir(tmp_path)) == ["notes.txt"] and (tmp_path / "notes.txt").read_text() == "mine"
+
+
+def test_a_write_probe_is_no_users_file(tmp_path):
+    """A sibling process's writability probe (`.probe-*`, there for an instant while process 1 checks --out) is the
+    run's bookkeeping: process 0's claim takes the folder; a user's file beside it is still refused."""
+    from mjx_pusht.io.outputs import OutputError, claim_out_dir, stray_files
+
+    (tmp_path / ".probe-x1y2z3").write_bytes(b"")
+    assert stray_files(tmp_path, "sweep") == []
+    claim_out_dir(tmp_path, "sweep", {"seeds": [0]})
+    (tmp_path / "probe-notes.txt").write_text("mine")
+    with pytest.raises(OutputError, match="probe-notes.txt"):
+        claim_out_dir(tmp_path, "sweep", {"seeds": [0]})
+
+
 def test_a_coordinator_port_in_use_is_one_line_not_a_segfault(tmp_path):
     """Finding 6: a port another program listens on made process 0 segfault (exit 139)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:

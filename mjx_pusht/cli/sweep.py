@@ -45,9 +45,10 @@ def cmd_sweep(args) -> int:
 
         fp = fingerprint(rows_for(seeds, len(scenario.grid()))[0], config)
         processes.agree({**fp.pop("config"), **fp, "out": str(Path(args.out).resolve())})
-    row_seeds, combos, out, banner, clock, backend = start_batch("sweep", args.out, seeds, name, why, config, scenario,
-                                                                 replace=args.replace, resume=args.resume,
-                                                                 check=processes.leader, share=args.share_out)
+    # process 0 claims the folder for all; its refusal (or any process's) ends every process, not process 0 alone
+    row_seeds, combos, out, banner, clock, backend = processes.settled("start", lambda: start_batch(
+        "sweep", args.out, seeds, name, why, config, scenario, replace=args.replace, resume=args.resume,
+        check=processes.leader, share=args.share_out))
     print(read_tree(backend.model).describe())
     print(f"pusher shape simulated: {backend.pusher}" + (" (substituted: MJX's JAX backend has no cylinder-box collision)"
                                                           if backend.pusher != scenario.scene.pusher else ""))

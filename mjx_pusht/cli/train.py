@@ -69,7 +69,6 @@ def cmd_train(args) -> int:
     """`mjx-pusht train`: check everything, train, then judge the policy with `eval` on the held-out seeds."""
     from mjx_pusht.backends.base import resolve
     from mjx_pusht.io.banner import Banner
-    from mjx_pusht.io.outputs import claim_out_dir
     from mjx_pusht.study.distributed import Processes
     from mjx_pusht.train.dagger import DaggerConfig
 
@@ -137,14 +136,14 @@ def cmd_train(args) -> int:
         if not processes.leader:  # its files go to a folder of its own, removed after: process 0 writes the run's
             from mjx_pusht.train.run import train_dagger
 
+            processes.settled("claim")  # process 0's claim of --out: its refusal ends this process too
+
             def follow(out: Path) -> None:  # DAgger's processes agree on their weights by construction (one mesh)
                 train_dagger(cfg, name, out, minutes=args.minutes, progress=False, rerun=False, keep=args.keep,
                              devices=devices, until=args.until)
 
             return _follow(follow, devices, processes, args)
-    out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out,  # the run's settings:
-                        check=lambda path, same: _restart(path, args))  # checked on --resume
-    _check_rerun(args)
+    out = processes.settled("claim", lambda: _claim(args))
     banner = Banner("train")
     print(f"backend: {name} ({why}); DAgger from {cfg.obs_type} on the {task.name} task: {cfg.envs} {cfg.reset} "
           f"episodes an iteration, "
@@ -178,6 +177,17 @@ def _follow(train, devices: list, processes, args) -> int:
     return 0
 
 
+def _claim(args) -> Path:
+    """The run's folder, claimed (its settings checked on --resume, before the run file: a refusal changes nothing),
+    and rerun's presence checked."""
+    from mjx_pusht.io.outputs import claim_out_dir
+
+    out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out,
+                        check=lambda path, same: _restart(path, args))
+    _check_rerun(args)
+    return out
+
+
 def _restart(out: Path, args) -> None:
     """A folder holding a training run is continued (--resume) or started over (--replace), never mixed."""
     started = (out / "checkpoints" / "resume.msgpack").exists()
@@ -201,7 +211,6 @@ def _check_rerun(args) -> None:
 def _cmd_ppo(args, name: str, why: str, devices: list, processes) -> int:
     """`train --algo ppo`: Brax's PPO (train/ppo.py), then the same judgement and files as DAgger's."""
     from mjx_pusht.io.banner import Banner
-    from mjx_pusht.io.outputs import claim_out_dir
 
     if name == "cpu":
         raise TrainError("--algo ppo runs in Brax's jitted JAX: use --backend mjx-warp or mjx-jax "
@@ -222,10 +231,9 @@ def _cmd_ppo(args, name: str, why: str, devices: list, processes) -> int:
 
         processes.agree({**config_dict(cfg), "backend": name, "devices": len(devices), "out": str(args.out.resolve())})
         if not processes.leader:  # Brax's loop on its devices; process 0 alone judges and writes (Brax calls back there)
+            processes.settled("claim")  # process 0's claim of --out: its refusal ends this process too
             return _follow(lambda out: train_ppo(cfg, name, out, progress=False, **run)[1], devices, processes, args)
-    out = claim_out_dir(args.out, "train", {}, replace=args.replace, share=args.share_out,
-                        check=lambda path, same: _restart(path, args))  # before the run file: a refusal changes nothing
-    _check_rerun(args)
+    out = processes.settled("claim", lambda: _claim(args))
     banner = Banner("train")
     print(f"backend: {name} ({why}); Brax PPO from {cfg.obs_type} on the {cfg.the_task.name} task: {cfg.envs} envs, "
           f"{cfg.timesteps:,} env steps, held-out judgement {cfg.evals} times on seeds {cfg.held_out_seeds()[0]}..{cfg.held_out_seeds()[-1]}")

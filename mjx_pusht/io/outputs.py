@@ -9,7 +9,7 @@ import threading
 from pathlib import Path
 
 from mjx_pusht.errors import MjxPushtError
-from mjx_pusht.io.own import BOOKKEEPING, INSIDE, OWN, RESULTS, RUN_FILE, owns, remove_own, runs_holding
+from mjx_pusht.io.own import BOOKKEEPING, INSIDE, OWN, PROBE, RESULTS, RUN_FILE, owns, remove_own, runs_holding
 from mjx_pusht.io.replace import ASIDE, remember_run_file, set_aside, settle
 
 
@@ -236,7 +236,7 @@ def stray_files(path: Path, command: str) -> list[str]:
     """What `path` holds that `command` never writes: files and folders by their path inside it (a folder that is
     not one of the command's is named whole, with a trailing /, and not looked into). Inside `.replaced/` (--replace's
     earlier results, replace.py) the same: a user's file there is a stray, as anywhere else."""
-    patterns = (*BOOKKEEPING, *(n for n in OWN[command] if n not in INSIDE),
+    patterns = (*BOOKKEEPING, PROBE, *(n for n in OWN[command] if n not in INSIDE),
                 *(f"{n}/{p}" for n in OWN[command] if n in INSIDE for p in INSIDE[n]))
     strays = []
     for root, dirs, files in os.walk(path):

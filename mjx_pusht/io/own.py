@@ -25,6 +25,9 @@ OWN = {
 }
 # the run file, and the lock file runs of earlier versions left (the lock is now the OS's, on the folder itself)
 BOOKKEEPING = (RUN_FILE, ".lock")
+# prepare_out_dir's writability probe, there for an instant (or left by a kill in that instant): a run's, never a
+# user's. Two processes of one sweep share --out, and process 0 took process 1's probe for a user's file (lead29).
+PROBE = ".probe-*"
 # Inside the folders a command writes, the files it puts there: a file matching none of these is a user's, and no
 # command removes it (a user's data/mine.txt in demos' data/ stays, and the folder is refused).
 _DATASET = ("data/chunk-*/file-*.parquet", "meta/info.json", "meta/stats.json", "meta/tasks.parquet",

@@ -125,6 +125,23 @@ class Processes:
                 raise DistributedError(f"process {i} was given other settings than process {self.process_id} "
                                        f"({diff}): give every process the same options; nothing was written")
 
+    def settled(self, name: str, step=None):
+        """`step()` in this process (process 0's claim of the run's folder; None where a process has none), then every
+        process hears whether each one's went through: a refusal in one ends every process in one line. Refused in
+        process 0 alone, its --out claim left the others waiting for it at their next barrier or collective for ever
+        (a sweep's process 1 at "parts-ready", 24 hours; the fast loop, notebook lead29). Returns `step`'s result."""
+        try:
+            result = None if step is None else step()
+        except Exception as e:  # noqa: BLE001 - told to the others, then raised here as it was
+            if self.many:
+                every_process(f"settled:{name}", f"{type(e).__name__}: {(str(e).splitlines() or [''])[0]}")
+            raise
+        if self.many:
+            for i, theirs in enumerate(every_process(f"settled:{name}", "")):
+                if theirs:
+                    raise DistributedError(f"process {i} stopped before any work ({theirs}): nothing was run here")
+        return result
+
     def block(self, n_rows: int) -> tuple[int, int]:
         """This process's rows [lo, hi) of n_rows: contiguous blocks, as even as they can be."""
         edges = np.linspace(0, n_rows, self.num_processes + 1).round().astype(int)
