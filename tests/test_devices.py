@@ -140,6 +140,22 @@ def test_process_0_refusing_the_folder_ends_every_training_process_in_one_line(t
     assert sorted(os.listdir(tmp_path)) == ["notes.txt"]
 
 
+def test_a_folder_flag_given_to_one_training_process_alone_stops_both(tmp_path):
+    """Process 0 alone claims, records and judges, so `--replace` given to it alone (or `--no-rerun` to another) was
+    never compared between the processes (the fifteenth pass): both are refused in one line, before any training."""
+    port = _free_port()
+    args = [*over(TINY, "--backend", "mjx-jax"), "--out", str(tmp_path / "run"), "--num-processes", "2",
+            "--coordinator", f"127.0.0.1:{port}"]
+    procs = [subprocess.Popen([sys.executable, "-m", "mjx_pusht", *args, "--process-id", str(i), *extra],
+                              env={**ENV, "JAX_PLATFORMS": "cpu"}, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True) for i, extra in ((1, []), (0, ["--replace"]))]
+    errs = [p.communicate(timeout=300)[1] for p in procs]
+    assert [p.returncode for p in procs] == [1, 1], errs
+    for err in errs:
+        assert len(err.strip().splitlines()) == 1 and "other settings" in err and "replace" in err, err
+    assert not (tmp_path / "run").exists()
+
+
 @pytest.mark.slow
 def test_two_processes_joined_by_jax_distributed_train_the_policy_two_devices_of_one_process_do(tmp_path):
     """Two processes on localhost (one CPU device each, their gradients averaged across processes through gloo)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 import subprocess
@@ -59,9 +60,9 @@ def test_bad_process_options_are_one_line(tmp_path, capsys, argv, needle):
     assert needle in err and err.count("\n") == 1
 
 
-def _start(i, out, port, *extra):
+def _start(i, out, port, *extra, n=2):
     env = {**os.environ, "JAX_PLATFORMS": "cpu"}
-    return subprocess.Popen([sys.executable, "-m", "mjx_pusht", *_sweep_args(out, "--num-processes", "2",
+    return subprocess.Popen([sys.executable, "-m", "mjx_pusht", *_sweep_args(out, "--num-processes", str(n),
                              "--coordinator", f"127.0.0.1:{port}", "--process-id", str(i), *extra)],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
@@ -91,6 +92,51 @@ def test_process_0_refusing_the_folder_ends_every_process_in_one_line(tmp_path):
     assert len(zero) == 1 and "holds files sweep did not write (notes.txt)" in zero[0]
     assert len(one) == 1 and "process 0 stopped before any work" in one[0] and "notes.txt" in one[0]
     assert sorted(os.listdir(tmp_path)) == ["notes.txt"] and (tmp_path / "notes.txt").read_text() == "mine"
+
+
+@pytest.mark.parametrize("zero, one, n, needle", [
+    ([], [], 3, "num_processes"),  # process 1, told of 3, ran its own block into the table's chunks
+    ([], ["--resume"], 2, "resume"),  # process 1's --resume was ignored without a word
+    (["--replace"], [], 2, "replace"),
+])
+def test_flags_given_to_one_process_alone_stop_both_in_one_line(tmp_path, zero, one, n, needle):
+    """The fifteenth pass: a flag only process 0 acts on (it claims the folder), or another process count, given to
+    one process was not compared; now every process is refused in one line naming it, and nothing is written."""
+    port = _free_port()
+    out = tmp_path / "out"
+    procs = [_start(1, out, port, *one, n=n), _start(0, out, port, *zero)]
+    errs = [p.communicate(timeout=240)[1] for p in procs]
+    assert [p.returncode for p in procs] == [1, 1], errs
+    for err in errs:
+        assert len(err.strip().splitlines()) == 1 and "other settings" in err and needle in err, err
+    assert not out.exists()
+
+
+def test_a_refused_resume_over_processes_leaves_no_folder(tmp_path):
+    """Process 0 alone makes --out: another process making it too left an empty folder behind when process 0
+    refused it (`--resume` with nothing to resume; the fifteenth pass). One process leaves none, and so do two."""
+    port = _free_port()
+    out = tmp_path / "new" / "out"
+    procs = [_start(1, out, port, "--resume"), _start(0, out, port, "--resume")]
+    errs = [p.communicate(timeout=240)[1] for p in procs]
+    assert [p.returncode for p in procs] == [1, 1], errs
+    assert "nothing to resume" in errs[1] and "process 0 stopped before any work" in errs[0]
+    assert os.listdir(tmp_path) == []
+
+
+def test_chunks_of_runs_split_otherwise_are_refused_before_any_row(tmp_path):
+    """Chunk files that overlap (rows 3-4 written by two runs of other process counts) were found only after every
+    row had run, in a traceback, the other process left waiting for ever (the fifteenth pass). `--resume` refuses
+    them at the start, in one line."""
+    from mjx_pusht.study.sweep import PARTS, ResumeError, check_resumable, fingerprint
+
+    seeds, config = np.arange(8), {"backend": "cpu", "steps": 20}
+    (tmp_path / PARTS).mkdir()
+    (tmp_path / PARTS / "manifest.json").write_text(json.dumps(fingerprint(seeds, config)))
+    for lo, hi in ((0, 5), (3, 6)):
+        (tmp_path / PARTS / f"seeds-{lo:012d}-{hi:012d}.parquet").write_bytes(b"")
+    with pytest.raises(ResumeError, match=r"overlap \(rows 3..4 twice\)"):
+        check_resumable(tmp_path, seeds, config, resume=True)
 
 
 def test_a_write_probe_is_no_users_file(tmp_path):

@@ -44,7 +44,11 @@ def cmd_sweep(args) -> int:
         from mjx_pusht.study.sweep import fingerprint, rows_for
 
         fp = fingerprint(rows_for(seeds, len(scenario.grid()))[0], config)
-        processes.agree({**fp.pop("config"), **fp, "out": str(Path(args.out).resolve())})
+        # the folder's and the recording's flags too: process 0 alone claims and records, so a flag given to another
+        # process alone (--resume, --replace) was ignored without a word (the fifteenth pass)
+        processes.agree({**fp.pop("config"), **fp, "out": str(Path(args.out).resolve()), "resume": args.resume,
+                         "replace": args.replace, "share_out": args.share_out, "rerun": args.rerun,
+                         "record": args.record, "audit": args.audit})
     # process 0 claims the folder for all; its refusal (or any process's) ends every process, not process 0 alone
     row_seeds, combos, out, banner, clock, backend = processes.settled("start", lambda: start_batch(
         "sweep", args.out, seeds, name, why, config, scenario, replace=args.replace, resume=args.resume,
@@ -60,10 +64,10 @@ def cmd_sweep(args) -> int:
         from mjx_pusht.study.audit import Audit
 
         auditor = Audit(backend, row_seeds, combos, args.audit)  # its CPU rows run beside the device's
-    try:
-        run = run_sweep(backend, row_seeds, out, config=config, chunk=args.chunk, resume=args.resume,
-                        progress=args.progress, combos=combos, on_start=auditor.start if auditor else None,
-                        processes=processes)
+    try:  # a process's failure in its rows reaches the others in one line (they waited at a barrier for a day)
+        run = processes.settled("rows", lambda: run_sweep(
+            backend, row_seeds, out, config=config, chunk=args.chunk, resume=args.resume, progress=args.progress,
+            combos=combos, on_start=auditor.start if auditor else None, processes=processes))
     except KeyboardInterrupt:
         print(f"\ninterrupted: {kept_chunks(out)}", file=sys.stderr)
         return 130

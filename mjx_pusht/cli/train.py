@@ -132,7 +132,8 @@ def cmd_train(args) -> int:
     if processes.many:  # one run: every process must have been given the same one
         from mjx_pusht.train.resume import config_dict
 
-        processes.agree({**config_dict(cfg), "backend": name, "devices": len(devices), "out": str(args.out.resolve())})
+        processes.agree({**config_dict(cfg), "backend": name, "devices": len(devices), "out": str(args.out.resolve()),
+                         **_folder_flags(args)})
         if not processes.leader:  # its files go to a folder of its own, removed after: process 0 writes the run's
             from mjx_pusht.train.run import train_dagger
 
@@ -175,6 +176,12 @@ def _follow(train, devices: list, processes, args) -> int:
           + (f" (its final weights' digest {digest}, as process 0's)" if digest else "")
           + f"; process 0 writes the run to {args.out}")
     return 0
+
+
+def _folder_flags(args) -> dict:
+    """The flags process 0 alone acts on (it claims, records and judges): compared between the processes like the
+    run's settings, since one given to another process alone was ignored without a word (the fifteenth pass)."""
+    return {k: getattr(args, k, None) for k in ("replace", "share_out", "rerun", "record")}
 
 
 def _claim(args) -> Path:
@@ -229,7 +236,8 @@ def _cmd_ppo(args, name: str, why: str, devices: list, processes) -> int:
     if processes.many:  # one run: every process must have been given the same one (Brax maps it over them all)
         from mjx_pusht.train.resume import config_dict
 
-        processes.agree({**config_dict(cfg), "backend": name, "devices": len(devices), "out": str(args.out.resolve())})
+        processes.agree({**config_dict(cfg), "backend": name, "devices": len(devices), "out": str(args.out.resolve()),
+                         **_folder_flags(args)})
         if not processes.leader:  # Brax's loop on its devices; process 0 alone judges and writes (Brax calls back there)
             processes.settled("claim")  # process 0's claim of --out: its refusal ends this process too
             return _follow(lambda out: train_ppo(cfg, name, out, progress=False, **run)[1], devices, processes, args)

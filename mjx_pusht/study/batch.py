@@ -52,7 +52,10 @@ def start_batch(command: str, out, seeds, name: str, why: str, config: dict, sce
         # as train's --resume without a checkpoint: a fresh run under --resume was silently a fresh run
         raise ResumeError(f"--resume: {out} holds no unfinished {command} (no .parts) and no finished one; "
                           "nothing to resume (run without --resume to start)")
-    out = prepare_out_dir(out)
+    # with several processes process 0 makes and claims the folder for all; another process making it too left an
+    # empty folder behind when process 0 refused it (the fifteenth pass)
+    out = prepare_out_dir(out) if check else Path(out)
+
     def resumable(path: Path, same: bool) -> None:
         if replace and not resume and (path / PARTS).is_dir():  # --replace: its own unfinished chunks go
             remove_own(path / PARTS)

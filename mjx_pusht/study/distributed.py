@@ -115,10 +115,19 @@ class Processes:
         (seeds, scene, steps, parameters, --out): their rows would be mixed into one table."""
         if not self.many:
             return
-        mine = json.dumps(settings, sort_keys=True, default=str)
+        import jax
+        from jax._src import distributed
+
+        # the process count too: a process given another --num-processes joined, ran its own block of rows and mixed
+        # them into the table's chunks (the fifteenth pass)
+        mine = json.dumps({**settings, "num_processes": self.num_processes}, sort_keys=True, default=str)
         settings = json.loads(mine)  # compared as every process sees it: through JSON
-        for i, given in enumerate(every_process("settings", mine, int(self.peer_timeout * 1000))):
-            theirs = json.loads(given)
+        client = distributed.global_state.client
+        client.key_value_set(f"mjx_pusht:settings:{jax.process_index()}", mine)
+        # read in process order and compared as each arrives: a process told of one process too many must not wait
+        # for it before it sees that process 0 was told otherwise
+        for i in range(jax.process_count()):
+            theirs = json.loads(client.blocking_key_value_get(f"mjx_pusht:settings:{i}", int(self.peer_timeout * 1000)))
             if theirs != settings:
                 diff = "; ".join(f"{k} {settings.get(k)} here, {theirs.get(k)} there"
                                  for k in sorted({*theirs, *settings}) if theirs.get(k) != settings.get(k))

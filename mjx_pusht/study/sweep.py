@@ -91,6 +91,10 @@ def check_resumable(out: Path, seeds: np.ndarray, config: dict, resume: bool) ->
                           f"choose another --out (or remove {parts} to run every seed again)") from None
     if theirs != fingerprint(seeds, config):
         raise ResumeError(f"--resume: the unfinished {what} in {out} used other seeds or settings; choose another --out")
+    for (_, hi), (lo, _) in zip(done, done[1:]):  # chunks of runs split otherwise (the fifteenth pass): at the end,
+        if lo < hi:  # after every row had run, the table failed in a traceback and the other process waited for ever
+            raise ResumeError(f"--resume: chunk files in {parts} overlap (rows {lo}..{hi - 1} twice), so they are not "
+                              f"one run's; remove {parts} to run every seed again")
     import pyarrow.parquet as pq
 
     for lo, hi in done:  # before any work: a chunk cut or damaged on disk would only show at the end
