@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # There, on the GPU host, in the repository's root: unpack what tools/offline-gpu/bundle.sh packed here and
 # install it (docs/offline-gpu.md). Usage: bash tools/offline-gpu/unbundle.sh
-# the folders tools/offline-gpu/bundle.sh packed here (7 calls for MuJoCo, Warp, Brax and jax 0.10.2, not 11),
+# the folders tools/offline-gpu/bundle.sh packed here (8 calls of 55 MiB for MuJoCo, Warp, Brax and jax 0.10.2),
 # every call but the last having run `mkdir -p ~/b && cp .gpu-all/K/* ~/b/`: each wheel set present installed
 # (MuJoCo, Warp, Brax into ~/site; jax 0.10.2 into ~/jsite, first on the path; LeRobot into ~/site), demos
 # into ~/diffusion (diffusion_pusht.sh's RUNS)
