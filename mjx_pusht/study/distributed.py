@@ -115,19 +115,14 @@ class Processes:
         (seeds, scene, steps, parameters, --out): their rows would be mixed into one table."""
         if not self.many:
             return
-        import jax
-        from jax._src import distributed
-
         # the process count too: a process given another --num-processes joined, ran its own block of rows and mixed
         # them into the table's chunks (the fifteenth pass)
         mine = json.dumps({**settings, "num_processes": self.num_processes}, sort_keys=True, default=str)
         settings = json.loads(mine)  # compared as every process sees it: through JSON
-        client = distributed.global_state.client
-        client.key_value_set(f"mjx_pusht:settings:{jax.process_index()}", mine)
-        # read in process order and compared as each arrives: a process told of one process too many must not wait
-        # for it before it sees that process 0 was told otherwise
-        for i in range(jax.process_count()):
-            theirs = json.loads(client.blocking_key_value_get(f"mjx_pusht:settings:{i}", int(self.peer_timeout * 1000)))
+        # compared as each arrives, in process order: a process told of one process too many must not wait for it
+        # before it sees that process 0 was told otherwise
+        for i, given in enumerate(each_process("settings", mine, int(self.peer_timeout * 1000))):
+            theirs = json.loads(given)
             if theirs != settings:
                 diff = "; ".join(f"{k} {settings.get(k)} here, {theirs.get(k)} there"
                                  for k in sorted({*theirs, *settings}) if theirs.get(k) != settings.get(k))
@@ -186,13 +181,17 @@ def same_program_text() -> None:
 def every_process(name: str, value: str, timeout_ms: int = BARRIER_TIMEOUT_MS) -> list[str]:
     """`value` from every process joined through jax.distributed, in process order (each process gives its own under
     `name`, once), through the coordinator's key-value store; waits for each at most `timeout_ms`."""
+    return list(each_process(name, value, timeout_ms))
+
+
+def each_process(name: str, value: str, timeout_ms: int = BARRIER_TIMEOUT_MS):
+    """As `every_process`, `value` given at once, the others' read one at a time as the iterator is advanced."""
     import jax
     from jax._src import distributed
 
     client = distributed.global_state.client
     client.key_value_set(f"mjx_pusht:{name}:{jax.process_index()}", value)
-    return [client.blocking_key_value_get(f"mjx_pusht:{name}:{i}", timeout_ms)
-            for i in range(jax.process_count())]
+    return (client.blocking_key_value_get(f"mjx_pusht:{name}:{i}", timeout_ms) for i in range(jax.process_count()))
 
 
 def leave_peers(code: int) -> None:
